@@ -1,0 +1,39 @@
+# SLZ Lander: two commands do all set-up. `make demo` runs the main job, `make test` runs the checks.
+# Both create the virtualenv idempotently (re-installed only when pyproject.toml changes).
+
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed-stamp
+
+.PHONY: setup demo test lint typecheck pytest bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/slz demo --out runs/demo
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: $(STAMP)
+	$(BIN)/mypy companion sitl bench tests models
+
+# pytest exits 5 when it collected no test: make treats that as a failure, as it must.
+pytest: $(STAMP)
+	$(BIN)/python -m pytest -m "not slow"
+
+test: lint typecheck pytest
+
+bench: $(STAMP)
+	$(BIN)/python bench/perception.py
+
+clean:
+	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache runs

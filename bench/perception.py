@@ -1,0 +1,88 @@
+"""Per-stage latency of the SLZ perception pipeline on 640x480 frames, on one CPU thread.
+
+Run: ``.venv/bin/python bench/perception.py [--frames N] [--out bench/results/perception.json]``.
+Frames are rendered from seeded scenes along a slow descent (20 m -> 8 m) so tracking sees a moving camera.
+Prints median and p95 per stage and in total, with and without the network, and writes them as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO_ROOT))
+
+from bench.machine import machine_context  # noqa: E402
+from companion.perception.config import PerceptionConfig  # noqa: E402
+from companion.perception.geometry import Pose  # noqa: E402
+from companion.perception.pipeline import STAGES, SlzPipeline, camera_from_config  # noqa: E402
+from sitl.flat_scene import FlatScene  # noqa: E402
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=300)
+    parser.add_argument("--warmup", type=int, default=10)
+    parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "perception.json")
+    args = parser.parse_args()
+
+    cv2.setNumThreads(1)
+    config = PerceptionConfig.model_validate(
+        {"model": {"path": str(REPO_ROOT / "models/blob_detector/blob_detector.onnx"), "intra_op_threads": 1}}
+    )
+    pipeline = SlzPipeline.from_config(config)
+    camera, T_body_camera = camera_from_config(config.camera)
+    scenes = [FlatScene(seed, n_people=180, roi_half_m=20.0) for seed in range(3)]
+    frames = []
+    for k in range(args.frames + args.warmup):
+        altitude_m = 20.0 - 12.0 * (k % 100) / 100.0
+        pose = Pose.from_ned_euler(2.0 * math.sin(0.05 * k), 1.0, -altitude_m, 0.03 * math.sin(k), 0.02, 0.4)
+        frames.append((scenes[k // 100 % 3].render(camera, T_body_camera, pose).image_bgr, pose))
+
+    timings: dict[str, list[float]] = {stage: [] for stage in (*STAGES, "total", "total_without_network")}
+    for k, (frame, pose) in enumerate(frames):
+        if k % 100 == 0:
+            pipeline.reset()
+        start = time.perf_counter()
+        result = pipeline.process(frame, pose, 0.1 * (k % 100))
+        total_ms = (time.perf_counter() - start) * 1e3
+        if k < args.warmup:
+            continue
+        for stage in STAGES:
+            timings[stage].append(result.timings_ms[stage])
+        timings["total"].append(total_ms)
+        timings["total_without_network"].append(total_ms - result.timings_ms["density"])
+
+    summary = {
+        name: {"median_ms": float(np.median(v)), "p95_ms": float(np.percentile(v, 95))} for name, v in timings.items()
+    }
+    report = {
+        "benchmark": "perception",
+        "frame": f"{camera.width_px}x{camera.height_px}",
+        "frames": args.frames,
+        "threads": 1,
+        "model": str(config.model.path.relative_to(REPO_ROOT)),
+        "grid": f"{config.projection.grid_extent_m} m at {config.projection.grid_resolution_m} m",
+        "machine": machine_context(),
+        "stages": summary,
+    }
+    sys.stdout.write(f"SLZ perception, {report['frame']}, 1 thread, {args.frames} frames, {report['machine']}\n")
+    sys.stdout.write(f"{'stage':<24}{'median ms':>12}{'p95 ms':>12}\n")
+    for name, row in summary.items():
+        sys.stdout.write(f"{name:<24}{row['median_ms']:>12.2f}{row['p95_ms']:>12.2f}\n")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    sys.stdout.write(f"wrote {args.out}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

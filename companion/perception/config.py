@@ -1,0 +1,183 @@
+"""Configuration of the SLZ perception pipeline: one validated model for every parameter.
+
+Symbols in brackets are the paper's (safe-landing-paper.tex, section "SLZ algorithm").
+"""
+
+from __future__ import annotations
+
+import enum
+from pathlib import Path
+
+from pydantic import Field, model_validator
+
+from companion.config import StrictModel, load_yaml_config
+
+
+class SelectionPolicyName(str, enum.Enum):
+    """How the landing target is chosen among the tracked zones."""
+
+    BIGGEST = "biggest"
+    """The tracked zone with the largest radius (paper)."""
+    OLDEST = "oldest"
+    """The tracked zone that has existed longest (paper)."""
+    NEAREST = "nearest"
+    """The tracked zone whose centre is closest to the vehicle, horizontally."""
+    RANDOM = "random"
+    """Blind baseline: a seeded random point of the search area, ignoring perception (paper's "random")."""
+
+
+class ModelConfig(StrictModel):
+    """The density model and how onnxruntime runs it."""
+
+    path: Path = Field(
+        default=Path("models/blob_detector/blob_detector.onnx"),
+        description="ONNX file; relative paths are relative to the working directory.",
+    )
+    providers: list[str] = Field(
+        default_factory=lambda: ["CPUExecutionProvider"],
+        min_length=1,
+        description="onnxruntime execution providers in order of preference; unavailable ones are skipped "
+        "(e.g. TensorrtExecutionProvider, CUDAExecutionProvider on a Jetson).",
+    )
+    intra_op_threads: int = Field(default=1, ge=0, le=64, description="0 lets onnxruntime choose.")
+
+
+class OccupancyConfig(StrictModel):
+    """Density map -> binary occupancy map in the image (paper: threshold, then dilate for safety)."""
+
+    density_threshold: float = Field(
+        default=0.01,
+        gt=0.0,
+        description="A density cell is occupied when its value (people per cell) reaches this.",
+    )
+    relative_threshold: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="Also require at least this fraction of the frame's maximum density (0 disables).",
+    )
+    dilation_m: float = Field(
+        default=0.5,
+        ge=0.0,
+        le=10.0,
+        description="Safety margin grown around occupied cells, metres on the head plane, converted to pixels "
+        "with the frame's finest ground sampling distance.",
+    )
+
+
+class ProjectionConfig(StrictModel):
+    """The world grid on the head plane that the occupancy map is projected onto."""
+
+    head_height_m: float = Field(default=1.7, ge=0.0, le=3.0, description="Head plane height above ground [h_t].")
+    grid_resolution_m: float = Field(default=0.1, gt=0.0, le=2.0, description="Side of one grid cell.")
+    grid_extent_m: float = Field(default=40.0, gt=0.0, le=500.0, description="Side of the square grid.")
+    min_depth_m: float = Field(
+        default=0.5, gt=0.0, description="Head-plane points closer to the camera than this are unknown."
+    )
+
+    @model_validator(mode="after")
+    def _grid_size(self) -> ProjectionConfig:
+        cells = self.grid_extent_m / self.grid_resolution_m
+        if not 8 <= cells <= 4096:
+            raise ValueError(
+                f"grid_extent_m / grid_resolution_m must give between 8 and 4096 cells per side (got {cells:.0f})"
+            )
+        return self
+
+
+class ZoneConfig(StrictModel):
+    """Largest-free-circle zone proposals (paper: distance transform, repeated N_p times)."""
+
+    n_proposals: int = Field(default=10, ge=1, le=100, description="Maximum zones per frame [N_p].")
+    vehicle_radius_m: float = Field(
+        default=0.5, gt=0.0, le=10.0, description="Vehicle footprint radius including propellers."
+    )
+    margin_m: float = Field(default=0.5, ge=0.0, le=20.0, description="Extra clearance around the footprint.")
+
+    @property
+    def min_radius_m(self) -> float:
+        """Zones smaller than the footprint plus margin are dropped."""
+        return self.vehicle_radius_m + self.margin_m
+
+
+class TrackingConfig(StrictModel):
+    """Kalman tracking of zones with IoU/Hungarian association."""
+
+    max_tracks: int = Field(default=5, ge=1, le=100, description="Maximum simultaneous trackers [M_p].")
+    iou_threshold: float = Field(default=0.3, gt=0.0, le=1.0, description="Minimum circle IoU to associate [mu].")
+    max_misses: int = Field(
+        default=5, ge=1, le=1000, description="A track is deleted after this many consecutive misses [mu_1]."
+    )
+    sigma_a: float = Field(
+        default=0.5,
+        gt=0.0,
+        le=100.0,
+        description="Scale of the process noise Q, an acceleration variance in m^2/s^4 [sigma_a].",
+    )
+    measurement_std_position_m: float = Field(default=0.3, gt=0.0, le=10.0, description="R: centre noise.")
+    measurement_std_radius_m: float = Field(default=0.3, gt=0.0, le=10.0, description="R: radius noise.")
+    initial_std_velocity_mps: float = Field(
+        default=1.0, gt=0.0, le=100.0, description="Initial standard deviation of a new track's rates."
+    )
+
+
+class SelectionConfig(StrictModel):
+    """Which tracked zone becomes the landing target."""
+
+    policy: SelectionPolicyName = SelectionPolicyName.OLDEST
+    seed: int = Field(default=0, ge=0, description="Seed of the random policy.")
+    random_half_extent_m: float = Field(
+        default=15.0,
+        gt=0.0,
+        le=500.0,
+        description="The random policy draws its point in a square of this half side around the search area's "
+        "centre (the vehicle's position when none is given): 15 m gives the paper's 30 m x 30 m ROI.",
+    )
+
+
+class CameraConfig(StrictModel):
+    """Pinhole intrinsics and the camera's mounting on the body."""
+
+    width_px: int = Field(default=640, ge=16, le=8192)
+    height_px: int = Field(default=480, ge=16, le=8192)
+    hfov_deg: float = Field(default=90.0, gt=1.0, lt=179.0, description="Used when fx/fy are not given.")
+    fx_px: float | None = Field(default=None, gt=0.0)
+    fy_px: float | None = Field(default=None, gt=0.0)
+    cx_px: float | None = None
+    cy_px: float | None = None
+    tilt_deg: float = Field(default=0.0, ge=-90.0, le=90.0, description="0 = nadir, positive towards the nose.")
+    roll_deg: float = Field(default=0.0, ge=-90.0, le=90.0, description="Positive towards the right side.")
+    yaw_deg: float = Field(default=0.0, ge=-180.0, le=180.0, description="Image rotation about the optical axis.")
+    offset_frd_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @model_validator(mode="after")
+    def _focal_pair(self) -> CameraConfig:
+        if (self.fx_px is None) != (self.fy_px is None):
+            raise ValueError("fx_px and fy_px must be given together (or neither, to use hfov_deg)")
+        return self
+
+
+class PerceptionConfig(StrictModel):
+    """Every parameter of the SLZ perception pipeline, with documented defaults."""
+
+    camera: CameraConfig = Field(default_factory=CameraConfig)
+    model: ModelConfig = Field(default_factory=ModelConfig)
+    occupancy: OccupancyConfig = Field(default_factory=OccupancyConfig)
+    projection: ProjectionConfig = Field(default_factory=ProjectionConfig)
+    zones: ZoneConfig = Field(default_factory=ZoneConfig)
+    tracking: TrackingConfig = Field(default_factory=TrackingConfig)
+    selection: SelectionConfig = Field(default_factory=SelectionConfig)
+
+    @model_validator(mode="after")
+    def _tracks_vs_proposals(self) -> PerceptionConfig:
+        if self.tracking.max_tracks > self.zones.n_proposals:
+            raise ValueError(
+                f"tracking.max_tracks [M_p] must be <= zones.n_proposals [N_p] "
+                f"(got M_p={self.tracking.max_tracks}, N_p={self.zones.n_proposals})"
+            )
+        return self
+
+
+def load_perception_config(path: str | Path, section: str | None = "perception") -> PerceptionConfig:
+    """Load the ``perception`` section of a mission config YAML file (or the whole file if ``section=None``)."""
+    return load_yaml_config(PerceptionConfig, path, section=section)

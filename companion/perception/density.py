@@ -1,0 +1,277 @@
+"""Density model runner: camera frame -> crowd density map, through onnxruntime.
+
+The model's input contract (size, channel order, layout, normalization, output stride) travels with the model:
+in the ONNX metadata under the key ``slz.contract`` (a JSON object), or in a sidecar file next to it
+(``model.onnx`` -> ``model.json``). It is checked against the graph's declared shapes and with one dry run at
+load time, so a mismatched model fails on the ground with a clear message, not in flight.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from pydantic import Field, ValidationError, model_validator
+
+from companion.config import StrictModel, format_validation_error
+from companion.perception.errors import PerceptionError
+
+logger = logging.getLogger(__name__)
+
+CONTRACT_METADATA_KEY = "slz.contract"
+
+U8Image = npt.NDArray[np.uint8]
+F32Array = npt.NDArray[np.float32]
+
+
+class ChannelOrder(str, enum.Enum):
+    """Channel order the network expects (frames arrive as OpenCV BGR)."""
+
+    RGB = "rgb"
+    BGR = "bgr"
+
+
+class TensorLayout(str, enum.Enum):
+    """Memory layout of the input tensor."""
+
+    NCHW = "nchw"
+    NHWC = "nhwc"
+
+
+class DensityModelContract(StrictModel):
+    """What a density model expects and produces.
+
+    The input is ``((pixel * scale) - mean) / std`` per channel, in ``channel_order``, as a float32 tensor of
+    shape (1, 3, H, W) or (1, H, W, 3). The output is a density map of shape (1, 1, H/s, W/s) or (1, H/s, W/s)
+    whose cells hold people per cell (its sum is the people count), with ``s = output_stride``.
+    """
+
+    name: str = "unnamed"
+    version: str = "0"
+    input_width_px: int = Field(ge=8, le=8192)
+    input_height_px: int = Field(ge=8, le=8192)
+    channel_order: ChannelOrder = ChannelOrder.RGB
+    layout: TensorLayout = TensorLayout.NCHW
+    scale: float = Field(default=1.0 / 255.0, gt=0.0)
+    mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    std: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    output_stride: int = Field(ge=1, le=64)
+
+    @model_validator(mode="after")
+    def _divisible(self) -> DensityModelContract:
+        if self.input_width_px % self.output_stride or self.input_height_px % self.output_stride:
+            raise ValueError(
+                f"input size {self.input_width_px}x{self.input_height_px} is not divisible by "
+                f"output_stride {self.output_stride}"
+            )
+        if any(s <= 0 for s in self.std):
+            raise ValueError(f"std must be positive (got {self.std})")
+        return self
+
+    @property
+    def output_shape_hw(self) -> tuple[int, int]:
+        """(rows, cols) of the density map."""
+        return self.input_height_px // self.output_stride, self.input_width_px // self.output_stride
+
+
+@dataclass(frozen=True)
+class DensityMap:
+    """A density map and how its cells relate to the frame it came from.
+
+    Attributes
+    ----------
+    values : ndarray, shape (h, w), float32
+        People per cell. Non-finite values are kept: downstream stages treat them as occupied.
+    frame_width_px, frame_height_px : int
+        Size of the camera frame the map was computed from.
+    """
+
+    values: F32Array
+    frame_width_px: int
+    frame_height_px: int
+
+    @property
+    def stride_x(self) -> float:
+        """Frame pixels per density cell, horizontally."""
+        return float(self.frame_width_px / self.values.shape[1])
+
+    @property
+    def stride_y(self) -> float:
+        """Frame pixels per density cell, vertically."""
+        return float(self.frame_height_px / self.values.shape[0])
+
+
+class DensityModel(Protocol):
+    """Anything that turns a BGR frame into a :class:`DensityMap` (ONNX runner, test fakes)."""
+
+    def predict(self, frame_bgr: U8Image) -> DensityMap:
+        """Density map for one frame of shape (H, W, 3), uint8, BGR."""
+        ...
+
+
+def check_frame(frame_bgr: Any, where: str) -> U8Image:
+    """Validate a camera frame: ndarray (H, W, 3) uint8. Raise :class:`PerceptionError` otherwise."""
+    if not isinstance(frame_bgr, np.ndarray):
+        raise PerceptionError(where, f"frame must be a numpy array, got {type(frame_bgr).__name__}")
+    if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
+        raise PerceptionError(
+            where, f"frame must have shape (H, W, 3) and dtype uint8, got {frame_bgr.shape} {frame_bgr.dtype}"
+        )
+    if frame_bgr.shape[0] < 8 or frame_bgr.shape[1] < 8:
+        raise PerceptionError(where, f"frame too small: {frame_bgr.shape}")
+    return frame_bgr
+
+
+def _read_contract(path: Path, metadata: dict[str, str]) -> DensityModelContract:
+    sidecar = path.with_suffix(".json")
+    if CONTRACT_METADATA_KEY in metadata:
+        raw_text, source = metadata[CONTRACT_METADATA_KEY], f"{path} metadata '{CONTRACT_METADATA_KEY}'"
+    elif sidecar.is_file():
+        raw_text, source = sidecar.read_text(encoding="utf-8"), str(sidecar)
+    else:
+        raise PerceptionError(
+            "density.load",
+            f"{path} has no input contract: expected ONNX metadata '{CONTRACT_METADATA_KEY}' or a sidecar {sidecar}",
+        )
+    try:
+        raw = json.loads(raw_text)
+    except json.JSONDecodeError as exc:
+        raise PerceptionError("density.load", f"contract in {source} is not valid JSON: {exc}") from None
+    try:
+        return DensityModelContract.model_validate(raw)
+    except ValidationError as exc:
+        problems = "; ".join(format_validation_error(exc, "contract"))
+        raise PerceptionError("density.load", f"invalid contract in {source}: {problems}") from None
+
+
+def _dims_match(declared: list[Any], expected: tuple[int, ...]) -> bool:
+    """Declared ONNX dims (ints, or str/None when symbolic) against the expected ones."""
+    if len(declared) != len(expected):
+        return False
+    return all(not isinstance(d, int) or d in (e, -1) for d, e in zip(declared, expected, strict=True))
+
+
+class OnnxDensityModel:
+    """Runs an ONNX density model with onnxruntime.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.onnx`` file.
+    providers : list of str
+        Execution providers in order of preference. Those not available in this onnxruntime build are skipped
+        (and logged); if none is left, loading fails.
+    intra_op_threads : int
+        Threads for one inference (0: onnxruntime's default).
+
+    Raises
+    ------
+    PerceptionError
+        Missing or corrupt file, no usable provider, missing or invalid contract, or graph shapes that do not
+        fit the contract.
+    """
+
+    def __init__(self, path: str | Path, providers: list[str] | None = None, intra_op_threads: int = 1) -> None:
+        import onnxruntime as ort
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise PerceptionError("density.load", f"model file not found: {self.path}")
+        wanted = providers or ["CPUExecutionProvider"]
+        available = ort.get_available_providers()
+        chosen = [p for p in wanted if p in available]
+        skipped = [p for p in wanted if p not in available]
+        if skipped:
+            logger.warning("execution providers not available here, skipped: %s", ", ".join(skipped))
+        if not chosen:
+            raise PerceptionError(
+                "density.load", f"none of the providers {wanted} is available (available: {available})"
+            )
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = intra_op_threads
+        options.inter_op_num_threads = 1
+        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        options.log_severity_level = 3
+        try:
+            self._session = ort.InferenceSession(str(self.path), sess_options=options, providers=chosen)
+        except Exception as exc:  # onnxruntime raises several unrelated types for a bad file
+            raise PerceptionError("density.load", f"cannot load ONNX model {self.path}: {exc}") from None
+        self.providers: list[str] = list(self._session.get_providers())
+        logger.info("density model %s on %s", self.path, ", ".join(self.providers))
+        metadata = dict(self._session.get_modelmeta().custom_metadata_map)
+        self.contract = _read_contract(self.path, metadata)
+        self._check_graph()
+
+    def _check_graph(self) -> None:
+        c = self.contract
+        inputs = self._session.get_inputs()
+        outputs = self._session.get_outputs()
+        if len(inputs) != 1 or len(outputs) < 1:
+            raise PerceptionError(
+                "density.load", f"expected 1 input and >= 1 output, got {len(inputs)} and {len(outputs)}"
+            )
+        self._input_name: str = inputs[0].name
+        if c.layout is TensorLayout.NCHW:
+            expected_in: tuple[int, ...] = (1, 3, c.input_height_px, c.input_width_px)
+        else:
+            expected_in = (1, c.input_height_px, c.input_width_px, 3)
+        if not _dims_match(list(inputs[0].shape), expected_in):
+            raise PerceptionError(
+                "density.load",
+                f"input '{self._input_name}' has shape {inputs[0].shape}, contract says {list(expected_in)}",
+            )
+        h, w = c.output_shape_hw
+        declared_out = list(outputs[0].shape)
+        if not (_dims_match(declared_out, (1, 1, h, w)) or _dims_match(declared_out, (1, h, w))):
+            raise PerceptionError(
+                "density.load",
+                f"output '{outputs[0].name}' has shape {declared_out}, contract says [1, 1, {h}, {w}] "
+                f"(input {c.input_width_px}x{c.input_height_px} / stride {c.output_stride})",
+            )
+        try:
+            self._run(np.zeros((c.input_height_px, c.input_width_px, 3), dtype=np.uint8))
+        except PerceptionError as exc:
+            raise PerceptionError("density.load", f"dry run failed: {exc.what}") from None
+
+    def _run(self, frame_bgr: U8Image) -> F32Array:
+        c = self.contract
+        if frame_bgr.shape[1] != c.input_width_px or frame_bgr.shape[0] != c.input_height_px:
+            frame_bgr = np.asarray(
+                cv2.resize(frame_bgr, (c.input_width_px, c.input_height_px), interpolation=cv2.INTER_AREA), np.uint8
+            )
+        image = cv2.cvtColor(frame_bgr, cv2.COLOR_BGR2RGB) if c.channel_order is ChannelOrder.RGB else frame_bgr
+        x = image.astype(np.float32) * np.float32(c.scale)
+        if c.mean != (0.0, 0.0, 0.0) or c.std != (1.0, 1.0, 1.0):
+            x = (x - np.asarray(c.mean, dtype=np.float32)) / np.asarray(c.std, dtype=np.float32)
+        tensor = x.transpose(2, 0, 1)[None] if c.layout is TensorLayout.NCHW else x[None]
+        out = np.asarray(self._session.run(None, {self._input_name: np.ascontiguousarray(tensor)})[0], np.float32)
+        if out.ndim < 2 or out.shape[-2:] != c.output_shape_hw or out.size != out.shape[-2] * out.shape[-1]:
+            raise PerceptionError(
+                "density.predict",
+                f"model output has shape {list(out.shape)}, expected a {c.output_shape_hw} density map",
+            )
+        return out.reshape(c.output_shape_hw)
+
+    def predict(self, frame_bgr: U8Image) -> DensityMap:
+        """Density map of one frame.
+
+        Parameters
+        ----------
+        frame_bgr : ndarray, shape (H, W, 3), uint8
+            The camera frame, BGR. Resized to the contract's input size if it differs.
+
+        Returns
+        -------
+        DensityMap
+            People per cell, shape (input_height / stride, input_width / stride), with its relation to the frame.
+        """
+        frame_bgr = check_frame(frame_bgr, "density.predict")
+        values = self._run(frame_bgr)
+        return DensityMap(values, frame_width_px=frame_bgr.shape[1], frame_height_px=frame_bgr.shape[0])

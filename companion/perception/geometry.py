@@ -1,0 +1,203 @@
+"""Rigid transforms, attitudes and the pinhole camera.
+
+Frames (all right-handed)
+-------------------------
+world
+    Local NED: x = north, y = east, z = down, metres, origin on the ground at the home position. This is
+    MAVLink's ``MAV_FRAME_LOCAL_NED``. The ground is the plane ``down_m = 0``; the head plane is
+    ``down_m = -head_height_m``.
+body
+    FRD: x = forward, y = right, z = down, at the vehicle's centre of mass.
+camera
+    OpenCV optical frame: x = image right, y = image down, z = optical axis (out of the lens).
+
+A transform ``T_a_b`` is a 4x4 homogeneous matrix that maps coordinates of a point expressed in frame ``b`` to
+frame ``a``: ``p_a = T_a_b @ p_b``. So ``T_world_camera = T_world_body @ T_body_camera``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from companion.perception.errors import PerceptionError
+
+F64Array = npt.NDArray[np.float64]
+
+
+def rot_x(angle_rad: float) -> F64Array:
+    """Rotation matrix (3, 3) about the x axis by ``angle_rad`` (right-hand rule)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle_rad: float) -> F64Array:
+    """Rotation matrix (3, 3) about the y axis by ``angle_rad`` (right-hand rule)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle_rad: float) -> F64Array:
+    """Rotation matrix (3, 3) about the z axis by ``angle_rad`` (right-hand rule)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def R_world_body_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> F64Array:
+    """Attitude as a rotation matrix (3, 3) from aerospace Euler angles (MAVLink ``ATTITUDE``).
+
+    ZYX convention: ``R_world_body = Rz(yaw) @ Ry(pitch) @ Rx(roll)``, world NED, body FRD. Yaw is measured
+    from north towards east, pitch is nose up, roll is right wing down.
+    """
+    return rot_z(yaw_rad) @ rot_y(pitch_rad) @ rot_x(roll_rad)
+
+
+def R_world_body_from_quaternion(q_wxyz: npt.ArrayLike) -> F64Array:
+    """Attitude as a rotation matrix (3, 3) from a unit quaternion ``[w, x, y, z]`` (MAVLink order).
+
+    The quaternion rotates body FRD to world NED, as in ``ATTITUDE_QUATERNION``. It is normalized here;
+    a zero or non-finite quaternion raises :class:`PerceptionError`.
+    """
+    q = np.asarray(q_wxyz, dtype=np.float64).reshape(4)
+    norm = float(np.linalg.norm(q))
+    if not math.isfinite(norm) or norm < 1e-9:
+        raise PerceptionError("geometry.quaternion", f"not a rotation quaternion: {q.tolist()}")
+    w, x, y, z = q / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def make_transform(R: npt.ArrayLike, t: npt.ArrayLike) -> F64Array:
+    """Homogeneous transform (4, 4) from a rotation (3, 3) and a translation (3,)."""
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(R, dtype=np.float64)
+    T[:3, 3] = np.asarray(t, dtype=np.float64).reshape(3)
+    return T
+
+
+def invert_transform(T: F64Array) -> F64Array:
+    """Inverse of a rigid homogeneous transform (4, 4), using ``R.T`` rather than a general inverse."""
+    R = T[:3, :3]
+    t = T[:3, 3]
+    return make_transform(R.T, -R.T @ t)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """The vehicle's pose at one instant: ``T_world_body`` (4, 4), world NED, body FRD, metres.
+
+    Build it with :meth:`from_ned_euler` or :meth:`from_ned_quaternion` from MAVLink telemetry.
+    """
+
+    T_world_body: F64Array
+
+    @classmethod
+    def from_ned_euler(
+        cls,
+        north_m: float,
+        east_m: float,
+        down_m: float,
+        roll_rad: float = 0.0,
+        pitch_rad: float = 0.0,
+        yaw_rad: float = 0.0,
+    ) -> Pose:
+        """Pose from a local NED position (m) and ZYX Euler angles (rad)."""
+        R = R_world_body_from_euler(roll_rad, pitch_rad, yaw_rad)
+        return cls(make_transform(R, (north_m, east_m, down_m)))
+
+    @classmethod
+    def from_ned_quaternion(cls, north_m: float, east_m: float, down_m: float, q_wxyz: npt.ArrayLike) -> Pose:
+        """Pose from a local NED position (m) and a ``[w, x, y, z]`` quaternion (body FRD to world NED)."""
+        return cls(make_transform(R_world_body_from_quaternion(q_wxyz), (north_m, east_m, down_m)))
+
+    @property
+    def position_ned_m(self) -> F64Array:
+        """Position (3,) of the body origin in world NED, metres."""
+        return np.array(self.T_world_body[:3, 3], dtype=np.float64)
+
+    @property
+    def altitude_m(self) -> float:
+        """Height above the ground plane (``-down_m``), metres."""
+        return float(-self.T_world_body[2, 3])
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """Intrinsics of an undistorted pinhole camera.
+
+    Attributes
+    ----------
+    width_px, height_px : int
+        Image size in pixels.
+    fx_px, fy_px : float
+        Focal lengths in pixels.
+    cx_px, cy_px : float
+        Principal point in pixels (OpenCV convention: the centre of the top-left pixel is (0, 0)).
+    """
+
+    width_px: int
+    height_px: int
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+
+    @classmethod
+    def from_hfov(cls, width_px: int, height_px: int, hfov_deg: float) -> PinholeCamera:
+        """Square-pixel camera with its principal point at the image centre and horizontal FOV ``hfov_deg``."""
+        f = 0.5 * width_px / math.tan(math.radians(hfov_deg) / 2.0)
+        return cls(width_px, height_px, f, f, (width_px - 1) / 2.0, (height_px - 1) / 2.0)
+
+    @property
+    def K(self) -> F64Array:
+        """Intrinsic matrix (3, 3)."""
+        return np.array([[self.fx_px, 0.0, self.cx_px], [0.0, self.fy_px, self.cy_px], [0.0, 0.0, 1.0]])
+
+    def scaled(self, sx: float, sy: float) -> PinholeCamera:
+        """The same camera seen through an image resized by ``sx`` horizontally and ``sy`` vertically.
+
+        Pixel centres map as ``u' = (u + 0.5) * sx - 0.5``, so the principal point shifts accordingly.
+        """
+        return PinholeCamera(
+            width_px=round(self.width_px * sx),
+            height_px=round(self.height_px * sy),
+            fx_px=self.fx_px * sx,
+            fy_px=self.fy_px * sy,
+            cx_px=(self.cx_px + 0.5) * sx - 0.5,
+            cy_px=(self.cy_px + 0.5) * sy - 0.5,
+        )
+
+
+def T_body_camera_from_mount(
+    tilt_deg: float = 0.0,
+    roll_deg: float = 0.0,
+    yaw_deg: float = 0.0,
+    offset_frd_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> F64Array:
+    """Camera-to-body transform (4, 4) for a camera mounted under the vehicle.
+
+    With all angles zero the camera looks straight down (nadir) with the top of the image towards the
+    vehicle's nose: camera x = body right, camera y = body backward, camera z = body down.
+
+    Parameters
+    ----------
+    tilt_deg : float
+        Rotation of the optical axis from nadir towards the nose (0 = nadir, 90 = looking forward).
+    roll_deg : float
+        Rotation of the optical axis from nadir towards the right side, applied after the tilt.
+    yaw_deg : float
+        Rotation of the camera about its own optical axis (image rotation), applied first.
+    offset_frd_m : tuple of float
+        Position of the optical centre in the body FRD frame, metres.
+    """
+    R_nadir = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    R = rot_x(-math.radians(roll_deg)) @ rot_y(math.radians(tilt_deg)) @ R_nadir @ rot_z(math.radians(yaw_deg))
+    return make_transform(R, offset_frd_m)

@@ -1,0 +1,190 @@
+"""The SLZ perception pipeline: frame + pose -> occupancy -> head plane -> zones -> tracks -> target.
+
+Each stage is passed in the constructor, so the SITL, tests and the drone plug in their own parts (a fake
+density model, another selection policy) without touching the rest.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TypeVar
+
+from companion.perception.config import CameraConfig, PerceptionConfig
+from companion.perception.density import DensityMap, DensityModel, OnnxDensityModel, U8Image, check_frame
+from companion.perception.errors import PerceptionError
+from companion.perception.geometry import F64Array, PinholeCamera, Pose, T_body_camera_from_mount
+from companion.perception.occupancy import OccupancyImage, OccupancyMapper
+from companion.perception.projection import HeadPlaneOccupancy, HeadPlaneProjector
+from companion.perception.selection import SelectionContext, SelectionPolicy, Target, make_policy
+from companion.perception.tracking import TrackedZone, ZoneTracker
+from companion.perception.zones import Zone, ZoneFinder
+
+ResultT = TypeVar("ResultT")
+
+STAGES = ("density", "occupancy", "projection", "zones", "tracking", "selection")
+
+
+def camera_from_config(config: CameraConfig) -> tuple[PinholeCamera, F64Array]:
+    """Intrinsics and ``T_body_camera`` (4, 4) described by a camera config."""
+    if config.fx_px is not None and config.fy_px is not None:
+        camera = PinholeCamera(
+            config.width_px,
+            config.height_px,
+            config.fx_px,
+            config.fy_px,
+            config.cx_px if config.cx_px is not None else (config.width_px - 1) / 2.0,
+            config.cy_px if config.cy_px is not None else (config.height_px - 1) / 2.0,
+        )
+    else:
+        camera = PinholeCamera.from_hfov(config.width_px, config.height_px, config.hfov_deg)
+    T_body_camera = T_body_camera_from_mount(config.tilt_deg, config.roll_deg, config.yaw_deg, config.offset_frd_m)
+    return camera, T_body_camera
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything the pipeline computed for one frame.
+
+    Attributes
+    ----------
+    t_s : float
+        Capture time (vehicle clock, s).
+    pose : Pose
+        Vehicle pose at the capture time.
+    density : DensityMap
+        Network output.
+    occupancy : OccupancyImage
+        Thresholded and dilated occupancy in the density map's pixel grid.
+    head_plane : HeadPlaneOccupancy
+        Occupancy on the world grid.
+    zones : list of Zone
+        This frame's proposals, largest first.
+    tracks : list of TrackedZone
+        Live tracks after this frame.
+    target : Target or None
+        The selected landing target.
+    timings_ms : dict
+        Wall time of each stage (``STAGES``), milliseconds.
+    """
+
+    t_s: float
+    pose: Pose
+    density: DensityMap
+    occupancy: OccupancyImage
+    head_plane: HeadPlaneOccupancy
+    zones: list[Zone]
+    tracks: list[TrackedZone]
+    target: Target | None
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+
+class SlzPipeline:
+    """Runs the stages in order for each frame. See the module docstring."""
+
+    def __init__(
+        self,
+        density_model: DensityModel,
+        occupancy: OccupancyMapper,
+        projector: HeadPlaneProjector,
+        zone_finder: ZoneFinder,
+        tracker: ZoneTracker,
+        policy: SelectionPolicy,
+    ) -> None:
+        self.density_model = density_model
+        self.occupancy = occupancy
+        self.projector = projector
+        self.zone_finder = zone_finder
+        self.tracker = tracker
+        self.policy = policy
+
+    @classmethod
+    def from_config(cls, config: PerceptionConfig, density_model: DensityModel | None = None) -> SlzPipeline:
+        """Build every stage from one config; the ONNX model is loaded unless ``density_model`` is given."""
+        camera, T_body_camera = camera_from_config(config.camera)
+        model = density_model or OnnxDensityModel(
+            config.model.path, config.model.providers, config.model.intra_op_threads
+        )
+        return cls(
+            density_model=model,
+            occupancy=OccupancyMapper(config.occupancy),
+            projector=HeadPlaneProjector(camera, T_body_camera, config.projection),
+            zone_finder=ZoneFinder(config.zones),
+            tracker=ZoneTracker(config.tracking),
+            policy=make_policy(config.selection),
+        )
+
+    def reset(self) -> None:
+        """Start a new mission: no tracks, fresh policy state."""
+        self.tracker.reset()
+        self.policy.reset()
+
+    def process(
+        self, frame_bgr: U8Image, pose: Pose, t_s: float, area_centre_ne_m: tuple[float, float] | None = None
+    ) -> FrameResult:
+        """Run the whole pipeline on one frame.
+
+        Parameters
+        ----------
+        frame_bgr : ndarray, shape (H, W, 3), uint8
+            Camera frame (BGR), of the size given in the camera config.
+        pose : Pose
+            Vehicle pose interpolated at the frame's capture time.
+        t_s : float
+            Capture time on the vehicle's clock, seconds; must not decrease between calls.
+        area_centre_ne_m : tuple of float, optional
+            Centre of the mission's search area, for policies that use one.
+        """
+        frame_bgr = check_frame(frame_bgr, "pipeline.process")
+        cam = self.projector.camera
+        if frame_bgr.shape[:2] != (cam.height_px, cam.width_px):
+            raise PerceptionError(
+                "pipeline.process",
+                f"frame is {frame_bgr.shape[1]}x{frame_bgr.shape[0]}, "
+                f"camera config says {cam.width_px}x{cam.height_px}",
+            )
+        timings: dict[str, float] = {}
+        density = _timed(timings, "density", lambda: self.density_model.predict(frame_bgr))
+        return self._after_density(density, pose, t_s, area_centre_ne_m, timings)
+
+    def process_density(
+        self,
+        density: DensityMap,
+        pose: Pose,
+        t_s: float,
+        area_centre_ne_m: tuple[float, float] | None = None,
+    ) -> FrameResult:
+        """Run every stage after the network on an existing density map (replays, benchmarks)."""
+        return self._after_density(density, pose, t_s, area_centre_ne_m, {"density": 0.0})
+
+    def _after_density(
+        self,
+        density: DensityMap,
+        pose: Pose,
+        t_s: float,
+        area_centre_ne_m: tuple[float, float] | None,
+        timings: dict[str, float],
+    ) -> FrameResult:
+        projector = self.projector
+
+        def occupancy_stage() -> OccupancyImage:
+            gsd = projector.finest_gsd_m_per_px(pose)
+            return self.occupancy.compute(density, gsd)
+
+        occupancy = _timed(timings, "occupancy", occupancy_stage)
+        density_camera = projector.camera.scaled(1.0 / density.stride_x, 1.0 / density.stride_y)
+        head_plane = _timed(timings, "projection", lambda: projector.project(occupancy.values, density_camera, pose))
+        zones = _timed(timings, "zones", lambda: self.zone_finder.find(head_plane))
+        tracks = _timed(timings, "tracking", lambda: self.tracker.update(t_s, zones))
+        position = pose.position_ned_m
+        context = SelectionContext(t_s, float(position[0]), float(position[1]), area_centre_ne_m)
+        target = _timed(timings, "selection", lambda: self.policy.select(tracks, context))
+        return FrameResult(t_s, pose, density, occupancy, head_plane, zones, tracks, target, timings)
+
+
+def _timed(timings: dict[str, float], stage: str, fn: Callable[[], ResultT]) -> ResultT:
+    start = time.perf_counter()
+    result = fn()
+    timings[stage] = (time.perf_counter() - start) * 1e3
+    return result

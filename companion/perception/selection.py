@@ -1,0 +1,161 @@
+"""Target selection: which tracked zone the vehicle should land in.
+
+Every policy has one method, :meth:`SelectionPolicy.select`, so new ones (a multi-objective cost, say) plug in
+beside the paper's. Ties are broken by track id, so a policy is deterministic for the same tracks.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from companion.perception.config import SelectionConfig, SelectionPolicyName
+from companion.perception.tracking import TrackedZone
+
+
+@dataclass(frozen=True)
+class Target:
+    """The chosen landing target on the head plane (world NED, m).
+
+    ``track_id`` is None for a target that does not come from a tracked zone (the blind random baseline).
+    """
+
+    north_m: float
+    east_m: float
+    radius_m: float
+    track_id: int | None
+
+
+@dataclass(frozen=True)
+class SelectionContext:
+    """What a policy may know besides the tracks.
+
+    Attributes
+    ----------
+    t_s : float
+        Vehicle-clock time of the frame.
+    vehicle_north_m, vehicle_east_m : float
+        The vehicle's horizontal position (world NED).
+    area_centre_ne_m : tuple of float or None
+        Centre of the search area (e.g. the ROI), if the mission has one.
+    """
+
+    t_s: float
+    vehicle_north_m: float
+    vehicle_east_m: float
+    area_centre_ne_m: tuple[float, float] | None = None
+
+
+class SelectionPolicy(Protocol):
+    """Chooses a target, or None when there is nothing to choose."""
+
+    name: str
+
+    def select(self, tracks: Sequence[TrackedZone], context: SelectionContext) -> Target | None:
+        """The target for this frame."""
+        ...
+
+    def reset(self) -> None:
+        """Forget any state (a new mission)."""
+        ...
+
+
+def _target(track: TrackedZone) -> Target:
+    return Target(track.north_m, track.east_m, track.radius_m, track.track_id)
+
+
+class BiggestPolicy:
+    """The largest tracked zone (paper: "biggest SLZ")."""
+
+    name = "biggest"
+
+    def select(self, tracks: Sequence[TrackedZone], context: SelectionContext) -> Target | None:
+        """The track with the largest radius."""
+        if not tracks:
+            return None
+        return _target(min(tracks, key=lambda t: (-t.radius_m, t.track_id)))
+
+    def reset(self) -> None:
+        """Stateless."""
+
+
+class OldestPolicy:
+    """The longest-lived tracked zone (paper: "oldest SLZ", more robust to moving people)."""
+
+    name = "oldest"
+
+    def select(self, tracks: Sequence[TrackedZone], context: SelectionContext) -> Target | None:
+        """The track created first."""
+        if not tracks:
+            return None
+        return _target(min(tracks, key=lambda t: (t.created_s, t.track_id)))
+
+    def reset(self) -> None:
+        """Stateless."""
+
+
+class NearestPolicy:
+    """The tracked zone whose centre is horizontally closest to the vehicle."""
+
+    name = "nearest"
+
+    def select(self, tracks: Sequence[TrackedZone], context: SelectionContext) -> Target | None:
+        """The closest track."""
+        if not tracks:
+            return None
+        return _target(
+            min(
+                tracks,
+                key=lambda t: (
+                    math.hypot(t.north_m - context.vehicle_north_m, t.east_m - context.vehicle_east_m),
+                    t.track_id,
+                ),
+            )
+        )
+
+    def reset(self) -> None:
+        """Stateless."""
+
+
+class RandomPolicy:
+    """Blind baseline (paper: "random landing"): a seeded uniform point of the search square.
+
+    It ignores perception entirely. The point is drawn once, at the first call after construction or
+    :meth:`reset`, and kept, like a blind emergency landing that commits to a spot.
+    """
+
+    name = "random"
+
+    def __init__(self, seed: int, half_extent_m: float) -> None:
+        self._seed = seed
+        self._half_extent_m = half_extent_m
+        self._rng = np.random.default_rng(seed)
+        self._chosen: Target | None = None
+
+    def select(self, tracks: Sequence[TrackedZone], context: SelectionContext) -> Target | None:
+        """The committed random point (radius 0, no track)."""
+        if self._chosen is None:
+            centre = context.area_centre_ne_m or (context.vehicle_north_m, context.vehicle_east_m)
+            dn, de = self._rng.uniform(-self._half_extent_m, self._half_extent_m, size=2)
+            self._chosen = Target(centre[0] + float(dn), centre[1] + float(de), 0.0, None)
+        return self._chosen
+
+    def reset(self) -> None:
+        """Forget the point and restart the random stream from the seed."""
+        self._rng = np.random.default_rng(self._seed)
+        self._chosen = None
+
+
+def make_policy(config: SelectionConfig) -> SelectionPolicy:
+    """The policy named in the config."""
+    if config.policy is SelectionPolicyName.BIGGEST:
+        return BiggestPolicy()
+    if config.policy is SelectionPolicyName.OLDEST:
+        return OldestPolicy()
+    if config.policy is SelectionPolicyName.NEAREST:
+        return NearestPolicy()
+    return RandomPolicy(config.seed, config.random_half_extent_m)

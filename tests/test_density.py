@@ -1,0 +1,197 @@
+"""The onnxruntime density runner on real ONNX graphs built here, and its errors."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+from onnx import TensorProto, helper
+
+from companion.perception.blob_model import build_blob_density_model, save_model
+from companion.perception.density import (
+    CONTRACT_METADATA_KEY,
+    DensityModelContract,
+    OnnxDensityModel,
+    TensorLayout,
+)
+from companion.perception.errors import PerceptionError
+
+pytestmark = pytest.mark.integration
+
+
+def pool_model(
+    path: Path,
+    input_shape: list[int | str],
+    output_shape: list[int | str],
+    stride: int,
+    contract: Mapping[str, object] | None,
+    layout: str = "nchw",
+) -> Path:
+    """A graph that averages the input's channels and pools at ``stride``: density = mean brightness."""
+    nodes = []
+    source = "frame"
+    if layout == "nhwc":
+        nodes.append(helper.make_node("Transpose", ["frame"], ["nchw"], perm=[0, 3, 1, 2]))
+        source = "nchw"
+    nodes += [
+        helper.make_node("ReduceMean", [source], ["gray"], axes=[1], keepdims=1),
+        helper.make_node("AveragePool", ["gray"], ["density"], kernel_shape=[stride, stride], strides=[stride, stride]),
+    ]
+    graph = helper.make_graph(
+        nodes,
+        "pool",
+        [helper.make_tensor_value_info("frame", TensorProto.FLOAT, input_shape)],
+        [helper.make_tensor_value_info("density", TensorProto.FLOAT, output_shape)],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    if contract is not None:
+        helper.set_model_props(model, {CONTRACT_METADATA_KEY: json.dumps(contract)})
+    onnx.save(model, str(path))
+    return path
+
+
+CONTRACT = {"input_width_px": 64, "input_height_px": 48, "output_stride": 8}
+
+
+def test_blob_model_finds_a_bright_blob_in_the_right_cell(blob_model: OnnxDensityModel) -> None:
+    frame = np.full((480, 640, 3), 90, dtype=np.uint8)
+    frame[200:208, 400:408] = 250  # an 8 px bright square centred at (u, v) = (403.5, 203.5)
+    density = blob_model.predict(frame)
+    assert density.values.shape == (120, 160)
+    assert density.stride_x == density.stride_y == 4.0
+    row, col = np.unravel_index(int(np.argmax(density.values)), density.values.shape)
+    assert abs(row - 203.5 / 4) <= 1.5
+    assert abs(col - 403.5 / 4) <= 1.5
+    assert density.values.max() > 0.1
+    quiet = density.values.copy()
+    quiet[row - 5 : row + 6, col - 5 : col + 6] = 0
+    assert quiet.max() == 0.0  # uniform ground gives nothing, image borders included
+
+
+def test_frames_of_another_size_are_resized_and_strides_follow(blob_model: OnnxDensityModel) -> None:
+    density = blob_model.predict(np.zeros((240, 320, 3), dtype=np.uint8))
+    assert density.values.shape == (120, 160)
+    assert density.stride_x == pytest.approx(2.0)
+
+
+def test_contract_from_metadata_and_nhwc_bgr_normalization(tmp_path: Path) -> None:
+    contract = {
+        **CONTRACT,
+        "layout": "nhwc",
+        "channel_order": "bgr",
+        "scale": 1.0,
+        "mean": [10, 20, 30],
+        "std": [2, 2, 2],
+    }
+    path = pool_model(tmp_path / "m.onnx", [1, 48, 64, 3], [1, 1, 6, 8], 8, contract, layout="nhwc")
+    model = OnnxDensityModel(path)
+    assert model.contract.layout is TensorLayout.NHWC
+    frame = np.zeros((48, 64, 3), dtype=np.uint8)
+    frame[..., 0], frame[..., 1], frame[..., 2] = 50, 60, 70  # B, G, R
+    # ((50-10) + (60-20) + (70-30)) / 2 / 3 = 20 in every cell.
+    np.testing.assert_allclose(model.predict(frame).values, 20.0, rtol=1e-6)
+
+
+def test_contract_from_a_sidecar_file(tmp_path: Path) -> None:
+    path = pool_model(tmp_path / "side.onnx", [1, 3, 48, 64], [1, 1, 6, 8], 8, contract=None)
+    (tmp_path / "side.json").write_text(json.dumps(CONTRACT))
+    assert OnnxDensityModel(path).contract.output_stride == 8
+
+
+def test_symbolic_dimensions_are_checked_by_the_dry_run(tmp_path: Path) -> None:
+    path = pool_model(tmp_path / "dyn.onnx", [1, 3, "h", "w"], [1, 1, "oh", "ow"], 8, CONTRACT)
+    assert OnnxDensityModel(path).predict(np.zeros((48, 64, 3), np.uint8)).values.shape == (6, 8)
+    wrong = pool_model(tmp_path / "dyn4.onnx", [1, 3, "h", "w"], [1, 1, "oh", "ow"], 4, CONTRACT)
+    with pytest.raises(
+        PerceptionError,
+        match=r"dry run failed: model output has shape \[1, 1, 12, 16\], expected a \(6, 8\) density map",
+    ):
+        OnnxDensityModel(wrong)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(PerceptionError, match="model file not found") as info:
+        OnnxDensityModel(tmp_path / "nope.onnx")
+    assert info.value.where == "density.load"
+
+
+def test_corrupt_file(tmp_path: Path) -> None:
+    path = tmp_path / "corrupt.onnx"
+    path.write_bytes(b"\x08\x07 this is not a protobuf")
+    with pytest.raises(PerceptionError, match="cannot load ONNX model"):
+        OnnxDensityModel(path)
+
+
+def test_missing_contract(tmp_path: Path) -> None:
+    path = pool_model(tmp_path / "m.onnx", [1, 3, 48, 64], [1, 1, 6, 8], 8, contract=None)
+    with pytest.raises(PerceptionError, match="no input contract"):
+        OnnxDensityModel(path)
+
+
+def test_invalid_contract_names_the_field(tmp_path: Path) -> None:
+    path = pool_model(tmp_path / "m.onnx", [1, 3, 48, 64], [1, 1, 6, 8], 8, {**CONTRACT, "output_stride": 0})
+    with pytest.raises(PerceptionError, match=r"contract\.output_stride"):
+        OnnxDensityModel(path)
+
+
+def test_input_shape_that_does_not_fit_the_contract(tmp_path: Path) -> None:
+    path = pool_model(tmp_path / "m.onnx", [1, 3, 96, 128], [1, 1, 12, 16], 8, CONTRACT)
+    with pytest.raises(
+        PerceptionError, match=r"input 'frame' has shape \[1, 3, 96, 128\], contract says \[1, 3, 48, 64\]"
+    ):
+        OnnxDensityModel(path)
+
+
+def test_output_shape_that_does_not_fit_the_stride(tmp_path: Path) -> None:
+    path = pool_model(tmp_path / "m.onnx", [1, 3, 48, 64], [1, 1, 12, 16], 4, CONTRACT)
+    with pytest.raises(PerceptionError, match=r"output 'density' has shape \[1, 1, 12, 16\]"):
+        OnnxDensityModel(path)
+
+
+def test_unavailable_providers_are_skipped_and_none_left_is_an_error(
+    blob_model_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING):
+        model = OnnxDensityModel(blob_model_path, ["NoSuchExecutionProvider", "CPUExecutionProvider"])
+    assert model.providers == ["CPUExecutionProvider"]
+    assert "NoSuchExecutionProvider" in caplog.text
+    with pytest.raises(PerceptionError, match="none of the providers"):
+        OnnxDensityModel(blob_model_path, ["NoSuchExecutionProvider"])
+
+
+@pytest.mark.parametrize(
+    "frame",
+    [
+        np.zeros((480, 640), np.uint8),
+        np.zeros((480, 640, 4), np.uint8),
+        np.zeros((480, 640, 3), np.float32),
+        np.zeros((4, 4, 3), np.uint8),
+        "not an image",
+    ],
+)
+def test_bad_frames_are_rejected(blob_model: OnnxDensityModel, frame: object) -> None:
+    with pytest.raises(PerceptionError, match=r"density\.predict"):
+        blob_model.predict(frame)  # type: ignore[arg-type]
+
+
+def test_contract_validation() -> None:
+    with pytest.raises(ValueError, match="not divisible"):
+        DensityModelContract(input_width_px=100, input_height_px=48, output_stride=8)
+
+
+def test_blob_model_is_deterministic(tmp_path: Path) -> None:
+    a = save_model(build_blob_density_model(), tmp_path / "a.onnx").read_bytes()
+    b = save_model(build_blob_density_model(), tmp_path / "b.onnx").read_bytes()
+    assert a == b
+
+
+def test_shipped_placeholder_model_is_the_builders_output(tmp_path: Path) -> None:
+    shipped = Path(__file__).resolve().parent.parent / "models" / "blob_detector" / "blob_detector.onnx"
+    rebuilt = save_model(build_blob_density_model(), tmp_path / "rebuilt.onnx")
+    assert shipped.read_bytes() == rebuilt.read_bytes(), "run models/blob_detector/build.py"
