@@ -53,6 +53,39 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sitl(args: argparse.Namespace) -> int:
+    from companion.config import validate_config
+    from sitl.config import SitlConfig, load_sitl_config
+    from sitl.vehicle import SitlError, SitlVehicle, install_signal_handlers
+
+    base = load_sitl_config(args.config) if args.config else SitlConfig()
+    overrides = {
+        key: value
+        for key, value in {
+            "instance": args.instance,
+            "speed_factor": args.speed,
+            "lockstep": True if args.lockstep else None,
+            "seed": args.seed,
+            "dynamics": args.dynamics,
+            "log_path": str(args.log) if args.log else None,
+            "duration_s": args.duration,
+            "bind_address": args.bind,
+        }.items()
+        if value is not None
+    }
+    config = validate_config(SitlConfig, {**base.model_dump(), **overrides}, source="command line", prefix="sitl")
+    try:
+        vehicle = SitlVehicle(config)
+    except SitlError as exc:
+        sys.stderr.write(f"slz sitl: {exc}\n")
+        return 1
+    install_signal_handlers(vehicle)
+    try:
+        return vehicle.run()
+    finally:
+        vehicle.close()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``slz``."""
     parser = argparse.ArgumentParser(prog="slz", description="SLZ Lander: safe landing in populated areas.")
@@ -65,6 +98,18 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--section", default="perception", help="top-level section to check ('' for the whole file)")
     check.add_argument("--show", action="store_true", help="print the config with every default filled in")
     check.set_defaults(func=_cmd_check_config)
+
+    sitl = sub.add_parser("sitl", help="run the simulated PX4-style vehicle (MAVLink on UDP 14540/14550)")
+    sitl.add_argument("--config", type=Path, help="YAML file with a 'sitl' section")
+    sitl.add_argument("--instance", type=int, help="shifts every port, as PX4 does")
+    sitl.add_argument("--speed", type=float, help="simulated seconds per wall second; 0 = as fast as possible")
+    sitl.add_argument("--lockstep", action="store_true", help="wait for the client's acknowledgement at each tick")
+    sitl.add_argument("--seed", type=int)
+    sitl.add_argument("--dynamics", choices=["rigid_body", "jsbsim_f450"])
+    sitl.add_argument("--log", type=Path, help="write the true trajectory here (CSV)")
+    sitl.add_argument("--duration", type=float, help="stop after this many simulated seconds")
+    sitl.add_argument("--bind", help="local address (default 127.0.0.1)")
+    sitl.set_defaults(func=_cmd_sitl)
 
     demo = sub.add_parser("demo", help="run the SLZ pipeline on a seeded scene and write an annotated image")
     demo.add_argument("--config", type=Path, default=DEFAULT_PERCEPTION_CONFIG)

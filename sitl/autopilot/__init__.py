@@ -1,0 +1,1 @@
+"""A PX4-style autopilot on the MAVLink wire: modes, commands, parameters, telemetry, failsafes, control."""

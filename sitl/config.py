@@ -1,0 +1,101 @@
+"""The SITL vehicle's configuration: ports, origin, dynamics, clock, seed, parameters."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, field_validator, model_validator
+
+from companion.config import StrictModel, load_yaml_config
+from sitl.autopilot.params import PARAMS
+from sitl.dynamics.base import DynamicsBackend
+
+API_PORT_REMOTE = 14540
+API_PORT_LOCAL = 14580
+GCS_PORT_REMOTE = 14550
+GCS_PORT_LOCAL = 18570
+CONTROL_PORT = 4560
+
+
+class SitlConfig(StrictModel):
+    """One simulated vehicle. Ports follow PX4 SITL and shift with ``instance``."""
+
+    instance: int = Field(default=0, ge=0, le=99, description="Shifts every port by this much, as PX4 does.")
+    bind_address: str = Field(default="127.0.0.1", description="Local address of every socket (loopback).")
+    gcs_port_remote: int = Field(default=GCS_PORT_REMOTE, ge=1, le=65535, description="Ground station port.")
+    origin_lat_deg: float = Field(default=47.397742, ge=-90.0, le=90.0)
+    origin_lon_deg: float = Field(default=8.545594, ge=-180.0, le=180.0)
+    origin_alt_m: float = Field(default=488.0, ge=-500.0, le=9000.0)
+    dynamics: DynamicsBackend = DynamicsBackend.RIGID_BODY
+    physics_rate_hz: float = Field(default=400.0, ge=100.0, le=2000.0)
+    speed_factor: float = Field(default=1.0, ge=0.0, le=1000.0, description="Sim seconds per wall second; 0 = max.")
+    lockstep: bool = Field(default=False, description="Wait for the client's acknowledgement at every tick.")
+    lockstep_period_s: float = Field(default=0.1, gt=0.0, le=10.0, description="Tick period (the camera's).")
+    lockstep_timeout_s: float = Field(default=10.0, gt=0.0, le=600.0, description="Wall-clock wait for an ack.")
+    seed: int = Field(default=0, ge=0)
+    position_noise_m: float = Field(default=0.0, ge=0.0, le=5.0, description="Noise on reported positions.")
+    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    params: dict[str, float] = Field(default_factory=dict, description="Parameter overrides, PX4 names.")
+    log_path: Path | None = Field(default=None, description="Trajectory log (CSV), ground truth.")
+    log_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
+    duration_s: float | None = Field(default=None, gt=0.0, description="Stop after this much simulated time.")
+
+    @field_validator("params")
+    @classmethod
+    def _known_params(cls, value: dict[str, float]) -> dict[str, float]:
+        known = {p.name for p in PARAMS}
+        unknown = sorted(set(value) - known)
+        if unknown:
+            raise ValueError(f"unknown parameters {unknown}; known: {sorted(known)}")
+        return value
+
+    @model_validator(mode="after")
+    def _ports(self) -> SitlConfig:
+        if self.api_port_remote == self.gcs_port_remote:
+            raise ValueError(
+                f"instance {self.instance} puts the API link on the ground-station port {self.gcs_port_remote}; "
+                "choose another instance (or gcs_port_remote)"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _rates(self) -> SitlConfig:
+        if (
+            abs(self.lockstep_period_s * self.physics_rate_hz - round(self.lockstep_period_s * self.physics_rate_hz))
+            > 1e-6
+        ):
+            raise ValueError(
+                f"lockstep_period_s ({self.lockstep_period_s}) must be a whole number of physics steps "
+                f"(1/{self.physics_rate_hz} s)"
+            )
+        return self
+
+    @property
+    def api_port_local(self) -> int:
+        """Local port of the offboard/API link."""
+        return API_PORT_LOCAL + self.instance
+
+    @property
+    def api_port_remote(self) -> int:
+        """Where the API link sends (MAVSDK listens here: ``udpin://0.0.0.0:14540``)."""
+        return API_PORT_REMOTE + self.instance
+
+    @property
+    def gcs_port_local(self) -> int:
+        """Local port of the ground-station link."""
+        return GCS_PORT_LOCAL + self.instance
+
+    @property
+    def control_port(self) -> int:
+        """The harness control channel (JSON over UDP): simulated pilot, lockstep, ground truth."""
+        return CONTROL_PORT + self.instance
+
+    @property
+    def system_id(self) -> int:
+        """MAVLink system id (PX4: instance + 1)."""
+        return self.instance + 1
+
+
+def load_sitl_config(path: str | Path) -> SitlConfig:
+    """Load the ``sitl`` section of a YAML file."""
+    return load_yaml_config(SitlConfig, path, section="sitl")

@@ -1,0 +1,570 @@
+"""The SITL vehicle process: dynamics, controller and commander under one simulated clock, on the MAVLink wire.
+
+Rates: physics, attitude and rate control at ``physics_rate_hz``; position control, the commander, telemetry
+scheduling and the trajectory log at 100 Hz of simulated time; heartbeats at 1 Hz of wall time (and at once on a
+mode or arming change), so MAVSDK stays connected at any simulation speed.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import select
+import signal
+import time
+from pathlib import Path
+from types import FrameType
+from typing import Any, TextIO
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl.autopilot.commander import FORCE_MAGIC, Commander, ControlSource, LandedState, MavResult
+from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
+from sitl.autopilot.mavlink_link import MavlinkLink
+from sitl.autopilot.modes import FlightMode
+from sitl.autopilot.params import ParamError, ParameterStore, decode_value, encode_value
+from sitl.autopilot.telemetry import (
+    API_RATES_HZ,
+    GCS_RATES_HZ,
+    MESSAGE_IDS,
+    NAMES_BY_ID,
+    Battery,
+    Origin,
+    StreamSchedule,
+    TelemetryBuilder,
+)
+from sitl.clock import SimClock
+from sitl.config import SitlConfig
+from sitl.control_channel import ControlChannel
+from sitl.dynamics.base import DynamicsError, make_dynamics
+
+logger = logging.getLogger(__name__)
+
+OUTER_RATE_HZ = 100.0
+HEARTBEAT_PERIOD_S = 1.0
+IDLE_COMMAND = 0.1  # armed on the ground: props spin at idle
+
+# SET_POSITION_TARGET_LOCAL_NED type_mask bits
+IGNORE_PX, IGNORE_PY, IGNORE_PZ = 1, 2, 4
+IGNORE_VX, IGNORE_VY, IGNORE_VZ = 8, 16, 32
+IGNORE_YAW = 1024
+
+
+class SitlError(Exception):
+    """The SITL vehicle cannot start or had to stop (what failed, and where)."""
+
+    def __init__(self, where: str, what: str) -> None:
+        super().__init__(f"{where}: {what}")
+        self.where = where
+        self.what = what
+
+
+class SitlVehicle:
+    """One simulated PX4 quadrotor. Build it, then :meth:`run` until shutdown; :meth:`close` frees the ports."""
+
+    def __init__(self, config: SitlConfig) -> None:
+        self.config = config
+        try:
+            self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz)
+        except DynamicsError as exc:
+            raise SitlError("dynamics", str(exc)) from None
+        if config.physics_rate_hz < self.dynamics.min_rate_hz:
+            raise SitlError(
+                "config.physics_rate_hz",
+                f"{config.physics_rate_hz} Hz is below the {config.dynamics.value} model's "
+                f"{self.dynamics.min_rate_hz} Hz minimum",
+            )
+        airframe = self.dynamics.airframe
+        self.params = ParameterStore({"MPC_THR_HOVER": round(airframe.hover_thrust, 4), **config.params})
+        self.params.set("MAV_SYS_ID", config.system_id)
+        self.dynamics.set_wind(np.array(config.wind_ned_mps))
+        home = self.dynamics.state().position_ned_m.copy()
+        home[2] = 0.0
+        self.commander = Commander(self.params, home)
+        self.controller = CascadedController(airframe, self._limits())
+        self.clock = SimClock(1.0 / config.physics_rate_hz, config.speed_factor)
+        self._outer_every = max(1, round(config.physics_rate_hz / OUTER_RATE_HZ))
+        self._outer_dt_s = self._outer_every / config.physics_rate_hz
+        self.telemetry = TelemetryBuilder(
+            Origin(config.origin_lat_deg, config.origin_lon_deg, config.origin_alt_m),
+            np.random.default_rng(config.seed),
+            config.position_noise_m,
+        )
+        self.battery = Battery()
+        self.links: list[MavlinkLink] = []
+        self.control: ControlChannel | None = None
+        try:
+            sysid, bind = config.system_id, config.bind_address
+            self.links.append(MavlinkLink("api", bind, config.api_port_local, config.api_port_remote, sysid))
+            self.links.append(MavlinkLink("gcs", bind, config.gcs_port_local, config.gcs_port_remote, sysid))
+            self.control = ControlChannel(bind, config.control_port)
+        except Exception as exc:
+            self.close()
+            raise SitlError("network", str(exc)) from None
+        self.schedules = {
+            id(self.links[0]): StreamSchedule(API_RATES_HZ),
+            id(self.links[1]): StreamSchedule(GCS_RATES_HZ),
+        }
+        self._setpoint: Setpoint | None = None
+        self._motors = np.zeros(4)
+        self._running = True
+        self._exit_code = 0
+        self._last_heartbeat_wall = -math.inf
+        self.setpoints_rejected = 0
+        self.commands_by_sender: dict[str, int] = {}
+        self.setpoints_by_sender: dict[str, int] = {}
+        self._last_reject_text_s = -math.inf
+        # Lockstep
+        self._lockstep_client: tuple[str, int] | None = None
+        self._tick_seq = 0
+        self._next_tick_s = 0.0
+        self._tick_sent_wall = math.nan
+        self._lockstep_ack: dict[str, Any] | None = None
+        # Trajectory log
+        self._log: TextIO | None = None
+        self._next_log_s = 0.0
+        if config.log_path is not None:
+            Path(config.log_path).parent.mkdir(parents=True, exist_ok=True)
+            self._log = open(config.log_path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
+            self._log.write("t_s,north_m,east_m,down_m,vn_mps,ve_mps,vd_mps,qw,qx,qy,qz,armed,mode,landed_state\n")
+
+    # -- lifecycle ---------------------------------------------------------------------------------------------
+    def _limits(self) -> ControllerLimits:
+        p = self.params
+        return ControllerLimits(
+            xy_vel_max_mps=p["MPC_XY_VEL_MAX"],
+            z_vel_max_up_mps=p["MPC_Z_VEL_MAX_UP"],
+            z_vel_max_down_mps=p["MPC_Z_VEL_MAX_DN"],
+            tilt_max_deg=p["MPC_TILTMAX_AIR"],
+        )
+
+    def request_stop(self, *_: object) -> None:
+        """Stop at the next loop turn (signal handler and control channel)."""
+        self._running = False
+
+    def close(self) -> None:
+        """Release sockets and the log."""
+        for link in self.links:
+            link.close()
+        if self.control is not None:
+            self.control.close()
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+    def describe(self) -> str:
+        """One line with the endpoints."""
+        c = self.config
+        return (
+            f"SITL instance {c.instance} ready: sysid {c.system_id}, api udp {c.bind_address}:{c.api_port_local} -> "
+            f"{c.api_port_remote}, gcs {c.gcs_port_local} -> {c.gcs_port_remote}, control {c.control_port}, "
+            f"dynamics {c.dynamics.value}, speed {c.speed_factor or 'max'}{', lockstep' if c.lockstep else ''}"
+        )
+
+    def run(self) -> int:
+        """Run until shutdown, ``duration_s`` or a lockstep timeout; returns the exit code."""
+        logger.info(self.describe())
+        assert self.control is not None
+        sockets: list[Any] = [*self.links, self.control]
+        fast = self.config.speed_factor == 0 or self.config.speed_factor > 1
+        try:
+            while self._running:
+                if not fast or self.clock.steps % self._outer_every == 0:
+                    self._poll()
+                self._heartbeat_if_due()
+                if self.config.duration_s is not None and self.clock.now_s >= self.config.duration_s - 1e-9:
+                    logger.info("duration reached at %.3f s simulated", self.clock.now_s)
+                    break
+                at_tick = self.config.lockstep and self.clock.now_s >= self._next_tick_s - 1e-9
+                if at_tick and not self._lockstep_gate(sockets):
+                    continue
+                wait = self.clock.wall_time_until_next_step()
+                if wait > 0:
+                    select.select(sockets, [], [], min(wait, HEARTBEAT_PERIOD_S))
+                    continue
+                self._step()
+        finally:
+            self._write_log_row(force=True)
+        return self._exit_code
+
+    # -- lockstep ------------------------------------------------------------------------------------------------
+    def _lockstep_gate(self, sockets: list[Any]) -> bool:
+        """True when simulated time may pass the current tick."""
+        if self._lockstep_client is None:
+            select.select(sockets, [], [], 0.05)  # nobody to step with yet
+            self.clock.resync()
+            return False
+        if math.isnan(self._tick_sent_wall):
+            assert self.control is not None
+            self.control.send({"event": "tick", "seq": self._tick_seq, "t_s": self.clock.now_s}, self._lockstep_client)
+            self._tick_sent_wall = time.monotonic()
+        ack = self._lockstep_ack
+        if ack is not None and ack.get("seq") == self._tick_seq and self._ack_covers_mavlink(ack):
+            self._lockstep_ack = None
+            self._tick_seq += 1
+            self._next_tick_s += self.config.lockstep_period_s
+            self._tick_sent_wall = math.nan
+            self.clock.resync()
+            return True
+        if time.monotonic() - self._tick_sent_wall > self.config.lockstep_timeout_s:
+            logger.error(
+                "lockstep: no acknowledgement of tick %d (t = %.3f s) within %.1f s wall; stopping",
+                self._tick_seq,
+                self.clock.now_s,
+                self.config.lockstep_timeout_s,
+            )
+            self._exit_code = 3
+            self._running = False
+            return False
+        select.select(sockets, [], [], 0.02)
+        return False
+
+    def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
+        """The client's MAVLink messages sent before its ack have all been received (no overtaking)."""
+        source = (int(ack.get("sysid", 0)), int(ack.get("compid", 0)))
+        received = sum(link.stats.per_source.get(source, 0) for link in self.links)
+        return received >= int(ack.get("mavlink_sent", 0))
+
+    # -- the physics step ----------------------------------------------------------------------------------------
+    def _step(self) -> None:
+        t_s = self.clock.now_s
+        dt_s = self.clock.step_s
+        state = self.dynamics.state()
+        if self.clock.steps % self._outer_every == 0:
+            cmd = self.commander
+            self._setpoint = cmd.update(t_s, state, self.controller.collective)
+            if self._setpoint is None:
+                self.controller.reset()
+            else:
+                self.controller.update_position(
+                    state, self._setpoint, self._outer_dt_s, integrate=cmd.landed_state is not LandedState.ON_GROUND
+                )
+            self._announce()
+            self.battery.update(self.controller.collective, self._outer_dt_s, cmd.armed)
+            self._send_telemetry(t_s, state)
+            self._write_log_row()
+        if self._setpoint is not None:
+            self._motors = self.controller.update_attitude(state, dt_s)
+        else:
+            self._motors = np.full(4, IDLE_COMMAND if self.commander.armed else 0.0)
+        self.dynamics.set_motor_commands(self._motors)
+        self.dynamics.step(dt_s)
+        self.clock.advance()
+
+    def _announce(self) -> None:
+        """Send the commander's new events as STATUSTEXT and a heartbeat at once on a change."""
+        cmd = self.commander
+        if cmd.changed:
+            cmd.changed = False
+            self._last_heartbeat_wall = -math.inf
+            self._write_log_row(force=True)  # phase changes reach the disk at once
+        while cmd.events:
+            text = cmd.events.popleft()
+            self._statustext(text, failsafe=text.startswith("Failsafe"))
+
+    def _statustext(self, text: str, failsafe: bool = False) -> None:
+        severity = mavlink.MAV_SEVERITY_CRITICAL if failsafe else mavlink.MAV_SEVERITY_INFO
+        for link in self.links:
+            link.send(link.mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+
+    def _heartbeat_if_due(self) -> None:
+        now = time.monotonic()
+        if now - self._last_heartbeat_wall >= HEARTBEAT_PERIOD_S:
+            self._last_heartbeat_wall = now
+            for link in self.links:
+                link.send(self.telemetry.heartbeat(link.mav, self.commander))
+
+    def _send_telemetry(self, t_s: float, state: Any) -> None:
+        for link in self.links:
+            for name in self.schedules[id(link)].due(t_s):
+                link.send(self.telemetry.build(name, link.mav, t_s, state, self.commander, self.battery))
+
+    def _write_log_row(self, force: bool = False) -> None:
+        if self._log is None:
+            return
+        t_s = self.clock.now_s
+        if not force and t_s < self._next_log_s - 1e-9:
+            return
+        self._next_log_s = t_s + 1.0 / self.config.log_rate_hz
+        s = self.dynamics.state()
+        values = [t_s, *s.position_ned_m, *s.velocity_ned_mps, *s.quaternion_wxyz]
+        cmd = self.commander
+        self._log.write(
+            ",".join(f"{v:.17g}" for v in values) + f",{int(cmd.armed)},{cmd.mode.px4_name},{cmd.landed_state.name}\n"
+        )
+        if force:
+            self._log.flush()
+
+    # -- inputs --------------------------------------------------------------------------------------------------
+    def _poll(self) -> None:
+        for link in self.links:
+            for msg in link.receive():
+                self._handle_mavlink(link, msg)
+        assert self.control is not None
+        for request, addr in self.control.receive():
+            self._handle_control(request, addr)
+
+    def _targets_us(self, msg: Any) -> bool:
+        target = getattr(msg, "target_system", 0)
+        return target in (0, self.config.system_id)
+
+    def _handle_mavlink(self, link: MavlinkLink, msg: Any) -> None:
+        kind = msg.get_type()
+        sender = f"{msg.get_srcSystem()}/{msg.get_srcComponent()}"
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            if self._targets_us(msg) and getattr(msg, "target_component", 0) in (0, 1):
+                self.commands_by_sender[sender] = self.commands_by_sender.get(sender, 0) + 1
+                self._handle_command(link, msg, kind == "COMMAND_INT")
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+            if self._targets_us(msg):
+                self.setpoints_by_sender[sender] = self.setpoints_by_sender.get(sender, 0) + 1
+                self._handle_setpoint(msg)
+        elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
+            if self._targets_us(msg):
+                self._handle_param(link, msg)
+        elif kind == "SET_MODE":
+            if self._targets_us(msg):
+                mode = FlightMode.from_custom_mode(int(msg.custom_mode))
+                if mode is not None:
+                    self.commander.set_mode(mode)
+        elif kind == "TIMESYNC" and msg.tc1 == 0:
+            link.send(link.mav.timesync_encode(int(self.clock.now_s * 1e9), msg.ts1))
+
+    def _send_ack(self, link: MavlinkLink, msg: Any, result: MavResult) -> None:
+        link.send(
+            link.mav.command_ack_encode(msg.command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+        )
+
+    def _handle_command(self, link: MavlinkLink, msg: Any, is_int: bool) -> None:
+        cmd = self.commander
+        c = int(msg.command)
+        p = [msg.param1, msg.param2, msg.param3, msg.param4]
+        p7 = float(msg.z) if is_int else float(msg.param7)
+        result = MavResult.UNSUPPORTED
+        follow_up: str | None = None
+        if c == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            force = round(p[1]) == FORCE_MAGIC if math.isfinite(p[1]) else False
+            result = cmd.arm(force) if p[0] > 0.5 else cmd.disarm(force)
+        elif c == mavlink.MAV_CMD_NAV_TAKEOFF:
+            above_home = math.nan
+            if math.isfinite(p7):
+                above_home = p7 - (self.config.origin_alt_m - float(cmd.home_ned_m[2]))  # param7 is AMSL
+            result = cmd.takeoff(above_home)
+        elif c == mavlink.MAV_CMD_NAV_LAND:
+            result = cmd.land()
+        elif c == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            result = cmd.return_to_launch()
+        elif c == mavlink.MAV_CMD_DO_SET_MODE:
+            mode = FlightMode.from_px4(int(p[1]), int(p[2])) if math.isfinite(p[1]) and math.isfinite(p[2]) else None
+            if mode is None or not (int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED):
+                result = MavResult.UNSUPPORTED
+            else:
+                result = cmd.set_mode(mode)
+        elif c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            name = NAMES_BY_ID.get(int(p[0]))
+            if name is None or name == "AUTOPILOT_VERSION":
+                result = MavResult.UNSUPPORTED if int(p[0]) != mavlink.MAVLINK_MSG_ID_HEARTBEAT else MavResult.ACCEPTED
+            else:
+                self.schedules[id(link)].set_interval(name, float(p[1]))
+                result = MavResult.ACCEPTED
+        elif c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            msg_id = int(p[0]) if c == mavlink.MAV_CMD_REQUEST_MESSAGE else MESSAGE_IDS["AUTOPILOT_VERSION"]
+            name = NAMES_BY_ID.get(msg_id)
+            if name is not None and self.telemetry.can_build(name):
+                result, follow_up = MavResult.ACCEPTED, name
+        elif c == mavlink.MAV_CMD_DO_SET_HOME:
+            if cmd.landed_state is LandedState.ON_GROUND and p[0] > 0.5:
+                home = self.dynamics.state().position_ned_m.copy()
+                home[2] = cmd.home_ned_m[2]
+                cmd.home_ned_m = home
+                result = MavResult.ACCEPTED
+            else:
+                result = MavResult.TEMPORARILY_REJECTED if p[0] > 0.5 else MavResult.DENIED
+        elif c == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            if math.isfinite(p[1]) and p[1] > 0:
+                self.params.set("MPC_XY_VEL_MAX", min(max(p[1], 0.5), 20.0))
+                self.controller.limits = self._limits()
+                result = MavResult.ACCEPTED
+            else:
+                result = MavResult.DENIED
+        self._send_ack(link, msg, result)
+        if follow_up is not None:
+            link.send(
+                self.telemetry.build(follow_up, link.mav, self.clock.now_s, self.dynamics.state(), cmd, self.battery)
+            )
+        if cmd.changed:
+            self._last_heartbeat_wall = -math.inf  # let the client see the new mode/arming at once
+            self._heartbeat_if_due()
+
+    def _handle_setpoint(self, msg: Any) -> None:
+        mask = int(msg.type_mask)
+        if msg.coordinate_frame != mavlink.MAV_FRAME_LOCAL_NED:
+            self._reject_setpoint(f"frame {msg.coordinate_frame} not supported (LOCAL_NED only)")
+            return
+        nan = math.nan
+        pos = np.array(
+            [
+                nan if mask & IGNORE_PX else msg.x,
+                nan if mask & IGNORE_PY else msg.y,
+                nan if mask & IGNORE_PZ else msg.z,
+            ],
+            dtype=np.float64,
+        )
+        vel = np.array(
+            [
+                nan if mask & IGNORE_VX else msg.vx,
+                nan if mask & IGNORE_VY else msg.vy,
+                nan if mask & IGNORE_VZ else msg.vz,
+            ],
+            dtype=np.float64,
+        )
+        yaw = nan if mask & IGNORE_YAW else float(msg.yaw)
+        # A field the mask says is used must hold a number: NaN there is malformed, as PX4 treats it.
+        used_pos = [msg.x, msg.y, msg.z]
+        used_vel = [msg.vx, msg.vy, msg.vz]
+        for i, bit in enumerate((IGNORE_PX, IGNORE_PY, IGNORE_PZ)):
+            if not mask & bit and not math.isfinite(used_pos[i]):
+                self._reject_setpoint("non-finite position")
+                return
+        for i, bit in enumerate((IGNORE_VX, IGNORE_VY, IGNORE_VZ)):
+            if not mask & bit and not math.isfinite(used_vel[i]):
+                self._reject_setpoint("non-finite velocity")
+                return
+        if not mask & IGNORE_YAW and not math.isfinite(yaw):
+            self._reject_setpoint("non-finite yaw")
+            return
+        ok, reason = self.commander.offboard_setpoint(pos, vel, yaw)
+        if not ok:
+            self._reject_setpoint(reason)
+
+    def _reject_setpoint(self, reason: str) -> None:
+        self.setpoints_rejected += 1
+        if self.clock.now_s - self._last_reject_text_s >= 1.0:
+            self._last_reject_text_s = self.clock.now_s
+            logger.warning("offboard setpoint rejected: %s", reason)
+            self._statustext(f"Setpoint rejected: {reason}")
+
+    def _handle_param(self, link: MavlinkLink, msg: Any) -> None:
+        names = self.params.names()
+        kind = msg.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            for name in names:
+                self._send_param(link, name)
+            return
+        raw_id = msg.param_id
+        name = raw_id.decode("ascii", "ignore") if isinstance(raw_id, bytes) else str(raw_id)
+        name = name.rstrip("\x00")
+        if kind == "PARAM_REQUEST_READ":
+            if msg.param_index >= 0:
+                if msg.param_index < len(names):
+                    self._send_param(link, names[msg.param_index])
+                return
+            if name in names:
+                self._send_param(link, name)
+            return
+        # PARAM_SET
+        if name not in names:
+            self._statustext(f"Unknown parameter {name}")
+            return
+        try:
+            spec = self.params.spec(name)
+            self.params.set(name, decode_value(spec, float(msg.param_value), int(msg.param_type)))
+            self.controller.limits = self._limits()
+        except ParamError as exc:
+            self._statustext(str(exc))
+        self._send_param(link, name)
+
+    def _send_param(self, link: MavlinkLink, name: str) -> None:
+        spec = self.params.spec(name)
+        link.send(
+            link.mav.param_value_encode(
+                name.encode("ascii"),
+                encode_value(spec, self.params[name]),
+                int(spec.param_type),
+                len(self.params.names()),
+                self.params.index(name),
+            )
+        )
+
+    def _handle_control(self, request: dict[str, Any], addr: tuple[str, int]) -> None:
+        assert self.control is not None
+        cmd = request["cmd"]
+        reply: dict[str, Any] = {"event": "ack", "cmd": cmd}
+        try:
+            if cmd == "ping":
+                reply = {"event": "pong", "t_s": self.clock.now_s}
+            elif cmd == "state":
+                reply = self._truth()
+            elif cmd == "pilot_mode":
+                reply["result"] = int(
+                    self.commander.set_mode(FlightMode.from_name(str(request["mode"])), ControlSource.PILOT)
+                )
+            elif cmd == "pilot_sticks":
+                self.commander.pilot_sticks = np.clip(
+                    [float(request.get(k, 0.0)) for k in ("north", "east", "down")], -1.0, 1.0
+                )
+            elif cmd == "rc_loss":
+                self.commander.set_rc_lost(bool(request["lost"]))
+            elif cmd == "wind":
+                wind = [float(v) for v in request["ned_mps"]]
+                if len(wind) != 3 or not all(math.isfinite(v) for v in wind):
+                    raise ValueError("ned_mps needs three finite numbers")
+                self.dynamics.set_wind(np.array(wind))
+            elif cmd == "lockstep_subscribe":
+                if not self.config.lockstep:
+                    raise ValueError("this SITL does not run in lockstep")
+                self._lockstep_client = addr
+                self._tick_sent_wall = math.nan  # (re)send the pending tick to the new client
+                reply["tick_period_s"] = self.config.lockstep_period_s
+            elif cmd == "lockstep_ack":
+                self._lockstep_ack = request
+                return
+            elif cmd == "shutdown":
+                self.request_stop()
+            else:
+                raise ValueError(f"unknown cmd {cmd!r}")
+        except (KeyError, ValueError, TypeError) as exc:
+            reply = {"event": "error", "cmd": cmd, "error": str(exc)}
+        self.control.send(reply, addr)
+
+    def _truth(self) -> dict[str, Any]:
+        s = self.dynamics.state()
+        cmd = self.commander
+        return {
+            "event": "state",
+            "t_s": self.clock.now_s,
+            "position_ned_m": s.position_ned_m.tolist(),
+            "velocity_ned_mps": s.velocity_ned_mps.tolist(),
+            "quaternion_wxyz": s.quaternion_wxyz.tolist(),
+            "on_ground": s.on_ground,
+            "armed": cmd.armed,
+            "mode": cmd.mode.px4_name,
+            "landed_state": cmd.landed_state.name,
+            "failsafe": cmd.failsafe,
+            "failsafe_since_s": None if math.isnan(cmd.failsafe_since_s) else cmd.failsafe_since_s,
+            "rc_lost": cmd.rc_lost,
+            "setpoints_rejected": self.setpoints_rejected,
+            "commands_by_sender": dict(self.commands_by_sender),
+            "setpoints_by_sender": dict(self.setpoints_by_sender),
+            "links": {
+                link.name: {
+                    "received": link.stats.received,
+                    "sent": link.stats.sent,
+                    "dropped_malformed": link.stats.dropped_malformed,
+                    "dropped_unknown": link.stats.dropped_unknown,
+                    "senders": sorted({f"{s_}/{c_}" for s_, c_ in link.stats.per_source}),
+                }
+                for link in self.links
+            },
+        }
+
+
+def install_signal_handlers(vehicle: SitlVehicle) -> None:
+    """SIGTERM and SIGINT stop the loop cleanly."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        vehicle.request_stop()
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)

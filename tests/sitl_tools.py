@@ -1,0 +1,193 @@
+"""Helpers for SITL tests: waiting on conditions with deadlines, a pymavlink ground station, a lockstep client."""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+import time
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl.config import API_PORT_REMOTE, CONTROL_PORT, GCS_PORT_REMOTE
+from sitl.process import SitlProcess
+
+T = TypeVar("T")
+
+
+def wait_until(condition: Callable[[], T | None], timeout_s: float, what: str, poll_s: float = 0.05) -> T:
+    """Poll ``condition`` until it returns something truthy; fail with ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+def state_when(
+    sitl: SitlProcess, predicate: Callable[[dict[str, Any]], bool], timeout_s: float, what: str
+) -> dict[str, Any]:
+    """The SITL's ground truth once ``predicate`` holds for it."""
+
+    def check() -> dict[str, Any] | None:
+        state = sitl.state()
+        return state if predicate(state) else None
+
+    return wait_until(check, timeout_s, what)
+
+
+class MavlinkPeer:
+    """A raw-UDP MAVLink peer bound to ``port`` (the side MAVSDK or a ground station would be)."""
+
+    def __init__(self, port: int, system_id: int = 255, component_id: int = 190) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        self.sock.bind(("127.0.0.1", port))
+        self.sock.setblocking(False)
+        self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.mav.robust_parsing = True
+        self.vehicle_addr: tuple[str, int] | None = None
+        self.vehicle_sysid = 1
+        self.messages: list[Any] = []
+        self.heartbeat_wall_times: list[float] = []
+        self.sent = 0
+
+    def poll(self) -> list[Any]:
+        """Read everything waiting; returns the new messages."""
+        new: list[Any] = []
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except BlockingIOError:
+                break
+            self.vehicle_addr = addr
+            for msg in self.mav.parse_buffer(data) or []:
+                if msg.get_type() == "HEARTBEAT":
+                    self.heartbeat_wall_times.append(time.monotonic())
+                    self.vehicle_sysid = msg.get_srcSystem()
+                new.append(msg)
+        self.messages.extend(new)
+        return new
+
+    def latest(self, kind: str) -> Any:
+        """The most recent message of a type (None if none yet)."""
+        self.poll()
+        for msg in reversed(self.messages):
+            if msg.get_type() == kind:
+                return msg
+        return None
+
+    def send(self, msg: Any) -> None:
+        """Send to the vehicle (once it has been heard)."""
+        assert self.vehicle_addr is not None, "the vehicle has not been heard yet"
+        buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        self.sock.sendto(buf, self.vehicle_addr)
+        self.sent += 1
+
+    def send_raw(self, data: bytes) -> None:
+        """Send arbitrary bytes (malformed input tests)."""
+        assert self.vehicle_addr is not None
+        self.sock.sendto(data, self.vehicle_addr)
+
+    def command(self, command: int, *params: float, timeout_s: float = 2.0) -> int:
+        """COMMAND_LONG to the autopilot; returns the ACK's result."""
+        p = [*params, *([0.0] * (7 - len(params)))]
+        self.messages.clear()
+        self.send(self.mav.command_long_encode(self.vehicle_sysid, 1, command, 0, *p))
+
+        def ack() -> Any:
+            for msg in self.poll():
+                if msg.get_type() == "COMMAND_ACK" and msg.command == command:
+                    return msg
+            return None
+
+        return int(wait_until(ack, timeout_s, f"COMMAND_ACK for {command}", poll_s=0.01).result)
+
+    def close(self) -> None:
+        """Close the socket."""
+        self.sock.close()
+
+
+class GroundStation(MavlinkPeer):
+    """A pymavlink ground station on the GCS link (UDP 14550)."""
+
+    def __init__(self, port: int = GCS_PORT_REMOTE) -> None:
+        super().__init__(port, system_id=255, component_id=190)
+
+
+def api_port(instance: int) -> int:
+    """MAVSDK's port for a SITL instance."""
+    return API_PORT_REMOTE + instance
+
+
+class LockstepClient:
+    """Drives a lockstep SITL from the API link: at each tick, send this tick's MAVLink, then acknowledge."""
+
+    def __init__(self, instance: int, system_id: int = 245, component_id: int = 190) -> None:
+        self.peer = MavlinkPeer(api_port(instance), system_id, component_id)
+        self.control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.control.bind(("127.0.0.1", 0))
+        self.control_addr = ("127.0.0.1", CONTROL_PORT + instance)
+        self.system_id = system_id
+        self.component_id = component_id
+
+    def subscribe(self, timeout_s: float = 10.0) -> None:
+        """Register for ticks and wait until the vehicle has been heard on MAVLink."""
+        self.control.sendto(json.dumps({"cmd": "lockstep_subscribe"}).encode(), self.control_addr)
+        wait_until(lambda: self.peer.poll() is not None and self.peer.vehicle_addr, timeout_s, "the vehicle")
+
+    def next_tick(self, timeout_s: float = 10.0) -> dict[str, Any]:
+        """Wait for the next tick event."""
+        self.control.settimeout(timeout_s)
+        while True:
+            data, _ = self.control.recvfrom(65535)
+            event: dict[str, Any] = json.loads(data)
+            if event.get("event") == "tick":
+                return event
+
+    def ack(self, seq: int) -> None:
+        """Acknowledge tick ``seq``, stating how many MAVLink messages were sent before it."""
+        request = {
+            "cmd": "lockstep_ack",
+            "seq": seq,
+            "mavlink_sent": self.peer.sent,
+            "sysid": self.system_id,
+            "compid": self.component_id,
+        }
+        self.control.sendto(json.dumps(request).encode(), self.control_addr)
+
+    def close(self) -> None:
+        """Close both sockets."""
+        self.peer.close()
+        self.control.close()
+
+
+def position_setpoint(
+    mav: Any, north_m: float, east_m: float, down_m: float, yaw_rad: float = math.nan, target_system: int = 1
+) -> Any:
+    """SET_POSITION_TARGET_LOCAL_NED with position (and yaw when given), as MAVSDK sends it."""
+    mask = 0b0000_1111_1111_1000 if math.isnan(yaw_rad) else 0b0000_1001_1111_1000
+    return mav.set_position_target_local_ned_encode(
+        0,
+        target_system,
+        1,
+        mavlink.MAV_FRAME_LOCAL_NED,
+        mask,
+        north_m,
+        east_m,
+        down_m,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0.0 if math.isnan(yaw_rad) else yaw_rad,
+        0,
+    )

@@ -1,0 +1,144 @@
+"""Lockstep and determinism: one seed and the same inputs give the same flight at any simulation speed."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl.process import SitlProcess
+from tests.sitl_tools import LockstepClient, position_setpoint, wait_until
+
+pytestmark = pytest.mark.sitl
+
+DURATION_S = 12.0
+
+
+def corner_at(t_s: float) -> tuple[float, float, float]:
+    """The scripted offboard path: climb, two legs of a square, back."""
+    if t_s < 4.0:
+        return 0.0, 0.0, -4.0
+    if t_s < 7.0:
+        return 4.0, 0.0, -4.0
+    if t_s < 10.0:
+        return 4.0, 4.0, -4.0
+    return 0.0, 0.0, -4.0
+
+
+def fly_in_lockstep(tmp_path: Path, instance: int, speed: str) -> tuple[str, list[tuple[Any, ...]], float]:
+    """Fly the script; returns the truth log, the LOCAL_POSITION_NED sequence the client saw, and the wall time."""
+    config = tmp_path / f"sitl-{speed}.yaml"
+    config.write_text("sitl:\n  position_noise_m: 0.05\n  seed: 42\n")
+    log = tmp_path / f"trajectory-{speed}.csv"
+    args = ["--config", str(config), "--lockstep", "--speed", speed, "--log", str(log), "--duration", str(DURATION_S)]
+    sitl = SitlProcess(args, instance, tmp_path).start()
+    client = LockstepClient(instance)
+    try:
+        client.subscribe()
+        sysid = client.peer.vehicle_sysid
+        start = time.monotonic()
+        while True:
+            tick = client.next_tick()
+            t_s = tick["t_s"]
+            client.peer.send(position_setpoint(client.peer.mav, *corner_at(t_s), target_system=sysid))
+            if tick["seq"] == 1:
+                client.peer.send(
+                    client.peer.mav.command_long_encode(
+                        sysid,
+                        1,
+                        mavlink.MAV_CMD_DO_SET_MODE,
+                        0,
+                        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                        6,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                    )
+                )
+            if tick["seq"] == 2:
+                client.peer.send(
+                    client.peer.mav.command_long_encode(
+                        sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0
+                    )
+                )
+            client.peer.poll()
+            client.ack(tick["seq"])
+            if t_s >= DURATION_S - 0.1 - 1e-9:
+                break
+        assert sitl.wait(timeout_s=20) == 0
+        wall_s = time.monotonic() - start
+        client.peer.poll()
+        seen = [(m.time_boot_ms, m.x, m.y, m.z) for m in client.peer.messages if m.get_type() == "LOCAL_POSITION_NED"]
+        return log.read_text(), seen, wall_s
+    finally:
+        client.close()
+        sitl.stop()
+
+
+def test_same_seed_same_flight_at_different_speeds(tmp_path: Path) -> None:
+    slow_log, slow_seen, slow_wall = fly_in_lockstep(tmp_path, 14, "2")
+    fast_log, fast_seen, fast_wall = fly_in_lockstep(tmp_path, 15, "0")
+    assert slow_wall > DURATION_S / 2 - 0.5  # paced at twice real time
+    assert fast_wall < slow_wall  # as fast as possible
+    rows = slow_log.splitlines()
+    assert len(rows) > 500
+    assert slow_log == fast_log  # bit-identical ground truth
+    last = rows[-1].split(",")
+    assert math.hypot(float(last[1]), float(last[2])) < 1.0
+    assert float(last[3]) < -3.5
+    assert any(float(r.split(",")[1]) > 3.7 for r in rows[1:])  # reached the 4 m leg
+    # The noisy telemetry the client received is the same sequence too (seeded noise, simulated timestamps).
+    assert len(slow_seen) > 400
+    assert slow_seen == fast_seen
+
+
+def test_time_waits_for_the_acknowledgement(tmp_path: Path) -> None:
+    config = tmp_path / "sitl.yaml"
+    config.write_text("sitl:\n  lockstep_timeout_s: 3.0\n")
+    sitl = SitlProcess(["--config", str(config), "--lockstep", "--speed", "0"], 12, tmp_path).start()
+    client = LockstepClient(12)
+    try:
+        client.subscribe()
+        tick = client.next_tick()
+        assert tick["seq"] == 0
+        # No acknowledgement yet: simulated time stays at the tick while the wall clock runs (a heartbeat).
+        beats = len(client.peer.heartbeat_wall_times)
+        wait_until(lambda: client.peer.poll() is not None and len(client.peer.heartbeat_wall_times) > beats, 2, "1 s")
+        assert sitl.state()["t_s"] == 0.0
+        client.ack(0)
+        assert client.next_tick()["seq"] == 1
+        assert sitl.state()["t_s"] == pytest.approx(0.1)
+        # A client that stops answering makes the SITL fail loudly after the timeout, not hang.
+        assert sitl.wait(timeout_s=10) == 3
+        assert "no acknowledgement of tick 1" in sitl.log_tail()
+    finally:
+        client.close()
+        sitl.stop()
+
+
+def test_an_ack_cannot_overtake_the_setpoints_sent_before_it(tmp_path: Path) -> None:
+    sitl = SitlProcess(["--lockstep", "--speed", "0"], 13, tmp_path).start()
+    client = LockstepClient(13)
+    try:
+        client.subscribe()
+        client.next_tick()
+        # Claim one more MAVLink message than actually arrived: the SITL must keep waiting for it.
+        client.peer.sent += 1
+        client.ack(0)
+        beats = len(client.peer.heartbeat_wall_times)
+        wait_until(
+            lambda: client.peer.poll() is not None and len(client.peer.heartbeat_wall_times) >= beats + 1, 3, "1 s"
+        )
+        assert sitl.state()["t_s"] == 0.0
+        client.peer.send(position_setpoint(client.peer.mav, 0, 0, -1, target_system=client.peer.vehicle_sysid))
+        client.peer.sent -= 1  # the message now sent is the one that was announced
+        assert client.next_tick()["seq"] == 1
+    finally:
+        client.close()
+        sitl.stop()

@@ -1,0 +1,220 @@
+"""The SITL vehicle against real clients: MAVSDK in its own process on 14540, a pymavlink ground station on 14550.
+
+Flight scripts with explicit tolerances and deadlines; ground truth read from the SITL's control channel and its
+trajectory log (simulated time).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sitl.autopilot.modes import FlightMode
+from sitl.process import SitlProcess
+from tests.sitl_tools import GroundStation, api_port, state_when, wait_until
+
+pytestmark = pytest.mark.sitl
+
+CLIENT = Path(__file__).resolve().parent / "clients" / "mavsdk_flight.py"
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+class Client:
+    """A MAVSDK client process and the JSON events it prints."""
+
+    def __init__(self, scenario: str, instance: int) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, str(CLIENT), scenario, "--port", str(api_port(instance))],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            cwd=REPO_ROOT,
+            text=True,
+        )
+        self.events: queue.Queue[dict[str, Any]] = queue.Queue()
+        self.seen: list[dict[str, Any]] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith("{"):
+                self.events.put(json.loads(line))
+
+    def expect(self, event: str, timeout_s: float, on_poll: Callable[[], None] | None = None) -> dict[str, Any]:
+        """Wait for ``event``; an ``error`` event or a deadline fails the test."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if on_poll is not None:
+                on_poll()
+            try:
+                item = self.events.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            self.seen.append(item)
+            if item["event"] == "error":
+                raise AssertionError(f"client failed: {item['error']} (events so far: {self.seen})")
+            if item["event"] == event:
+                return item
+        raise AssertionError(f"no '{event}' from the client within {timeout_s} s (events: {self.seen})")
+
+    def kill(self) -> None:
+        """SIGKILL: the process and MAVSDK's setpoint thread die at once."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout=10)
+
+
+@pytest.fixture
+def sitl_factory(tmp_path: Path) -> Iterator[Callable[..., SitlProcess]]:
+    started: list[SitlProcess] = []
+
+    def start(instance: int, *args: str) -> SitlProcess:
+        sitl = SitlProcess(list(args), instance, tmp_path).start()
+        started.append(sitl)
+        return sitl
+
+    yield start
+    for sitl in started:
+        sitl.stop()
+
+
+def test_mavsdk_flies_an_offboard_square_while_a_ground_station_watches(
+    sitl_factory: Callable[..., SitlProcess], tmp_path: Path
+) -> None:
+    log = tmp_path / "square.csv"
+    sitl = sitl_factory(1, "--speed", "1", "--log", str(log))
+    gcs = GroundStation()
+    modes_seen: set[str] = set()
+
+    def watch() -> None:
+        for msg in gcs.poll():
+            if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == 2:
+                mode = FlightMode.from_custom_mode(msg.custom_mode)
+                armed = bool(msg.base_mode & 128)
+                modes_seen.add(f"{mode.px4_name if mode else msg.custom_mode}{'+armed' if armed else ''}")
+
+    client = Client("square", 1)
+    try:
+        client.expect("connected", 20, watch)
+        client.expect("healthy", 20, watch)
+        client.expect("armed", 10, watch)
+        client.expect("took_off", 30, watch)
+        client.expect("offboard", 10, watch)
+        corners = [client.expect("corner_held", 40, watch) for _ in range(4)]
+        assert all(c["worst_error_m"] <= 0.3 for c in corners)
+        client.expect("on_ground", 60, watch)
+        client.expect("disarmed", 20, watch)
+        client.expect("done", 10, watch)
+    finally:
+        client.kill()
+    # The ground station saw the same vehicle (sysid 2 for instance 1) through the flight, on its own link.
+    assert {"AUTO.TAKEOFF+armed", "OFFBOARD+armed", "AUTO.LAND+armed", "AUTO.LAND"} <= modes_seen
+    gcs.send(gcs.mav.param_request_read_encode(2, 1, b"MIS_TAKEOFF_ALT", -1))
+    value = wait_until(lambda: gcs.latest("PARAM_VALUE"), 3.0, "PARAM_VALUE on the GCS link")
+    assert value.param_value == pytest.approx(5.0)  # set by MAVSDK on the other link
+    gcs.close()
+    state = sitl.state()
+    assert state["links"]["gcs"]["received"] >= 1
+    assert state["links"]["api"]["received"] > 50
+
+    # Ground truth in simulated time: each corner was held within 0.3 m for 2 s.
+    assert sitl.stop() == 0
+    rows = list(csv.DictReader(log.open()))
+    t = np.array([float(r["t_s"]) for r in rows])
+    pos = np.array([[float(r["north_m"]), float(r["east_m"]), float(r["down_m"])] for r in rows])
+    for corner in ([6, 0], [6, 6], [0, 6], [0, 0]):
+        inside = np.linalg.norm(pos - [*corner, -5.0], axis=1) <= 0.3
+        longest, start = 0.0, None
+        for ti, ok in zip(t, inside, strict=True):
+            if ok and start is None:
+                start = ti
+            if not ok:
+                start = None
+            if start is not None:
+                longest = max(longest, ti - start)
+        assert longest >= 2.0, f"corner {corner} held only {longest:.2f} s"
+    assert rows[-1]["armed"] == "0"
+    assert rows[-1]["landed_state"] == "ON_GROUND"
+
+
+def test_offboard_loss_failsafe_fires_after_com_of_loss_t_when_the_client_dies(
+    sitl_factory: Callable[..., SitlProcess],
+) -> None:
+    sitl = sitl_factory(2, "--speed", "1")
+    client = Client("hover", 2)
+    try:
+        client.expect("offboard", 60)
+        wait_until(lambda: sitl.state()["mode"] == "OFFBOARD", 5, "OFFBOARD")
+    finally:
+        client.kill()
+    killed_at_s = sitl.state()["t_s"]
+    state = state_when(sitl, lambda s: bool(s["failsafe"]), 5.0, "the offboard-loss failsafe")
+    assert state["failsafe"] == "Offboard lost"
+    assert state["mode"] == "AUTO.LAND"  # COM_OBL_ACT = 0
+    # COM_OF_LOSS_T = 1 s after the last setpoint (sent at most ~0.1 s before the kill).
+    assert 0.85 <= state["failsafe_since_s"] - killed_at_s <= 1.3
+    final = state_when(sitl, lambda s: s["landed_state"] == "ON_GROUND" and not s["armed"], 40, "landed")
+    assert abs(final["position_ned_m"][0]) < 1.0
+    assert abs(final["position_ned_m"][1]) < 1.0
+
+
+def test_pilot_takeover_leaves_offboard_and_the_vehicle_obeys_the_pilot(
+    sitl_factory: Callable[..., SitlProcess],
+) -> None:
+    sitl = sitl_factory(3, "--speed", "1")
+    client = Client("push_north", 3)
+    try:
+        client.expect("offboard", 60)
+        wait_until(lambda: sitl.state()["position_ned_m"][0] > 1.0, 10, "the client pushing north")
+        reply = sitl.request({"cmd": "pilot_mode", "mode": "POSCTL"})
+        assert reply["result"] == 0
+        assert sitl.state()["mode"] == "POSCTL"
+        # The pilot's sticks are centred: the vehicle brakes and holds, ignoring the setpoints that keep coming.
+        stopped = state_when(sitl, lambda s: bool(np.linalg.norm(s["velocity_ned_mps"]) < 0.2), 10, "braking")
+        setpoints_before = sum(stopped["setpoints_by_sender"].values())
+        t0 = stopped["t_s"]
+        later = state_when(sitl, lambda s: s["t_s"] >= t0 + 2.0, 5, "2 s of hold")
+        assert np.linalg.norm(np.subtract(later["position_ned_m"][:2], stopped["position_ned_m"][:2])) < 0.3
+        assert later["position_ned_m"][0] < 7.0  # never reached the client's 8 m
+        assert sum(later["setpoints_by_sender"].values()) >= setpoints_before + 20  # still streaming
+        assert later["mode"] == "POSCTL"
+        # The pilot pushes the stick east: the vehicle goes east.
+        sitl.request({"cmd": "pilot_sticks", "east": 0.4})
+        east0 = later["position_ned_m"][1]
+        wait_until(lambda: sitl.state()["position_ned_m"][1] > east0 + 2.0, 8, "moving east under the pilot")
+    finally:
+        client.kill()
+
+
+@pytest.mark.parametrize(("speed", "max_sim_s"), [("0.05", 0.5), ("0", None)])
+def test_heartbeats_follow_the_wall_clock_at_any_speed(
+    sitl_factory: Callable[..., SitlProcess], speed: str, max_sim_s: float | None
+) -> None:
+    sitl = sitl_factory(4, "--speed", speed)
+    gcs = GroundStation()
+    try:
+        t0_sim = sitl.state()["t_s"]
+        start = time.monotonic()
+        wait_until(lambda: gcs.poll() is not None and time.monotonic() - start >= 3.2, 5, "3.2 s of wall time")
+        beats = [t for t in gcs.heartbeat_wall_times if t >= start]
+        assert 3 <= len(beats) <= 5  # 1 Hz of wall time, whatever the simulation speed
+        elapsed_sim = sitl.state()["t_s"] - t0_sim
+        if max_sim_s is not None:
+            assert elapsed_sim <= max_sim_s
+        else:
+            assert elapsed_sim > 3.2  # faster than real time
+    finally:
+        gcs.close()
