@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sitl.dynamics.base import Airframe, F64Array, VehicleState
-from sitl.dynamics.rigid_body import GRAVITY_MPS2, quaternion_to_matrix
+from sitl.dynamics.rigid_body import GRAVITY_MPS2, cross3, quaternion_to_matrix
 
 
 @dataclass(frozen=True)
@@ -159,10 +159,10 @@ class CascadedController:
         z_b = -thrust / norm if norm > 1e-6 else np.array([0.0, 0.0, 1.0])
         yaw = self._yaw_sp if not math.isnan(self._yaw_sp) else math.atan2(R[1, 0], R[0, 0])
         x_c = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        y_b = np.cross(z_b, x_c)
+        y_b = cross3(z_b, x_c)
         y_norm = float(np.linalg.norm(y_b))
         y_b = y_b / y_norm if y_norm > 1e-6 else R[:, 1]
-        x_b = np.cross(y_b, z_b)
+        x_b = cross3(y_b, z_b)
         R_sp = np.column_stack([x_b, y_b, z_b])
         # Geometric attitude error (Lee et al.), in the body frame.
         E = R_sp.T @ R - R.T @ R_sp
