@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import os
 import platform
+import sys
 from pathlib import Path
+from typing import Any
 
 
 def cpu_model() -> str:
@@ -33,3 +36,10 @@ def machine_context() -> dict[str, object]:
         "opencv": cv2.__version__,
         "onnxruntime": onnxruntime.__version__,
     }
+
+
+def save_report(report: dict[str, Any], path: Path) -> None:
+    """Write a benchmark's JSON report and say where."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    sys.stdout.write(f"wrote {path}\n")

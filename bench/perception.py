@@ -8,7 +8,6 @@ Prints median and p95 per stage and in total, with and without the network, and 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -20,7 +19,7 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
-from bench.machine import machine_context  # noqa: E402
+from bench.machine import machine_context, save_report  # noqa: E402
 from companion.perception.config import PerceptionConfig  # noqa: E402
 from companion.perception.geometry import Pose  # noqa: E402
 from companion.perception.pipeline import STAGES, SlzPipeline, camera_from_config  # noqa: E402
@@ -78,9 +77,7 @@ def main() -> int:
     sys.stdout.write(f"{'stage':<24}{'median ms':>12}{'p95 ms':>12}\n")
     for name, row in summary.items():
         sys.stdout.write(f"{name:<24}{row['median_ms']:>12.2f}{row['p95_ms']:>12.2f}\n")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-    sys.stdout.write(f"wrote {args.out}\n")
+    save_report(report, args.out)
     return 0
 
 

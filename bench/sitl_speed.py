@@ -9,7 +9,6 @@ possible: physics and attitude control at 400 Hz, position control, commander, t
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -19,7 +18,7 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
-from bench.machine import machine_context  # noqa: E402
+from bench.machine import machine_context, save_report  # noqa: E402
 from sitl.autopilot.modes import FlightMode  # noqa: E402
 from sitl.config import SitlConfig  # noqa: E402
 from sitl.dynamics.base import DynamicsBackend  # noqa: E402
@@ -73,9 +72,7 @@ def main() -> int:
             )
         else:
             sys.stdout.write(f"{name:<14} {row}\n")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-    sys.stdout.write(f"wrote {args.out}\n")
+    save_report(report, args.out)
     return 0
 
 

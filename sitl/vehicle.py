@@ -120,7 +120,7 @@ class SitlVehicle:
         self._tick_seq = 0
         self._next_tick_s = 0.0
         self._tick_sent_wall = math.nan
-        self._lockstep_ack: dict[str, Any] | None = None
+        self._lockstep_ack: dict[str, int] | None = None
         # Trajectory log
         self._log: TextIO | None = None
         self._next_log_s = 0.0
@@ -220,11 +220,11 @@ class SitlVehicle:
         select.select(sockets, [], [], 0.02)
         return False
 
-    def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
+    def _ack_covers_mavlink(self, ack: dict[str, int]) -> bool:
         """The client's MAVLink messages sent before its ack have all been received (no overtaking)."""
-        source = (int(ack.get("sysid", 0)), int(ack.get("compid", 0)))
+        source = (ack["sysid"], ack["compid"])
         received = sum(link.stats.per_source.get(source, 0) for link in self.links)
-        return received >= int(ack.get("mavlink_sent", 0))
+        return bool(received >= ack["mavlink_sent"])
 
     # -- the physics step ----------------------------------------------------------------------------------------
     def _step(self) -> None:
@@ -518,7 +518,7 @@ class SitlVehicle:
                 self._tick_sent_wall = math.nan  # (re)send the pending tick to the new client
                 reply["tick_period_s"] = self.config.lockstep_period_s
             elif cmd == "lockstep_ack":
-                self._lockstep_ack = request
+                self._lockstep_ack = {key: int(request[key]) for key in ("seq", "mavlink_sent", "sysid", "compid")}
                 return
             elif cmd == "shutdown":
                 self.request_stop()

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -29,12 +30,15 @@ def corner_at(t_s: float) -> tuple[float, float, float]:
     return 0.0, 0.0, -4.0
 
 
-def fly_in_lockstep(tmp_path: Path, instance: int, speed: str) -> tuple[str, list[tuple[Any, ...]], float]:
+def fly_in_lockstep(
+    tmp_path: Path, instance: int, speed: str, dynamics: str = "rigid_body"
+) -> tuple[str, list[tuple[Any, ...]], float]:
     """Fly the script; returns the truth log, the LOCAL_POSITION_NED sequence the client saw, and the wall time."""
-    config = tmp_path / f"sitl-{speed}.yaml"
+    config = tmp_path / f"sitl-{instance}.yaml"
     config.write_text("sitl:\n  position_noise_m: 0.05\n  seed: 42\n")
-    log = tmp_path / f"trajectory-{speed}.csv"
+    log = tmp_path / f"trajectory-{instance}.csv"
     args = ["--config", str(config), "--lockstep", "--speed", speed, "--log", str(log), "--duration", str(DURATION_S)]
+    args += ["--dynamics", dynamics]
     sitl = SitlProcess(args, instance, tmp_path).start()
     client = LockstepClient(instance)
     try:
@@ -96,6 +100,24 @@ def test_same_seed_same_flight_at_different_speeds(tmp_path: Path) -> None:
     # The noisy telemetry the client received is the same sequence too (seeded noise, simulated timestamps).
     assert len(slow_seen) > 400
     assert slow_seen == fast_seen
+
+
+def test_both_dynamics_backends_fly_the_same_script_through_the_sitl(tmp_path: Path) -> None:
+    pytest.importorskip("jsbsim")
+    tracks = {}
+    for instance, dynamics in ((16, "rigid_body"), (17, "jsbsim_f450")):
+        log, _, _ = fly_in_lockstep(tmp_path, instance, "0", dynamics)
+        rows = [r.split(",") for r in log.splitlines()[1:]]
+        tracks[dynamics] = np.array([[float(v) for v in r[:4]] for r in rows])
+    rigid, jsb = tracks["rigid_body"], tracks["jsbsim_f450"]
+    n = min(len(rigid), len(jsb))
+    np.testing.assert_array_equal(rigid[:n, 0], jsb[:n, 0])  # the same simulated sample times
+    airborne = rigid[:n, 0] >= 3.0
+    # Stated tolerance, once airborne: within 0.5 m horizontally and 0.3 m vertically at every 20 ms sample.
+    horizontal = np.linalg.norm(rigid[:n, 1:3] - jsb[:n, 1:3], axis=1)[airborne]
+    vertical = np.abs(rigid[:n, 3] - jsb[:n, 3])[airborne]
+    assert horizontal.max() < 0.5
+    assert vertical.max() < 0.3
 
 
 def test_time_waits_for_the_acknowledgement(tmp_path: Path) -> None:

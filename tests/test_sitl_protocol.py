@@ -76,6 +76,17 @@ def test_requested_messages_and_intervals(api: MavlinkPeer) -> None:
     home = wait_until(lambda: api.latest("HOME_POSITION"), 2, "HOME_POSITION")
     assert (home.x, home.y, home.z) == (0.0, 0.0, 0.0)
     assert api.command(mavlink.MAV_CMD_REQUEST_MESSAGE, 9999) == UNSUPPORTED
+    # The same request as COMMAND_INT.
+    api.messages.clear()
+    api.send(
+        api.mav.command_int_encode(
+            SYSID, 1, 0, mavlink.MAV_CMD_REQUEST_MESSAGE, 0, 0, mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+        )
+    )
+    ack = wait_until(lambda: api.latest("COMMAND_ACK"), 2, "the COMMAND_INT ack")
+    assert ack.command == mavlink.MAV_CMD_REQUEST_MESSAGE
+    assert ack.result == ACCEPTED
+    assert ack.target_system == 245
     # ATTITUDE at 5 Hz: consecutive time_boot_ms (the simulated clock) 200 ms apart.
     assert api.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE, 200_000) == ACCEPTED
     api.messages.clear()
@@ -180,6 +191,9 @@ def test_control_channel_errors_are_answered(sitl: SitlProcess) -> None:
     assert sitl.request({"cmd": "fly_to_the_moon"})["event"] == "error"
     assert "unknown flight mode" in sitl.request({"cmd": "pilot_mode", "mode": "SPORT"})["error"]
     assert sitl.request({"cmd": "wind", "ned_mps": [1, "x"]})["event"] == "error"
+    bad_ack = sitl.request({"cmd": "lockstep_ack", "seq": "first", "mavlink_sent": 0, "sysid": 1, "compid": 1})
+    assert bad_ack["event"] == "error"
+    assert sitl.request({"cmd": "ping"})["event"] == "pong"
 
 
 def test_two_instances_run_side_by_side(tmp_path: Path) -> None:

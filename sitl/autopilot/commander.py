@@ -134,7 +134,7 @@ class Commander:
         if self.armed:
             return MavResult.ACCEPTED
         if not force:
-            problem = self._prearm_problem()
+            problem = self.prearm_problem()
             if problem:
                 self._event(f"Arming denied: {problem}")
                 return MavResult.DENIED
@@ -145,7 +145,8 @@ class Commander:
         self._event("Armed")
         return MavResult.ACCEPTED
 
-    def _prearm_problem(self) -> str | None:
+    def prearm_problem(self) -> str | None:
+        """Why arming would be denied now, or None when the pre-arm checks pass."""
         if self.landed_state is not LandedState.ON_GROUND:
             return "not landed"
         if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL):

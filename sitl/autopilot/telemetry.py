@@ -199,7 +199,7 @@ class TelemetryBuilder:
         health = SENSORS
         if cmd.rc_lost:
             health &= ~mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
-        if cmd.armed or cmd._prearm_problem() is None:
+        if cmd.armed or cmd.prearm_problem() is None:
             health |= PREARM_CHECK
         return mav.sys_status_encode(
             SENSORS | PREARM_CHECK,
