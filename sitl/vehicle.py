@@ -107,7 +107,6 @@ class SitlVehicle:
             id(self.links[1]): StreamSchedule(GCS_RATES_HZ),
         }
         self._setpoint: Setpoint | None = None
-        self._motors = np.zeros(4)
         self._running = True
         self._exit_code = 0
         self._last_heartbeat_wall = -math.inf
@@ -245,10 +244,10 @@ class SitlVehicle:
             self._send_telemetry(t_s, state)
             self._write_log_row()
         if self._setpoint is not None:
-            self._motors = self.controller.update_attitude(state, dt_s)
+            motors = self.controller.update_attitude(state, dt_s)
         else:
-            self._motors = np.full(4, IDLE_COMMAND if self.commander.armed else 0.0)
-        self.dynamics.set_motor_commands(self._motors)
+            motors = np.full(4, IDLE_COMMAND if self.commander.armed else 0.0)
+        self.dynamics.set_motor_commands(motors)
         self.dynamics.step(dt_s)
         self.clock.advance()
 

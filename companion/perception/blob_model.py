@@ -13,7 +13,6 @@ onnxruntime.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -158,10 +157,3 @@ def save_model(model: Any, path: str | Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     onnx.save(model, str(path))
     return path
-
-
-def contract_of(model: Any) -> dict[str, Any]:
-    """The contract dict stored in an ONNX model's metadata."""
-    props = {p.key: p.value for p in model.metadata_props}
-    result: dict[str, Any] = json.loads(props[CONTRACT_METADATA_KEY])
-    return result

@@ -84,7 +84,6 @@ class Commander:
         self.landed_state = LandedState.ON_GROUND
         self.events: deque[str] = deque(maxlen=32)
         self.offboard: OffboardSetpoint | None = None
-        self._offboard_times: deque[float] = deque(maxlen=8)
         self.rc_lost = False
         self._rc_lost_since_s = math.nan
         self.pilot_sticks = np.zeros(3)  # north, east, down velocity fractions in POSCTL
@@ -224,7 +223,6 @@ class Commander:
         if math.isinf(yaw_rad):
             return False, "infinite yaw"
         self.offboard = OffboardSetpoint(position_ned_m.copy(), velocity_ned_mps.copy(), yaw_rad, self._now_s)
-        self._offboard_times.append(self._now_s)
         return True, ""
 
     def set_rc_lost(self, lost: bool) -> None:

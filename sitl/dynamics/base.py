@@ -91,17 +91,6 @@ class VehicleState:
     acceleration_ned_mps2: F64Array = field(default_factory=lambda: np.zeros(3))
     on_ground: bool = True
 
-    def copy(self) -> VehicleState:
-        """An independent copy."""
-        return VehicleState(
-            self.position_ned_m.copy(),
-            self.velocity_ned_mps.copy(),
-            self.quaternion_wxyz.copy(),
-            self.rates_frd_radps.copy(),
-            self.acceleration_ned_mps2.copy(),
-            self.on_ground,
-        )
-
 
 class Dynamics(Protocol):
     """A vehicle model: motor commands in, state out, advanced in fixed steps."""
