@@ -217,3 +217,30 @@ def test_a_taken_port_is_a_clear_error(tmp_path: Path) -> None:
             SitlProcess([], 9, tmp_path).start(ready_timeout_s=10)
     finally:
         blocker.close()
+
+
+def test_rc_loss_in_position_mode_returns_home(tmp_path: Path) -> None:
+    config = tmp_path / "rtl.yaml"
+    config.write_text("sitl:\n  params:\n    RTL_RETURN_ALT: 5.0\n    MPC_LAND_SPEED: 1.5\n")
+    with SitlProcess(["--config", str(config), "--speed", "4"], 6, tmp_path) as sitl:
+        api = MavlinkPeer(api_port(6))
+        try:
+            wait_until(lambda: api.latest("HEARTBEAT"), 5, "a heartbeat")
+            assert api.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == ACCEPTED
+            assert api.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, math.nan) == ACCEPTED
+            state_when(sitl, lambda s: s["mode"] == "AUTO.LOITER", 20, "takeoff done")
+            assert sitl.request({"cmd": "pilot_mode", "mode": "POSCTL"})["result"] == ACCEPTED
+            sitl.request({"cmd": "pilot_sticks", "north": 0.5})
+            state_when(sitl, lambda s: s["position_ned_m"][0] > 4.0, 10, "the pilot flying north")
+            sitl.request({"cmd": "pilot_sticks", "north": 0.0})
+            sitl.request({"cmd": "rc_loss", "lost": True})
+            lost = state_when(sitl, lambda s: s["failsafe"] == "RC lost", 5, "the RC-loss failsafe")
+            assert lost["mode"] == "AUTO.RTL"  # NAV_RCL_ACT = 2
+            status = wait_until(lambda: api.latest("SYS_STATUS"), 3, "SYS_STATUS")
+            assert not status.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+            home = state_when(
+                sitl, lambda s: not s["armed"] and s["landed_state"] == "ON_GROUND", 90, "landed at home and disarmed"
+            )
+            assert math.hypot(*home["position_ned_m"][:2]) < 1.0
+        finally:
+            api.close()
