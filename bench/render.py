@@ -1,0 +1,69 @@
+"""Milliseconds per SITL camera frame at 320x240, 640x480 and 960x720, 120 people, 20 % walking, weather on.
+
+Run: ``.venv/bin/python bench/render.py``. pyrender offscreen through EGL (Mesa llvmpipe on a CPU-only machine).
+Measures the colour frame alone and with the person-mask pass, then the weather effect; writes
+``bench/results/render.json`` with the machine's context.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO_ROOT))
+
+from bench.machine import machine_context, save_report  # noqa: E402
+from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount  # noqa: E402
+from sitl.render.camera import Light, WorldRenderer  # noqa: E402
+from sitl.world.crowd import Crowd  # noqa: E402
+from sitl.world.park import Park  # noqa: E402
+from sitl.world.scenario import ScenarioConfig, WeatherKind  # noqa: E402
+from sitl.world.weather import WeatherState, apply_weather  # noqa: E402
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=60)
+    parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "render.json")
+    args = parser.parse_args()
+    config = ScenarioConfig(people_min=120, people_max=120, moving_fraction=0.2)
+    rows: dict[str, dict[str, float]] = {}
+    for width, height in ((320, 240), (640, 480), (960, 720)):
+        camera = PinholeCamera.from_hfov(width, height, 90.0)
+        renderer = WorldRenderer(
+            Park(1), Crowd(config, 1), camera, T_body_camera_from_mount(), Light.from_angles(50, 120, 0.45)
+        )
+        row: dict[str, float] = {}
+        try:
+            for label, with_mask in (("colour_ms", False), ("colour_and_mask_ms", True)):
+                times = []
+                for k in range(args.frames + 3):
+                    pose = Pose.from_ned_euler(0.05 * k, 0.0, -20.0, 0.03 * np.sin(k), 0.0, 0.4)
+                    start = time.perf_counter()
+                    view = renderer.render(pose, 0.1 * k + (100.0 if with_mask else 0.0), with_mask=with_mask)
+                    times.append((time.perf_counter() - start) * 1e3)
+                row[label] = float(np.median(times[3:]))
+            weather_times = []
+            for k in range(args.frames):
+                start = time.perf_counter()
+                apply_weather(view.image_bgr, WeatherState(WeatherKind.RAIN, 0.6), k, view.depth_m)
+                weather_times.append((time.perf_counter() - start) * 1e3)
+            row["weather_rain_ms"] = float(np.median(weather_times))
+        finally:
+            renderer.close()
+        rows[f"{width}x{height}"] = row
+    report = {"benchmark": "render", "people": 120, "moving_fraction": 0.2, "machine": machine_context(), "sizes": rows}
+    sys.stdout.write(f"SITL camera, median ms per frame, {report['machine']}\n")
+    for size, row in rows.items():
+        sys.stdout.write(f"{size:<9} " + "  ".join(f"{k} {v:.1f}" for k, v in row.items()) + "\n")
+    save_report(report, args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The simulated world: scenario ranges, seeded crowds that may walk, weather and light (all from one seed)."""

@@ -1,0 +1,189 @@
+"""A seeded crowd: who stands where, what they look like, and how the moving ones move, in simulated time.
+
+Positions are head-plane (north_m, east_m) in world NED, around the region of interest centred at the origin.
+Walks advance in fixed ticks of ``1 / walk_rate_hz`` simulated seconds from their own random stream, so the same seed
+gives the same tracks at any simulation speed and however often :meth:`Crowd.advance_to` is called.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from sitl.world.scenario import ScenarioConfig, WalkerKind
+
+F64Array = npt.NDArray[np.float64]
+
+
+class BodyType(enum.Enum):
+    """Procedural body types (the renderer builds a distinct mesh for each)."""
+
+    ADULT_SLIM = "adult_slim"
+    ADULT_BROAD = "adult_broad"
+    ADULT_WALKING = "adult_walking"
+    ADULT_SITTING = "adult_sitting"
+    ADULT_WITH_BACKPACK = "adult_with_backpack"
+    ADULT_WITH_HAT = "adult_with_hat"
+    ADULT_WITH_UMBRELLA = "adult_with_umbrella"
+    ADULT_ARMS_OUT = "adult_arms_out"
+    ELDERLY_WITH_CANE = "elderly_with_cane"
+    TEEN = "teen"
+    CHILD_STANDING = "child_standing"
+    CHILD_WALKING = "child_walking"
+    CHILD_SITTING = "child_sitting"
+    PERSON_WITH_STROLLER = "person_with_stroller"
+
+
+CHILD_TYPES = (BodyType.CHILD_STANDING, BodyType.CHILD_WALKING, BodyType.CHILD_SITTING)
+ADULT_TYPES = tuple(t for t in BodyType if t not in CHILD_TYPES)
+PATTERNS = ("solid", "striped", "checked", "two_tone")
+HAIR_BGR = ((20, 20, 25), (30, 50, 80), (60, 90, 140), (160, 200, 220), (200, 200, 200), (40, 40, 120))
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """What one person looks like."""
+
+    body: BodyType
+    height_m: float
+    radius_m: float
+    top_bgr: tuple[int, int, int]
+    bottom_bgr: tuple[int, int, int]
+    pattern: str
+    hair_bgr: tuple[int, int, int]
+    hat_bgr: tuple[int, int, int] | None
+
+
+class CrowdError(Exception):
+    """A crowd cannot be generated as configured (what failed, with the numbers)."""
+
+
+class Crowd:
+    """People of one scenario, drawn from ``seed``; some may walk.
+
+    Parameters
+    ----------
+    config : ScenarioConfig
+        Ranges and walk model.
+    seed : int
+        Fixes the count, positions, appearances, who moves and every step they take.
+    """
+
+    def __init__(self, config: ScenarioConfig, seed: int) -> None:
+        self.config = config
+        rng = np.random.default_rng([seed, 1])
+        n = int(rng.integers(config.people_min, config.people_max + 1))
+        self.radii_m = rng.uniform(config.person_radius_m.low, config.person_radius_m.high, size=n)
+        self.positions_ne_m = self._place(rng, self.radii_m)
+        self.appearances = [self._appearance(rng, float(r)) for r in self.radii_m]
+        n_moving = round(config.moving_fraction * n)
+        self.moving = np.zeros(n, dtype=bool)
+        self.moving[rng.choice(n, size=n_moving, replace=False)] = True
+        self.start_ne_m = self.positions_ne_m.copy()
+        self._walk_rng = np.random.default_rng([seed, 2])
+        self._ticks = 0
+        self.t_s = 0.0
+        mover_count = int(self.moving.sum())
+        self._speed_mps = rng.uniform(config.walking_speed_mps.low, config.walking_speed_mps.high, size=mover_count)
+        self._heading_rad = rng.uniform(-math.pi, math.pi, size=mover_count)
+        self._bound_m = config.roi_side_m / 2 + 10.0
+
+    def __len__(self) -> int:
+        return len(self.radii_m)
+
+    # -- generation --------------------------------------------------------------------------------------------
+    def _place(self, rng: np.random.Generator, radii: F64Array) -> F64Array:
+        c = self.config
+        half, gap = c.roi_side_m / 2, c.min_gap_m
+        positions = np.zeros((len(radii), 2))
+        placed = 0
+        attempts = 0
+        group_anchor: F64Array | None = None
+        while placed < len(radii):
+            attempts += 1
+            if attempts > 2000 * max(len(radii), 1):
+                raise CrowdError(
+                    f"could place only {placed} of {len(radii)} people without overlap in {c.roi_side_m} m"
+                )
+            r = radii[placed]
+            if group_anchor is not None and rng.random() < 0.8:  # groups: near the previous person
+                candidate = group_anchor + rng.normal(0.0, 0.6, size=2)
+            else:
+                candidate = rng.uniform(-half + r, half - r, size=2)
+            if np.any(np.abs(candidate) > half - r):
+                continue
+            if placed:
+                d = np.hypot(*(positions[:placed] - candidate).T)
+                if np.any(d < radii[:placed] + r + gap):
+                    continue
+            positions[placed] = candidate
+            placed += 1
+            group_anchor = candidate if rng.random() < c.group_fraction else None
+        return positions
+
+    def _appearance(self, rng: np.random.Generator, radius_m: float) -> Appearance:
+        child = rng.random() < self.config.child_fraction
+        body = (
+            CHILD_TYPES[int(rng.integers(len(CHILD_TYPES)))]
+            if child
+            else ADULT_TYPES[int(rng.integers(len(ADULT_TYPES)))]
+        )
+        height = float(rng.uniform(1.0, 1.4) if child else rng.uniform(1.55, 1.95))
+        hat = body is BodyType.ADULT_WITH_HAT or rng.random() < 0.15
+
+        def colour() -> tuple[int, int, int]:
+            b, g, r = (int(v) for v in rng.integers(15, 240, size=3))
+            return b, g, r
+
+        return Appearance(
+            body=body,
+            height_m=height,
+            radius_m=radius_m * (0.75 if child else 1.0),
+            top_bgr=colour(),
+            bottom_bgr=colour(),
+            pattern=PATTERNS[int(rng.integers(len(PATTERNS)))],
+            hair_bgr=HAIR_BGR[int(rng.integers(len(HAIR_BGR)))],
+            hat_bgr=colour() if hat else None,
+        )
+
+    # -- motion ------------------------------------------------------------------------------------------------
+    def advance_to(self, t_s: float) -> None:
+        """Walk every moving person up to simulated time ``t_s`` (ticks at ``walk_rate_hz``)."""
+        if t_s < self.t_s:
+            raise CrowdError(f"time went backwards: {t_s} s after {self.t_s} s")
+        period = 1.0 / self.config.walk_rate_hz
+        target_ticks = math.floor(t_s / period + 1e-9)
+        movers = np.nonzero(self.moving)[0]
+        while self._ticks < target_ticks:
+            self._ticks += 1
+            if len(movers):
+                if self.config.walker is WalkerKind.LATTICE:
+                    alpha = self._walk_rng.integers(-1, 2, size=(len(movers), 2))
+                    step = self.config.lattice_step_m * alpha
+                else:
+                    step = self._persistent_step(period)
+                new = self.positions_ne_m[movers] + step
+                # Reflect at a boundary 10 m outside the ROI so the crowd does not drift away.
+                over = np.abs(new) > self._bound_m
+                new[over] = np.sign(new[over]) * (2 * self._bound_m - np.abs(new[over]))
+                self.positions_ne_m[movers] = new
+        self.t_s = t_s
+
+    def _persistent_step(self, dt_s: float) -> F64Array:
+        # Heading follows an Ornstein-Uhlenbeck turn: its direction decorrelates over heading_persistence_s.
+        tau = self.config.heading_persistence_s
+        self._heading_rad += self._walk_rng.normal(0.0, math.sqrt(2.0 * dt_s / tau), size=len(self._heading_rad))
+        return np.column_stack([np.cos(self._heading_rad), np.sin(self._heading_rad)]) * (
+            self._speed_mps[:, None] * dt_s
+        )
+
+    def clearance_m(self, north_m: float, east_m: float) -> float:
+        """Distance from a point to the nearest person's body edge, now (negative inside a body)."""
+        if not len(self):
+            return math.inf
+        d = np.hypot(self.positions_ne_m[:, 0] - north_m, self.positions_ne_m[:, 1] - east_m) - self.radii_m
+        return float(d.min())

@@ -1,0 +1,168 @@
+"""A seeded city park around the region of interest: ground materials and objects a crowd detector can mistake for
+people (benches, bins, bushes, trees whose crowns hide people, parked cars, poles, dark and bright blobs).
+
+The ground is a texture over a square of ``2 * extent_m`` on a side, centred on the ROI, north up (row 0 is north).
+Objects are described here and turned into meshes by :mod:`sitl.render`.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+U8Image = npt.NDArray[np.uint8]
+
+
+class ObjectKind(enum.Enum):
+    """Distractors in the park."""
+
+    BENCH = "bench"
+    BIN = "bin"
+    BUSH = "bush"
+    TREE = "tree"
+    CAR = "car"
+    POLE = "pole"
+    DARK_BLOB = "dark_blob"
+    BRIGHT_BLOB = "bright_blob"
+
+
+@dataclass(frozen=True)
+class ParkObject:
+    """One object: kind, ground position (north_m, east_m), size (m) and heading (rad), colour (BGR)."""
+
+    kind: ObjectKind
+    north_m: float
+    east_m: float
+    size_m: float
+    height_m: float
+    heading_rad: float
+    colour_bgr: tuple[int, int, int]
+
+
+GRASS = ((60, 120, 70), (55, 105, 85), (70, 125, 95), (50, 110, 60))
+ASPHALT = (95, 95, 100)
+PAVING = ((150, 160, 170), (130, 140, 150))
+SAND = (140, 180, 205)
+COURT = ((70, 90, 160), (160, 100, 60), (60, 130, 60))
+
+
+def _noise(rng: np.random.Generator, size: int, blur_px: float) -> npt.NDArray[np.float32]:
+    factor = max(1, int(blur_px // 4))
+    small = max(1, size // factor)
+    field = rng.standard_normal((small, small)).astype(np.float32)
+    field = np.asarray(cv2.GaussianBlur(field, (0, 0), max(blur_px / factor, 0.5)), dtype=np.float32)
+    if factor > 1:
+        field = np.asarray(cv2.resize(field, (size, size), interpolation=cv2.INTER_CUBIC), dtype=np.float32)
+    std = float(field.std())
+    return field / std if std > 0 else field
+
+
+class Park:
+    """Ground texture and objects, from one seed.
+
+    Parameters
+    ----------
+    seed : int
+        Fixes materials, paths, courts and objects.
+    roi_side_m : float
+        The ROI, kept free of large objects so that people stand in the open (as in the paper's scenes).
+    extent_m : float
+        Half side of the textured ground.
+    texture_res_m : float
+        Metres per ground-texture pixel.
+    """
+
+    def __init__(
+        self, seed: int, roi_side_m: float = 30.0, extent_m: float = 45.0, texture_res_m: float = 0.05
+    ) -> None:
+        rng = np.random.default_rng([seed, 5])
+        self.extent_m = extent_m
+        self.texture_res_m = texture_res_m
+        self.ground_bgr = self._ground(rng)
+        self.objects = self._objects(rng, roi_side_m / 2)
+
+    def world_to_texture(self, north_m: float, east_m: float) -> tuple[float, float]:
+        """(col, row) of a ground point in the texture."""
+        return (east_m + self.extent_m) / self.texture_res_m - 0.5, (self.extent_m - north_m) / self.texture_res_m - 0.5
+
+    def _ground(self, rng: np.random.Generator) -> U8Image:
+        size = round(2 * self.extent_m / self.texture_res_m)
+        base = np.array(GRASS[int(rng.integers(len(GRASS)))], dtype=np.float32)
+        fine = _noise(rng, size, 1.0)
+        shade = 1.0 + 0.12 * _noise(rng, size, 40.0) + 0.06 * fine
+        ground = base[None, None, :] * shade[:, :, None]
+        yy, xx = np.mgrid[0:size, 0:size].astype(np.float32) - size / 2
+        px_per_m = 1.0 / self.texture_res_m
+        # Sand patches and a paved plaza.
+        for _ in range(int(rng.integers(1, 3))):
+            c = rng.uniform(-0.4, 0.4, size=2) * size
+            r = rng.uniform(3.0, 8.0) * px_per_m
+            patch = (np.hypot(xx - c[0], yy - c[1]) < r * (1 + 0.15 * fine))[:, :, None]
+            ground = np.where(patch, np.array(SAND, np.float32) * (1 + 0.05 * fine[:, :, None]), ground)
+        if rng.random() < 0.7:
+            c = rng.uniform(-0.35, 0.35, size=2) * size
+            half = rng.uniform(4.0, 9.0) * px_per_m
+            plaza = (np.abs(xx - c[0]) < half) & (np.abs(yy - c[1]) < half)
+            tiles = ((np.floor(xx / (0.5 * px_per_m)) + np.floor(yy / (0.5 * px_per_m))) % 2).astype(np.float32)
+            colour = np.array(PAVING[0], np.float32)[None, None, :] * (0.92 + 0.08 * tiles[:, :, None])
+            ground = np.where(plaza[:, :, None], colour, ground)
+        # A sports court with white markings.
+        if rng.random() < 0.6:
+            c = rng.uniform(-0.3, 0.3, size=2) * size
+            w, h = 14.0 * px_per_m, 26.0 * px_per_m
+            court = (np.abs(xx - c[0]) < w / 2) & (np.abs(yy - c[1]) < h / 2)
+            ground = np.where(court[:, :, None], np.array(COURT[int(rng.integers(len(COURT)))], np.float32), ground)
+            line = 0.08 * px_per_m
+            edge = court & (
+                (np.abs(np.abs(xx - c[0]) - w / 2 + line) < line) | (np.abs(np.abs(yy - c[1]) - h / 2 + line) < line)
+            )
+            mid = court & (np.abs(yy - c[1]) < line)
+            ground = np.where((edge | mid)[:, :, None], np.float32(235.0), ground)
+        # Asphalt and paved paths crossing the park.
+        for _ in range(int(rng.integers(1, 4))):
+            colour = np.array(ASPHALT if rng.random() < 0.5 else PAVING[1], dtype=np.float32)
+            width = rng.uniform(2.0, 5.0) * px_per_m
+            angle = rng.uniform(0, math.pi)
+            offset = rng.uniform(-0.45, 0.45) * size
+            dist = np.abs(xx * math.sin(angle) - yy * math.cos(angle) - offset)
+            ground = np.where((dist < width / 2)[:, :, None], colour * (1 + 0.04 * fine[:, :, None]), ground)
+        return np.clip(ground, 0, 255).astype(np.uint8)
+
+    def _objects(self, rng: np.random.Generator, roi_half_m: float) -> list[ParkObject]:
+        objects: list[ParkObject] = []
+
+        def place(
+            kind: ObjectKind, count: int, size: tuple[float, float], height: tuple[float, float], inside_roi: bool
+        ) -> None:
+            for _ in range(count):
+                while True:
+                    n, e = rng.uniform(-self.extent_m + 3, self.extent_m - 3, size=2)
+                    if inside_roi or max(abs(n), abs(e)) > roi_half_m + 1.0:
+                        break
+                colour = tuple(int(v) for v in rng.integers(20, 235, size=3))
+                objects.append(
+                    ParkObject(
+                        kind,
+                        float(n),
+                        float(e),
+                        float(rng.uniform(*size)),
+                        float(rng.uniform(*height)),
+                        float(rng.uniform(-math.pi, math.pi)),
+                        colour,  # type: ignore[arg-type]
+                    )
+                )
+
+        place(ObjectKind.TREE, int(rng.integers(4, 12)), (3.0, 6.0), (4.0, 9.0), inside_roi=False)
+        place(ObjectKind.CAR, int(rng.integers(2, 8)), (4.2, 4.8), (1.4, 1.6), inside_roi=False)
+        place(ObjectKind.BENCH, int(rng.integers(4, 10)), (1.5, 2.0), (0.45, 0.5), inside_roi=True)
+        place(ObjectKind.BIN, int(rng.integers(3, 8)), (0.35, 0.5), (0.8, 1.0), inside_roi=True)
+        place(ObjectKind.BUSH, int(rng.integers(4, 12)), (0.6, 1.8), (0.5, 1.4), inside_roi=False)
+        place(ObjectKind.POLE, int(rng.integers(3, 8)), (0.12, 0.2), (3.0, 6.0), inside_roi=True)
+        place(ObjectKind.DARK_BLOB, int(rng.integers(4, 12)), (0.3, 0.9), (0.0, 0.0), inside_roi=True)
+        place(ObjectKind.BRIGHT_BLOB, int(rng.integers(4, 12)), (0.3, 0.9), (0.0, 0.0), inside_roi=True)
+        return objects
