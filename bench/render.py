@@ -1,7 +1,7 @@
 """Milliseconds per SITL camera frame at 320x240, 640x480 and 960x720, 120 people, 20 % walking, weather on.
 
 Run: ``.venv/bin/python bench/render.py``. pyrender offscreen through EGL (Mesa llvmpipe on a CPU-only machine).
-Measures the colour frame alone and with the person-mask pass, then the weather effect; writes
+Measures the colour frame alone, with depth, and with depth and the person-mask pass, then the weather effect; writes
 ``bench/results/render.json`` with the machine's context.
 """
 
@@ -40,12 +40,17 @@ def main() -> int:
         )
         row: dict[str, float] = {}
         try:
-            for label, with_mask in (("colour_ms", False), ("colour_and_mask_ms", True)):
+            for label, with_mask, with_depth in (
+                ("colour_ms", False, False),
+                ("colour_and_depth_ms", False, True),
+                ("colour_depth_and_mask_ms", True, True),
+            ):
                 times = []
                 for k in range(args.frames + 3):
                     pose = Pose.from_ned_euler(0.05 * k, 0.0, -20.0, 0.03 * np.sin(k), 0.0, 0.4)
                     start = time.perf_counter()
-                    view = renderer.render(pose, 0.1 * k + (100.0 if with_mask else 0.0), with_mask=with_mask)
+                    t_s = 0.1 * k + 100.0 * len(row)
+                    view = renderer.render(pose, t_s, with_mask=with_mask, with_depth=with_depth)
                     times.append((time.perf_counter() - start) * 1e3)
                 row[label] = float(np.median(times[3:]))
             weather_times = []

@@ -1,8 +1,9 @@
 """The SITL's down-looking camera: pyrender, offscreen, on the fast path.
 
 Fast path (the naive scene costs over 100 ms a frame on a 2-core CPU): static geometry merged into two meshes (the
-textured ground, every park object), people who stand still merged into one mesh, each walking person a node whose
-pose moves (nothing re-uploaded), FLAT shading with the sun baked into vertex colours and blob shadows, no MSAA.
+textured ground, every park object), people who stand still merged into one mesh, the walking people into one mesh
+rebuilt each frame from cached vertices, indexed low-poly geometry, FLAT shading with the sun baked into vertex
+colours and blob shadows, a bilinear ground texture, no MSAA.
 A segmentation pass (people white, everything else black, depth-tested) gives the visible person mask.
 
 Frames: the world is ENU inside the renderer (x east, y north, z up); poses come in as the companion's
@@ -99,6 +100,21 @@ def _make_offscreen(width: int, height: int) -> Any:
         GL.glRenderbufferStorageMultisample(target, 0, fmt, width_, height_)
 
     pyrender.renderer.glRenderbufferStorageMultisample = storage_without_msaa
+    full_read = pyrender.renderer.Renderer._read_main_framebuffer
+
+    def read_framebuffer(self: Any, scene: Any, flags: int) -> Any:
+        """pyrender's read-back, or colour alone (no blit, no depth linearization) when depth is not wanted."""
+        if not getattr(self, "slz_skip_depth", False) or flags & (
+            pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.RGBA
+        ):
+            return full_read(self, scene, flags)
+        width, height = self._main_fb_dims
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb_ms)
+        data = GL.glReadPixels(0, 0, width, height, GL.GL_RGB, GL.GL_UNSIGNED_BYTE)
+        colour = np.frombuffer(data, dtype=np.uint8).reshape((height, width, 3))[::-1]
+        return colour, None
+
+    pyrender.renderer.Renderer._read_main_framebuffer = read_framebuffer
     try:
         renderer = pyrender.OffscreenRenderer(width, height)
     except Exception as exc:
@@ -151,7 +167,11 @@ class WorldRenderer:
         image = self.park.ground_bgr[:, :, ::-1]
         light = self.light.ambient + (1 - self.light.ambient) * max(0.0, -float(self.light.sun_dir_enu[2]))
         lit = np.clip(image.astype(np.float32) * light * self.light.sun_rgb[None, None, :], 0, 255).astype(np.uint8)
-        texture = pr.Texture(source=np.ascontiguousarray(lit[::-1]), source_channels="RGB")
+        from OpenGL import GL
+
+        # Bilinear without mipmaps: trilinear sampling of the full-screen ground costs a software rasterizer ~6 ms.
+        sampler = pr.Sampler(magFilter=GL.GL_LINEAR, minFilter=GL.GL_LINEAR)
+        texture = pr.Texture(source=np.ascontiguousarray(lit[::-1]), source_channels="RGB", sampler=sampler)
         material = pr.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0)
         primitive = pr.Primitive(
             positions=ground.vertices, indices=ground.faces, texcoord_0=uv, material=material, mode=4
@@ -160,7 +180,7 @@ class WorldRenderer:
         if self.park.objects:
             objects = trimesh.util.concatenate([object_mesh(o) for o in self.park.objects])
             bake_lighting(objects, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
-            self._black[self.scene.add(pr.Mesh.from_trimesh(objects, smooth=False))] = (0, 0, 0)
+            self._black[self.scene.add(pr.Mesh.from_trimesh(objects, smooth=True))] = (0, 0, 0)
 
     def _person(self, index: int, with_shadow_at: tuple[float, float] | None) -> trimesh.Trimesh:
         a = self.crowd.appearances[index]
@@ -186,9 +206,9 @@ class WorldRenderer:
                 m.apply_translation([east, north, 0.0])
                 parts.append(m)
                 shadows.append(self._shadow(i, float(north), float(east)))
-            node = self.scene.add(pr.Mesh.from_trimesh(trimesh.util.concatenate(parts), smooth=False))
+            node = self.scene.add(pr.Mesh.from_trimesh(trimesh.util.concatenate(parts), smooth=True))
             self._people_nodes.append(node)
-            self._black[self.scene.add(pr.Mesh.from_trimesh(trimesh.util.concatenate(shadows), smooth=False))] = (
+            self._black[self.scene.add(pr.Mesh.from_trimesh(trimesh.util.concatenate(shadows), smooth=True))] = (
                 0,
                 0,
                 0,
@@ -229,11 +249,11 @@ class WorldRenderer:
             shift = np.array([east, north, 0.0])
             bodies.append(body + shift)
             shadows.append(shadow + shift)
-        for attr in ("_mover_node", "_mover_shadow_node"):
-            node = getattr(self, attr)
-            if node is not None:
-                self.scene.remove_node(node)
-                self._black.pop(node, None)
+        if self._mover_node is not None:
+            # In place: rewrite the interleaved [x y z r g b a] float32 vertex buffers pyrender uploaded.
+            for node, positions in ((self._mover_node, bodies), (self._mover_shadow_node, shadows)):
+                self._rewrite_positions(node.mesh.primitives[0], np.concatenate(positions))
+            return
         body_mesh = pr.Mesh(
             [
                 pr.Primitive(
@@ -255,10 +275,23 @@ class WorldRenderer:
         self._mover_shadow_node = self.scene.add(shadow_mesh_)
         self._black[self._mover_shadow_node] = (0, 0, 0)
 
-    def render(self, pose: Pose, t_s: float, with_mask: bool = True) -> RenderedView:
-        """The camera frame at simulated time ``t_s`` from ``pose``, with its depth and (optionally) person mask.
+    def _rewrite_positions(self, primitive: Any, positions: F64Array) -> None:
+        if primitive._vaid is None:  # not uploaded yet: pyrender will upload these on the next draw
+            primitive.positions = positions
+            return
+        from OpenGL import GL
 
-        The mask costs a second render pass; without it ``person_mask`` is all False.
+        data = np.ascontiguousarray(np.hstack([positions, primitive.color_0]).astype(np.float32).ravel())
+        self._renderer._platform.make_current()
+        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, primitive._buffers[0])
+        GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
+        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, 0)
+
+    def render(self, pose: Pose, t_s: float, with_mask: bool = True, with_depth: bool = True) -> RenderedView:
+        """The camera frame at simulated time ``t_s`` from ``pose``, with (optionally) its depth and person mask.
+
+        The mask costs a second render pass; without it ``person_mask`` is all False. Without depth (needed only for
+        depth-aware fog) ``depth_m`` is all zeros and the read-back is cheaper.
         """
         pr = self._pyrender
         self.crowd.advance_to(t_s)
@@ -266,7 +299,11 @@ class WorldRenderer:
             self._update_movers()
         self.scene.set_pose(self._camera_node, self.T_gl_camera(pose))
         try:
+            self._renderer._renderer.slz_skip_depth = not with_depth
             colour, depth = self._renderer.render(self.scene, flags=pr.RenderFlags.FLAT)
+            self._renderer._renderer.slz_skip_depth = True  # the mask pass never needs depth
+            if depth is None:
+                depth = np.zeros(colour.shape[:2], dtype=np.float32)
             if with_mask:
                 people = [*self._people_nodes, *([self._mover_node] if self._mover_node is not None else [])]
                 seg_map = {**self._black, **{node: (255, 255, 255) for node in people}}

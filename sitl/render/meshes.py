@@ -29,7 +29,7 @@ def _part(mesh: trimesh.Trimesh, colour: RGB) -> trimesh.Trimesh:
 
 
 def _cylinder(radius: float, height: float, z0: float, colour: RGB, x: float = 0.0, y: float = 0.0) -> trimesh.Trimesh:
-    m = trimesh.creation.cylinder(radius=radius, height=height, sections=8)
+    m = trimesh.creation.cylinder(radius=radius, height=height, sections=6)
     m.apply_translation([x, y, z0 + height / 2])
     return _part(m, colour)
 
@@ -40,7 +40,7 @@ def _box(extents: tuple[float, float, float], centre: tuple[float, float, float]
     return _part(m, colour)
 
 
-def _sphere(radius: float, centre: tuple[float, float, float], colour: RGB, subdivisions: int = 1) -> trimesh.Trimesh:
+def _sphere(radius: float, centre: tuple[float, float, float], colour: RGB, subdivisions: int = 0) -> trimesh.Trimesh:
     m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
     m.apply_translation(centre)
     return _part(m, colour)
@@ -116,7 +116,7 @@ def object_mesh(o: ParkObject) -> trimesh.Trimesh:
     if o.kind is ObjectKind.TREE:
         trunk = _cylinder(0.15, o.height_m * 0.6, 0.0, (80, 60, 40))
         crown_colour = (40 + colour[0] % 30, 90 + colour[1] % 50, 40 + colour[2] % 30)
-        parts = [trunk, _sphere(o.size_m / 2, (0.0, 0.0, o.height_m - o.size_m / 3), crown_colour, subdivisions=2)]
+        parts = [trunk, _sphere(o.size_m / 2, (0.0, 0.0, o.height_m - o.size_m / 3), crown_colour, subdivisions=1)]
     elif o.kind is ObjectKind.CAR:
         body = _box((1.8, o.size_m, 0.8), (0.0, 0.0, 0.55), colour)
         cabin = _box((1.6, o.size_m * 0.5, 0.6), (0.0, -0.2, 1.2), (50, 60, 70))
