@@ -54,6 +54,12 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_sitl(args: argparse.Namespace) -> int:
+    if args.action == "snapshot":
+        from sitl.snapshot import contact_sheet
+
+        path = contact_sheet(args.seed or 0, args.out)
+        sys.stdout.write(f"wrote {path}\n")
+        return 0
     from companion.config import validate_config
     from sitl.config import SitlConfig, load_sitl_config
     from sitl.vehicle import SitlError, SitlVehicle, install_signal_handlers
@@ -100,6 +106,14 @@ def build_parser() -> argparse.ArgumentParser:
     check.set_defaults(func=_cmd_check_config)
 
     sitl = sub.add_parser("sitl", help="run the simulated PX4-style vehicle (MAVLink on UDP 14540/14550)")
+    sitl.add_argument(
+        "action",
+        nargs="?",
+        choices=["run", "snapshot"],
+        default="run",
+        help="run the vehicle, or render a contact sheet",
+    )
+    sitl.add_argument("--out", type=Path, default=Path("docs/images/sitl_contact_sheet.png"), help="snapshot: PNG path")
     sitl.add_argument("--config", type=Path, help="YAML file with a 'sitl' section")
     sitl.add_argument("--instance", type=int, help="shifts every port, as PX4 does")
     sitl.add_argument("--speed", type=float, help="simulated seconds per wall second; 0 = as fast as possible")

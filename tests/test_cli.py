@@ -61,3 +61,15 @@ def test_demo_with_a_missing_model_fails_clearly(tmp_path: Path) -> None:
     assert result.returncode == 1
     assert "density.load: model file not found" in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_sitl_snapshot_writes_a_contact_sheet(tmp_path: Path) -> None:
+    out = tmp_path / "sheet.png"
+    result = slz("sitl", "snapshot", "--seed", "2", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    import cv2
+
+    sheet = cv2.imread(str(out))
+    assert sheet is not None
+    assert sheet.shape == (6 * 244, 3 * (2 * 320 + 4), 3)  # six conditions x three altitudes, frame + mask each
+    assert sheet[:, 320:640].max() == 255  # the first mask column shows people
