@@ -9,12 +9,25 @@ from pydantic import Field, field_validator, model_validator
 from companion.config import StrictModel, load_yaml_config
 from sitl.autopilot.params import PARAMS
 from sitl.dynamics.base import DynamicsBackend
+from sitl.world.scenario import ScenarioConfig
 
 API_PORT_REMOTE = 14540
 API_PORT_LOCAL = 14580
 GCS_PORT_REMOTE = 14550
 GCS_PORT_LOCAL = 18570
 CONTROL_PORT = 4560
+FRAME_PORT = 5600
+
+
+class SitlCameraConfig(StrictModel):
+    """The simulated down-looking camera (its frames stream on TCP 5600 + instance)."""
+
+    enabled: bool = False
+    rate_hz: float = Field(default=10.0, gt=0.0, le=60.0, description="Frames per simulated second.")
+    width_px: int = Field(default=640, ge=16, le=4096)
+    height_px: int = Field(default=480, ge=16, le=4096)
+    hfov_deg: float = Field(default=90.0, gt=1.0, lt=179.0)
+    tilt_deg: float = Field(default=0.0, ge=-90.0, le=90.0, description="0 = nadir, positive towards the nose.")
 
 
 class SitlConfig(StrictModel):
@@ -39,6 +52,8 @@ class SitlConfig(StrictModel):
     log_path: Path | None = Field(default=None, description="Trajectory log (CSV), ground truth.")
     log_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
     duration_s: float | None = Field(default=None, gt=0.0, description="Stop after this much simulated time.")
+    camera: SitlCameraConfig = Field(default_factory=SitlCameraConfig)
+    scenario: ScenarioConfig = Field(default_factory=ScenarioConfig)
 
     @field_validator("params")
     @classmethod
@@ -56,6 +71,21 @@ class SitlConfig(StrictModel):
                 f"instance {self.instance} puts the API link on the ground-station port {self.gcs_port_remote}; "
                 "choose another instance (or gcs_port_remote)"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _camera_ticks(self) -> SitlConfig:
+        if self.camera.enabled and self.lockstep and abs(self.lockstep_period_s * self.camera.rate_hz - 1.0) > 1e-9:
+            raise ValueError(
+                f"with the camera in lockstep every tick is a frame: lockstep_period_s must be 1 / camera.rate_hz "
+                f"({1.0 / self.camera.rate_hz:g} s), got {self.lockstep_period_s}"
+            )
+        if self.camera.enabled:
+            steps = self.physics_rate_hz / self.camera.rate_hz
+            if abs(steps - round(steps)) > 1e-6:
+                raise ValueError(
+                    f"camera.rate_hz must divide physics_rate_hz ({self.physics_rate_hz}), got {self.camera.rate_hz}"
+                )
         return self
 
     @model_validator(mode="after")
@@ -89,6 +119,11 @@ class SitlConfig(StrictModel):
     def control_port(self) -> int:
         """The harness control channel (JSON over UDP): simulated pilot, lockstep, ground truth."""
         return CONTROL_PORT + self.instance
+
+    @property
+    def frame_port(self) -> int:
+        """The camera's frame stream (TCP): ``sitl://127.0.0.1:<port>``."""
+        return FRAME_PORT + self.instance
 
     @property
     def system_id(self) -> int:

@@ -38,15 +38,19 @@ class SitlProcess:
         PX4-style instance index (shifts every port).
     log_dir : Path
         Where the process's output is written (``sitl-<instance>.log``).
+    cpu : int, optional
+        Pin the process to this CPU (benchmarks "on one core").
     """
 
-    def __init__(self, args: list[str], instance: int, log_dir: Path) -> None:
+    def __init__(self, args: list[str], instance: int, log_dir: Path, cpu: int | None = None) -> None:
         self.args = list(args)
+        self.cpu = cpu
         self.instance = instance
         self.log_path = Path(log_dir) / f"sitl-{instance}.log"
         self.control_addr = ("127.0.0.1", CONTROL_PORT + instance)
         self._proc: subprocess.Popen[bytes] | None = None
         self._sock: socket.socket | None = None
+        self._request_id = 0
 
     def start(self, ready_timeout_s: float = 20.0) -> SitlProcess:
         """Start the process and wait until it answers on its control channel."""
@@ -54,7 +58,13 @@ class SitlProcess:
         log = open(self.log_path, "wb")  # noqa: SIM115 - owned by the child
         cmd = [sys.executable, "-m", "companion.cli", "sitl", "--instance", str(self.instance), *self.args]
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        self._proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
+        cpu = self.cpu
+
+        def pin() -> None:
+            if cpu is not None:
+                os.sched_setaffinity(0, {cpu})
+
+        self._proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=pin)
         log.close()
         atexit.register(self.stop)
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -79,8 +89,14 @@ class SitlProcess:
         return self._proc.pid
 
     def request(self, request: dict[str, Any], timeout_s: float = 2.0) -> dict[str, Any]:
-        """Send a control request and wait for its reply (``TimeoutError`` after ``timeout_s``)."""
+        """Send a control request and wait for its own reply (``TimeoutError`` after ``timeout_s``).
+
+        Each request carries an id that the SITL echoes, so a late reply to an earlier request is never taken for
+        this one's.
+        """
         assert self._sock is not None
+        self._request_id += 1
+        request = {**request, "id": self._request_id}
         self._sock.sendto(json.dumps(request).encode(), self.control_addr)
         deadline = time.monotonic() + timeout_s
         while True:
@@ -95,7 +111,7 @@ class SitlProcess:
             except ConnectionRefusedError:
                 raise TimeoutError(f"control port {self.control_addr[1]} refused") from None
             reply: dict[str, Any] = json.loads(data)
-            if reply.get("event") != "tick":
+            if reply.get("id") == self._request_id:
                 return reply
 
     def state(self) -> dict[str, Any]:

@@ -94,6 +94,9 @@ class SitlVehicle:
         self.battery = Battery()
         self.links: list[MavlinkLink] = []
         self.control: ControlChannel | None = None
+        self.camera: Any = None
+        self._next_frame_s = 0.0
+        self._frame_client_lost_wall = math.nan
         try:
             sysid, bind = config.system_id, config.bind_address
             self.links.append(MavlinkLink("api", bind, config.api_port_local, config.api_port_remote, sysid))
@@ -102,6 +105,15 @@ class SitlVehicle:
         except Exception as exc:
             self.close()
             raise SitlError("network", str(exc)) from None
+        if config.camera.enabled:
+            from sitl.render.camera import RenderError
+            from sitl.sim_camera import SimCamera
+
+            try:
+                self.camera = SimCamera(config)
+            except (RenderError, OSError) as exc:
+                self.close()
+                raise SitlError("camera", str(exc)) from None
         self.schedules = {
             id(self.links[0]): StreamSchedule(API_RATES_HZ),
             id(self.links[1]): StreamSchedule(GCS_RATES_HZ),
@@ -148,6 +160,9 @@ class SitlVehicle:
             link.close()
         if self.control is not None:
             self.control.close()
+        if self.camera is not None:
+            self.camera.close()
+            self.camera = None
         if self._log is not None:
             self._log.close()
             self._log = None
@@ -165,7 +180,7 @@ class SitlVehicle:
         """Run until shutdown, ``duration_s`` or a lockstep timeout; returns the exit code."""
         logger.info(self.describe())
         assert self.control is not None
-        sockets: list[Any] = [*self.links, self.control]
+        sockets: list[Any] = [*self.links, self.control, *([self.camera] if self.camera is not None else [])]
         fast = self.config.speed_factor == 0 or self.config.speed_factor > 1
         try:
             while self._running:
@@ -175,6 +190,12 @@ class SitlVehicle:
                 if self.config.duration_s is not None and self.clock.now_s >= self.config.duration_s - 1e-9:
                     logger.info("duration reached at %.3f s simulated", self.clock.now_s)
                     break
+                if self.camera is not None and not self.config.lockstep:
+                    if self.clock.now_s >= self._next_frame_s - 1e-9:  # free-running: frames go out, or are dropped
+                        self.camera.capture(self.clock.now_s, self.dynamics.state())
+                        self._next_frame_s += self.camera.period_s
+                    else:
+                        self.camera.server.poll()
                 at_tick = self.config.lockstep and self.clock.now_s >= self._next_tick_s - 1e-9
                 if at_tick and not self._lockstep_gate(sockets):
                     continue
@@ -196,6 +217,27 @@ class SitlVehicle:
             return False
         if math.isnan(self._tick_sent_wall):
             assert self.control is not None
+            if self.camera is not None:
+                # Every tick is a frame: it goes out whole before the tick, so the client has it to acknowledge.
+                self.camera.server.poll()
+                if not self.camera.server.connected:
+                    if self._tick_seq > 0:  # it was there: it left; do not wait for ever
+                        if math.isnan(self._frame_client_lost_wall):
+                            self._frame_client_lost_wall = time.monotonic()
+                        elif time.monotonic() - self._frame_client_lost_wall > self.config.lockstep_timeout_s:
+                            logger.error("lockstep: the frame client left at tick %d; stopping", self._tick_seq)
+                            self._exit_code = 3
+                            self._running = False
+                    select.select(sockets, [], [], 0.05)  # waiting for the frame client
+                    self.clock.resync()
+                    return False
+                self._frame_client_lost_wall = math.nan
+                self.camera.capture(self.clock.now_s, self.dynamics.state())
+                if not self.camera.server.flush(time.monotonic() + self.config.lockstep_timeout_s):
+                    logger.error("lockstep: the frame client did not take frame %d; stopping", self.camera.seq - 1)
+                    self._exit_code = 3
+                    self._running = False
+                    return False
             self.control.send({"event": "tick", "seq": self._tick_seq, "t_s": self.clock.now_s}, self._lockstep_client)
             self._tick_sent_wall = time.monotonic()
         ack = self._lockstep_ack
@@ -519,12 +561,18 @@ class SitlVehicle:
             elif cmd == "lockstep_ack":
                 self._lockstep_ack = {key: int(request[key]) for key in ("seq", "mavlink_sent", "sysid", "compid")}
                 return
+            elif cmd == "people":
+                if self.camera is None:
+                    raise ValueError("this SITL has no world (camera disabled)")
+                reply = {"event": "people", **self.camera.people()}
             elif cmd == "shutdown":
                 self.request_stop()
             else:
                 raise ValueError(f"unknown cmd {cmd!r}")
         except (KeyError, ValueError, TypeError) as exc:
             reply = {"event": "error", "cmd": cmd, "error": str(exc)}
+        if "id" in request:
+            reply["id"] = request["id"]  # lets the requester match replies to requests
         self.control.send(reply, addr)
 
     def _truth(self) -> dict[str, Any]:
@@ -544,6 +592,9 @@ class SitlVehicle:
             "failsafe_since_s": None if math.isnan(cmd.failsafe_since_s) else cmd.failsafe_since_s,
             "rc_lost": cmd.rc_lost,
             "setpoints_rejected": self.setpoints_rejected,
+            "frames": None
+            if self.camera is None
+            else {"sent": self.camera.server.stats.sent, "dropped": self.camera.server.stats.dropped},
             "commands_by_sender": dict(self.commands_by_sender),
             "setpoints_by_sender": dict(self.setpoints_by_sender),
             "links": {

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import socket
 import time
@@ -11,7 +10,8 @@ from typing import Any, TypeVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.config import API_PORT_REMOTE, CONTROL_PORT, GCS_PORT_REMOTE
+from sitl.config import API_PORT_REMOTE, GCS_PORT_REMOTE
+from sitl.lockstep import LockstepControl
 from sitl.process import SitlProcess
 
 T = TypeVar("T")
@@ -131,36 +131,20 @@ class LockstepClient:
 
     def __init__(self, instance: int, system_id: int = 245, component_id: int = 190) -> None:
         self.peer = MavlinkPeer(api_port(instance), system_id, component_id)
-        self.control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.control.bind(("127.0.0.1", 0))
-        self.control_addr = ("127.0.0.1", CONTROL_PORT + instance)
-        self.system_id = system_id
-        self.component_id = component_id
+        self.control = LockstepControl(instance, system_id, component_id)
 
     def subscribe(self, timeout_s: float = 10.0) -> None:
         """Register for ticks and wait until the vehicle has been heard on MAVLink."""
-        self.control.sendto(json.dumps({"cmd": "lockstep_subscribe"}).encode(), self.control_addr)
+        self.control.subscribe()
         wait_until(lambda: self.peer.poll() is not None and self.peer.vehicle_addr, timeout_s, "the vehicle")
 
     def next_tick(self, timeout_s: float = 10.0) -> dict[str, Any]:
         """Wait for the next tick event."""
-        self.control.settimeout(timeout_s)
-        while True:
-            data, _ = self.control.recvfrom(65535)
-            event: dict[str, Any] = json.loads(data)
-            if event.get("event") == "tick":
-                return event
+        return self.control.next_tick(timeout_s)
 
     def ack(self, seq: int) -> None:
         """Acknowledge tick ``seq``, stating how many MAVLink messages were sent before it."""
-        request = {
-            "cmd": "lockstep_ack",
-            "seq": seq,
-            "mavlink_sent": self.peer.sent,
-            "sysid": self.system_id,
-            "compid": self.component_id,
-        }
-        self.control.sendto(json.dumps(request).encode(), self.control_addr)
+        self.control.ack(seq, self.peer.sent)
 
     def close(self) -> None:
         """Close both sockets."""

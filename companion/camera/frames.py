@@ -1,0 +1,113 @@
+"""Frames and frame sources.
+
+A frame carries its sequence number and its capture time on the vehicle's clock (the clock of MAVLink's
+``time_boot_ms``), so the companion pairs it with the pose at that instant. Sources are async generators with
+``try/finally`` cleanup and a deadline on every wait.
+
+``sitl://HOST:PORT`` is the bundled SITL's camera stream (TCP, loopback): each message is
+``b"SLZF" | u32 header length | JSON header | u32 payload length | payload``, the header
+``{"seq", "t_capture_s", "width", "height", "encoding": "bgr8"}`` and the payload the raw image.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import struct
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from typing import Protocol
+from urllib.parse import urlparse
+
+import numpy as np
+import numpy.typing as npt
+
+MAGIC = b"SLZF"
+U8Image = npt.NDArray[np.uint8]
+
+
+class CameraError(Exception):
+    """A frame source failed (what, and which source)."""
+
+    def __init__(self, source: str, what: str) -> None:
+        super().__init__(f"{source}: {what}")
+        self.source = source
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera frame: ``image_bgr`` (H, W, 3) uint8, captured at ``t_capture_s`` on the vehicle's clock."""
+
+    seq: int
+    t_capture_s: float
+    image_bgr: U8Image
+
+
+class FrameSource(Protocol):
+    """Anything that yields frames."""
+
+    def frames(self) -> AsyncIterator[Frame]:
+        """Frames in capture order until the source ends."""
+        ...
+
+
+def encode_frame(seq: int, t_capture_s: float, image_bgr: U8Image) -> bytes:
+    """The SITL stream's wire form of a frame."""
+    h, w = image_bgr.shape[:2]
+    header = json.dumps({"seq": seq, "t_capture_s": t_capture_s, "width": w, "height": h, "encoding": "bgr8"}).encode()
+    payload = np.ascontiguousarray(image_bgr, dtype=np.uint8).tobytes()
+    return MAGIC + struct.pack("<I", len(header)) + header + struct.pack("<I", len(payload)) + payload
+
+
+class SitlFrameSource:
+    """Frames from the SITL's camera stream (``sitl://127.0.0.1:5600``).
+
+    Parameters
+    ----------
+    host, port : str, int
+        Where the SITL serves frames.
+    timeout_s : float
+        Longest wait for the connection and for each frame; a silent camera raises :class:`CameraError`.
+    """
+
+    def __init__(self, host: str, port: int, timeout_s: float = 10.0) -> None:
+        self.host, self.port, self.timeout_s = host, port, timeout_s
+        self.name = f"sitl://{host}:{port}"
+
+    async def frames(self) -> AsyncIterator[Frame]:
+        """Connect, then yield frames until the SITL closes the stream."""
+        try:
+            reader, writer = await asyncio.wait_for(asyncio.open_connection(self.host, self.port), self.timeout_s)
+        except (OSError, asyncio.TimeoutError) as exc:
+            raise CameraError(self.name, f"cannot connect: {exc}") from None
+        try:
+            while True:
+                try:
+                    magic = await asyncio.wait_for(reader.readexactly(4), self.timeout_s)
+                except asyncio.IncompleteReadError:
+                    return  # the SITL ended the stream
+                except asyncio.TimeoutError:
+                    raise CameraError(self.name, f"no frame for {self.timeout_s} s") from None
+                if magic != MAGIC:
+                    raise CameraError(self.name, f"bad frame marker {magic!r}")
+                (header_len,) = struct.unpack("<I", await reader.readexactly(4))
+                header = json.loads(await reader.readexactly(header_len))
+                (payload_len,) = struct.unpack("<I", await reader.readexactly(4))
+                payload = await reader.readexactly(payload_len)
+                h, w = int(header["height"]), int(header["width"])
+                if header.get("encoding") != "bgr8" or payload_len != h * w * 3:
+                    raise CameraError(self.name, f"unsupported frame {header} with {payload_len} bytes")
+                image = np.frombuffer(payload, dtype=np.uint8).reshape(h, w, 3)
+                yield Frame(int(header["seq"]), float(header["t_capture_s"]), image)
+        finally:
+            writer.close()
+
+
+def open_frame_source(url: str, timeout_s: float = 10.0) -> FrameSource:
+    """A frame source from its URL. Today: ``sitl://HOST:PORT`` (devices and streams come with the app)."""
+    parsed = urlparse(url)
+    if parsed.scheme == "sitl":
+        if not parsed.hostname or not parsed.port:
+            raise CameraError(url, "expected sitl://HOST:PORT")
+        return SitlFrameSource(parsed.hostname, parsed.port, timeout_s)
+    raise CameraError(url, f"unsupported frame source scheme {parsed.scheme!r} (supported: sitl)")

@@ -1,0 +1,72 @@
+"""The vehicle's camera in the SITL: the seeded world rendered at the vehicle's true pose, weather applied,
+streamed with its sequence number and capture time (simulated clock)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from companion.camera.frames import encode_frame
+from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from sitl.config import SitlConfig
+from sitl.dynamics.base import VehicleState
+from sitl.frame_server import FrameServer
+from sitl.render.camera import Light, WorldRenderer
+from sitl.world.crowd import Crowd
+from sitl.world.park import Park
+from sitl.world.scenario import WeatherKind
+from sitl.world.weather import WeatherSchedule, apply_weather
+
+
+class SimCamera:
+    """World + renderer + frame server for one SITL vehicle (see the module docstring)."""
+
+    def __init__(self, config: SitlConfig) -> None:
+        cam = config.camera
+        scenario = config.scenario
+        rng = np.random.default_rng([config.seed, 8])
+        self.light = Light.from_angles(
+            float(rng.uniform(scenario.sun_elevation_deg.low, scenario.sun_elevation_deg.high)),
+            float(rng.uniform(scenario.sun_azimuth_deg.low, scenario.sun_azimuth_deg.high)),
+            float(rng.uniform(scenario.ambient.low, scenario.ambient.high)),
+        )
+        self.park = Park(config.seed, roi_side_m=scenario.roi_side_m)
+        self.crowd = Crowd(scenario, config.seed)
+        self.weather = WeatherSchedule(scenario, config.seed)
+        self.intrinsics = PinholeCamera.from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)
+        self.T_body_camera = T_body_camera_from_mount(tilt_deg=cam.tilt_deg)
+        self.renderer = WorldRenderer(self.park, self.crowd, self.intrinsics, self.T_body_camera, self.light)
+        self.server = FrameServer(config.bind_address, config.frame_port)
+        self.period_s = 1.0 / cam.rate_hz
+        self.seed = config.seed
+        self.seq = 0
+
+    def fileno(self) -> int:
+        """For select()."""
+        return self.server.fileno()
+
+    def capture(self, t_s: float, state: VehicleState) -> bool:
+        """Render and send the frame at ``t_s``; False if it was dropped (no client, or the last one unsent)."""
+        n, e, d = (float(v) for v in state.position_ned_m)
+        pose = Pose.from_ned_quaternion(n, e, d, state.quaternion_wxyz)
+        weather = self.weather.state_at(t_s)
+        view = self.renderer.render(pose, t_s, with_mask=False, with_depth=weather.kind is WeatherKind.FOG)
+        image = apply_weather(view.image_bgr, weather, self.seed * 1_000_003 + self.seq, view.depth_m)
+        sent = self.server.send(encode_frame(self.seq, t_s, image))
+        self.seq += 1
+        return sent
+
+    def people(self) -> dict[str, Any]:
+        """Ground truth: every person's head-plane position, body radius and whether they walk, now."""
+        return {
+            "t_s": self.crowd.t_s,
+            "positions_ne_m": self.crowd.positions_ne_m.tolist(),
+            "radii_m": self.crowd.radii_m.tolist(),
+            "moving": self.crowd.moving.tolist(),
+        }
+
+    def close(self) -> None:
+        """Stop serving frames."""
+        self.server.close()
+        self.renderer.close()

@@ -1,0 +1,123 @@
+"""The SITL camera stream: frames with sequence numbers and simulated capture times, lockstep, seeded determinism."""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import itertools
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.camera.frames import CameraError, SitlFrameSource, open_frame_source
+from sitl.process import SitlProcess
+from tests.sitl_tools import LockstepClient, state_when
+
+pytestmark = pytest.mark.sitl
+
+SMALL_CAMERA = "sitl:\n  camera:\n    enabled: true\n    width_px: 320\n    height_px: 240\n  seed: {seed}\n{extra}"
+
+
+def start(tmp_path: Path, instance: int, seed: int, args: list[str], extra: str = "") -> SitlProcess:
+    config = tmp_path / f"camera-{instance}.yaml"
+    config.write_text(SMALL_CAMERA.format(seed=seed, extra=extra))
+    return SitlProcess(["--config", str(config), *args], instance, tmp_path).start()
+
+
+async def lockstep_frames(instance: int, count: int, take_off: bool = False) -> list[tuple[int, float, str]]:
+    """Receive ``count`` frames in lockstep, acknowledging each tick; (seq, capture time, image hash) of each.
+
+    With ``take_off``, the client arms and takes off at the first ticks, so the camera rises over the crowd.
+    """
+    client = LockstepClient(instance)
+    out = []
+    frames = SitlFrameSource("127.0.0.1", 5600 + instance, timeout_s=10).frames()
+    try:
+        client.subscribe()
+        for k in range(count):
+            frame = await frames.__anext__()
+            tick = await asyncio.to_thread(client.next_tick)
+            assert frame.seq == k == tick["seq"]
+            assert frame.t_capture_s == pytest.approx(tick["t_s"], abs=1e-9)
+            assert frame.image_bgr.shape == (240, 320, 3)
+            out.append((frame.seq, frame.t_capture_s, hashlib.sha1(frame.image_bgr.tobytes()).hexdigest()))
+            if take_off and k in (1, 2):
+                peer, sysid = client.peer, client.peer.vehicle_sysid
+                command = mavlink.MAV_CMD_COMPONENT_ARM_DISARM if k == 1 else mavlink.MAV_CMD_NAV_TAKEOFF
+                params = [1.0, 0, 0, 0, 0, 0, 0] if k == 1 else [0, 0, 0, math.nan, math.nan, math.nan, math.nan]
+                peer.send(peer.mav.command_long_encode(sysid, 1, command, 0, *params))
+            client.ack(k)
+    finally:
+        await frames.aclose()  # type: ignore[attr-defined]
+        client.close()
+    return out
+
+
+def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(tmp_path: Path) -> None:
+    runs: list[Any] = []
+    for instance in (20, 21):
+        sitl = start(
+            tmp_path,
+            instance,
+            seed=5,
+            args=["--lockstep", "--speed", "0"],
+            extra="  scenario:\n    moving_fraction: 0.2\n",
+        )
+        try:
+            frames = asyncio.run(lockstep_frames(instance, 30, take_off=True))
+            people = sitl.request({"cmd": "people"})
+            runs.append((frames, people["positions_ne_m"]))
+        finally:
+            sitl.stop()
+    (frames_a, people_a), (frames_b, people_b) = runs
+    assert [t for _, t, _ in frames_a] == pytest.approx([0.1 * k for k in range(30)])
+    assert frames_a == frames_b  # bit-identical frames from the same seed
+    assert people_a == people_b  # and the same walks
+    assert len({h for _, _, h in frames_a}) > 20  # the camera rises over walking people: frames differ
+
+
+def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path) -> None:
+    sitl = start(tmp_path, 22, seed=1, args=["--speed", "1"])
+    try:
+
+        async def read(n: int) -> list[float]:
+            source = open_frame_source("sitl://127.0.0.1:5622")
+            times = []
+            async for frame in source.frames():
+                times.append(frame.t_capture_s)
+                if len(times) == n:
+                    break
+            return times
+
+        times = asyncio.run(read(8))
+        gaps = [b - a for a, b in itertools.pairwise(times)]
+        assert gaps == pytest.approx([0.1] * 7, abs=1e-9)  # 10 Hz of simulated time
+        # The client has gone: the SITL goes on (and counts the frames nobody took).
+        t0 = sitl.state()["t_s"]
+        later = state_when(sitl, lambda s: s["t_s"] > t0 + 1.0, 5, "time to go on")
+        assert later["frames"]["dropped"] >= 5
+    finally:
+        sitl.stop()
+
+
+def test_in_lockstep_a_frame_client_that_leaves_stops_the_sitl_loudly(tmp_path: Path) -> None:
+    sitl = start(tmp_path, 23, seed=1, args=["--lockstep", "--speed", "0"], extra="  lockstep_timeout_s: 2.0\n")
+    asyncio.run(lockstep_frames(23, 3))  # then the client disconnects without acknowledging more
+    assert sitl.wait(timeout_s=15) == 3
+    assert "frame client" in sitl.log_tail() or "no acknowledgement" in sitl.log_tail()
+    sitl.stop()
+
+
+def test_frame_source_errors() -> None:
+    with pytest.raises(CameraError, match="unsupported frame source scheme 'rtsp'"):
+        open_frame_source("rtsp://camera/stream")
+
+    async def connect() -> None:
+        async for _ in SitlFrameSource("127.0.0.1", 5699, timeout_s=1).frames():
+            pass
+
+    with pytest.raises(CameraError, match="cannot connect"):
+        asyncio.run(connect())
