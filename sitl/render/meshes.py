@@ -46,6 +46,14 @@ def _sphere(radius: float, centre: tuple[float, float, float], colour: RGB, subd
     return _part(m, colour)
 
 
+def head_height_m(a: Appearance) -> float:
+    """Height of the centre of a person's head above the ground (the point a density model is trained to find)."""
+    h = a.height_m
+    sitting = a.body in (BodyType.ADULT_SITTING, BodyType.CHILD_SITTING)
+    hip = 0.25 * h if sitting else 0.47 * h
+    return hip + 0.3 * h + 0.065 * h * 1.1
+
+
 def person_mesh(a: Appearance, heading_rad: float) -> trimesh.Trimesh:
     """A person at the origin facing ``heading_rad`` (from north towards east), feet on z = 0.
 

@@ -11,10 +11,11 @@ import enum
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
-from sitl.world.scenario import ScenarioConfig, WalkerKind
+from sitl.world.scenario import ScenarioConfig, Style, WalkerKind
 
 F64Array = npt.NDArray[np.float64]
 
@@ -40,6 +41,20 @@ class BodyType(enum.Enum):
 
 CHILD_TYPES = (BodyType.CHILD_STANDING, BodyType.CHILD_WALKING, BodyType.CHILD_SITTING)
 ADULT_TYPES = tuple(t for t in BodyType if t not in CHILD_TYPES)
+HELDOUT_ONLY_TYPES = (BodyType.ELDERLY_WITH_CANE, BodyType.PERSON_WITH_STROLLER, BodyType.ADULT_WITH_UMBRELLA)
+
+
+def _adult_types(style: Style) -> tuple[BodyType, ...]:
+    if style is Style.TRAIN:
+        return tuple(t for t in ADULT_TYPES if t not in HELDOUT_ONLY_TYPES)
+    return ADULT_TYPES
+
+
+def _hue_range(style: Style) -> tuple[int, int]:
+    """OpenCV hue (0-179) range of clothing colours: warm for training, cool for held-out, all otherwise."""
+    return {Style.TRAIN: (0, 45), Style.HELDOUT: (90, 150)}.get(style, (0, 180))
+
+
 PATTERNS = ("solid", "striped", "checked", "two_tone")
 HAIR_BGR = ((20, 20, 25), (30, 50, 80), (60, 90, 140), (160, 200, 220), (200, 200, 200), (40, 40, 120))
 
@@ -126,17 +141,20 @@ class Crowd:
         return positions
 
     def _appearance(self, rng: np.random.Generator, radius_m: float) -> Appearance:
+        style = self.config.style
+        adults = _adult_types(style)
         child = rng.random() < self.config.child_fraction
-        body = (
-            CHILD_TYPES[int(rng.integers(len(CHILD_TYPES)))]
-            if child
-            else ADULT_TYPES[int(rng.integers(len(ADULT_TYPES)))]
-        )
+        body = CHILD_TYPES[int(rng.integers(len(CHILD_TYPES)))] if child else adults[int(rng.integers(len(adults)))]
         height = float(rng.uniform(1.0, 1.4) if child else rng.uniform(1.55, 1.95))
         hat = body is BodyType.ADULT_WITH_HAT or rng.random() < 0.15
 
+        hue_low, hue_high = _hue_range(style)
+
         def colour() -> tuple[int, int, int]:
-            b, g, r = (int(v) for v in rng.integers(15, 240, size=3))
+            hsv = np.array(
+                [[[rng.integers(hue_low, hue_high), rng.integers(60, 256), rng.integers(40, 240)]]], dtype=np.uint8
+            )
+            b, g, r = (int(v) for v in cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0])
             return b, g, r
 
         return Appearance(

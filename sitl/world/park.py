@@ -15,6 +15,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from sitl.world.scenario import Style
+
 U8Image = npt.NDArray[np.uint8]
 
 
@@ -75,12 +77,20 @@ class Park:
         Half side of the textured ground.
     texture_res_m : float
         Metres per ground-texture pixel.
+    style : Style
+        Grass colours: all, or the training or held-out half (dataset style split).
     """
 
     def __init__(
-        self, seed: int, roi_side_m: float = 30.0, extent_m: float = 45.0, texture_res_m: float = 0.05
+        self,
+        seed: int,
+        roi_side_m: float = 30.0,
+        extent_m: float = 45.0,
+        texture_res_m: float = 0.05,
+        style: Style = Style.ANY,
     ) -> None:
         rng = np.random.default_rng([seed, 5])
+        self.style = style
         self.extent_m = extent_m
         self.texture_res_m = texture_res_m
         self.ground_bgr = self._ground(rng)
@@ -92,7 +102,10 @@ class Park:
 
     def _ground(self, rng: np.random.Generator) -> U8Image:
         size = round(2 * self.extent_m / self.texture_res_m)
-        base = np.array(GRASS[int(rng.integers(len(GRASS)))], dtype=np.float32)
+        grasses: tuple[tuple[int, int, int], ...] = {Style.TRAIN: GRASS[:2], Style.HELDOUT: GRASS[2:]}.get(
+            self.style, GRASS
+        )
+        base = np.array(grasses[int(rng.integers(len(grasses)))], dtype=np.float32)
         fine = _noise(rng, size, 1.0)
         shade = 1.0 + 0.12 * _noise(rng, size, 40.0) + 0.06 * fine
         ground = base[None, None, :] * shade[:, :, None]

@@ -30,6 +30,17 @@ class WeatherKind(str, enum.Enum):
     """Dusk / overcast: darker, warmer or greyer light, lower contrast."""
 
 
+class Style(str, enum.Enum):
+    """Appearance families, for datasets whose held-out part must look unlike the training part."""
+
+    ANY = "any"
+    """Everything (SITL missions)."""
+    TRAIN = "train"
+    """Half the grass colours, warm clothing hues, all but three body types."""
+    HELDOUT = "heldout"
+    """The other grass colours, cool clothing hues, and three body types training never sees."""
+
+
 class WalkerKind(str, enum.Enum):
     """How moving people move."""
 
@@ -80,6 +91,7 @@ class ScenarioConfig(StrictModel):
     sun_azimuth_deg: Range = Field(default_factory=lambda: _range(0.0, 360.0))
     ambient: Range = Field(default_factory=lambda: _range(0.3, 0.7), description="Ambient light fraction.")
     start_altitude_m: Range = Field(default_factory=lambda: _range(15.0, 40.0))
+    style: Style = Field(default=Style.ANY, description="Appearance family (datasets: a train/held-out style split).")
 
     @model_validator(mode="after")
     def _feasible(self) -> ScenarioConfig:
