@@ -17,6 +17,7 @@ import numpy.typing as npt
 
 from companion.perception.geometry import F64Array, PinholeCamera, Pose
 from companion.perception.projection import plane_homography
+from sitl.world.park import smooth_noise
 
 U8Image = npt.NDArray[np.uint8]
 
@@ -50,19 +51,6 @@ class RenderedFrame:
 
 class SceneError(Exception):
     """A scene cannot be generated as asked (e.g. more people than fit without overlap)."""
-
-
-def _noise(rng: np.random.Generator, shape: tuple[int, int], blur_px: float) -> npt.NDArray[np.float32]:
-    """Unit-variance Gaussian noise of correlation length ``blur_px``; smooth fields are made at low resolution."""
-    factor = max(1, int(blur_px // 4))
-    small = (max(1, shape[0] // factor), max(1, shape[1] // factor))
-    field = rng.standard_normal(small).astype(np.float32)
-    if blur_px > 0:
-        field = np.asarray(cv2.GaussianBlur(field, (0, 0), blur_px / factor), dtype=np.float32)
-    if factor > 1:
-        field = np.asarray(cv2.resize(field, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC), dtype=np.float32)
-    std = float(field.std())
-    return field / std if std > 0 else field
 
 
 class FlatScene:
@@ -114,8 +102,8 @@ class FlatScene:
     def _make_ground(self, rng: np.random.Generator) -> U8Image:
         size = round(2 * self.texture_half_m / self.texture_res_m)
         base = np.array(rng.choice([[60, 120, 70], [55, 105, 85], [70, 125, 95]]), dtype=np.float32)  # grass
-        coarse = _noise(rng, (size, size), 40.0)
-        fine = _noise(rng, (size, size), 1.0)
+        coarse = smooth_noise(rng, (size, size), 40.0)
+        fine = smooth_noise(rng, (size, size), 1.0)
         shade = 1.0 + 0.12 * coarse + 0.05 * fine
         ground = base[None, None, :] * shade[:, :, None]
         # Paths: a few straight asphalt/paving strips crossing the park.

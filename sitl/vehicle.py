@@ -594,7 +594,11 @@ class SitlVehicle:
             "setpoints_rejected": self.setpoints_rejected,
             "frames": None
             if self.camera is None
-            else {"sent": self.camera.server.stats.sent, "dropped": self.camera.server.stats.dropped},
+            else {
+                "sent": self.camera.server.stats.sent,
+                "dropped": self.camera.server.stats.dropped,
+                "clients": self.camera.server.stats.clients,
+            },
             "commands_by_sender": dict(self.commands_by_sender),
             "setpoints_by_sender": dict(self.setpoints_by_sender),
             "links": {

@@ -194,7 +194,7 @@ class WorldRenderer:
             bake_lighting(objects, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
             self._black[self.scene.add(pr.Mesh.from_trimesh(objects, smooth=True))] = (0, 0, 0)
 
-    def _person(self, index: int, with_shadow_at: tuple[float, float] | None) -> trimesh.Trimesh:
+    def _person(self, index: int) -> trimesh.Trimesh:
         a = self.crowd.appearances[index]
         heading = float(np.random.default_rng([index, 6]).uniform(-math.pi, math.pi))
         mesh = person_mesh(a, heading)
@@ -214,7 +214,7 @@ class WorldRenderer:
             parts, shadows = [], []
             for i in still:
                 north, east = crowd.positions_ne_m[i]
-                m = self._person(i, None)
+                m = self._person(i)
                 m.apply_translation([east, north, 0.0])
                 parts.append(m)
                 shadows.append(self._shadow(i, float(north), float(east)))
@@ -231,7 +231,7 @@ class WorldRenderer:
         offset = 0
         faces, colours = [], []
         for i in self._mover_ids:
-            body, shadow = self._person(i, None), self._shadow(i, 0.0, 0.0)
+            body, shadow = self._person(i), self._shadow(i, 0.0, 0.0)
             self._mover_parts.append((np.asarray(body.vertices), np.asarray(shadow.vertices)))
             faces.append(np.asarray(body.faces) + offset)
             colours.append(np.asarray(body.visual.vertex_colors))

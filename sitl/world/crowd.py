@@ -98,7 +98,6 @@ class Crowd:
         n_moving = round(config.moving_fraction * n)
         self.moving = np.zeros(n, dtype=bool)
         self.moving[rng.choice(n, size=n_moving, replace=False)] = True
-        self.start_ne_m = self.positions_ne_m.copy()
         self._walk_rng = np.random.default_rng([seed, 2])
         self._ticks = 0
         self.t_s = 0.0

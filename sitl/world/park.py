@@ -53,13 +53,15 @@ SAND = (140, 180, 205)
 COURT = ((70, 90, 160), (160, 100, 60), (60, 130, 60))
 
 
-def _noise(rng: np.random.Generator, size: int, blur_px: float) -> npt.NDArray[np.float32]:
+def smooth_noise(rng: np.random.Generator, shape: tuple[int, int], blur_px: float) -> npt.NDArray[np.float32]:
+    """Unit-variance Gaussian noise of correlation length ``blur_px``; smooth fields are made at low resolution."""
     factor = max(1, int(blur_px // 4))
-    small = max(1, size // factor)
-    field = rng.standard_normal((small, small)).astype(np.float32)
-    field = np.asarray(cv2.GaussianBlur(field, (0, 0), max(blur_px / factor, 0.5)), dtype=np.float32)
+    small = (max(1, shape[0] // factor), max(1, shape[1] // factor))
+    field = rng.standard_normal(small).astype(np.float32)
+    if blur_px > 0:
+        field = np.asarray(cv2.GaussianBlur(field, (0, 0), blur_px / factor), dtype=np.float32)
     if factor > 1:
-        field = np.asarray(cv2.resize(field, (size, size), interpolation=cv2.INTER_CUBIC), dtype=np.float32)
+        field = np.asarray(cv2.resize(field, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC), dtype=np.float32)
     std = float(field.std())
     return field / std if std > 0 else field
 
@@ -96,18 +98,14 @@ class Park:
         self.ground_bgr = self._ground(rng)
         self.objects = self._objects(rng, roi_side_m / 2)
 
-    def world_to_texture(self, north_m: float, east_m: float) -> tuple[float, float]:
-        """(col, row) of a ground point in the texture."""
-        return (east_m + self.extent_m) / self.texture_res_m - 0.5, (self.extent_m - north_m) / self.texture_res_m - 0.5
-
     def _ground(self, rng: np.random.Generator) -> U8Image:
         size = round(2 * self.extent_m / self.texture_res_m)
         grasses: tuple[tuple[int, int, int], ...] = {Style.TRAIN: GRASS[:2], Style.HELDOUT: GRASS[2:]}.get(
             self.style, GRASS
         )
         base = np.array(grasses[int(rng.integers(len(grasses)))], dtype=np.float32)
-        fine = _noise(rng, size, 1.0)
-        shade = 1.0 + 0.12 * _noise(rng, size, 40.0) + 0.06 * fine
+        fine = smooth_noise(rng, (size, size), 1.0)
+        shade = 1.0 + 0.12 * smooth_noise(rng, (size, size), 40.0) + 0.06 * fine
         ground = base[None, None, :] * shade[:, :, None]
         yy, xx = np.mgrid[0:size, 0:size].astype(np.float32) - size / 2
         px_per_m = 1.0 / self.texture_res_m
