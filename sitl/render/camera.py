@@ -225,7 +225,8 @@ class WorldRenderer:
                 0,
                 0,
             )
-        # Walking people: one mesh rebuilt each frame from cached local vertices (one draw call, a small upload).
+        # Walking people: one mesh (and one of their shadows) built at the first frame from cached local vertices,
+        # then moved by rewriting its vertex buffer in place each frame (one draw call, no new GL objects).
         self._mover_ids = [int(i) for i in np.nonzero(crowd.moving)[0]]
         self._mover_parts = []
         offset = 0
@@ -239,7 +240,7 @@ class WorldRenderer:
         self._mover_node: Any = None
         self._mover_shadow_node: Any = None
         if self._mover_ids:
-            template = self._shadow(self._mover_ids[0], 0.0, 0.0)
+            template = self._shadow(self._mover_ids[0], 0.0, 0.0)  # every shadow is the same 10-sided disc mesh
             self._mover_faces = np.concatenate(faces)
             self._mover_colours = np.concatenate(colours)
             shadow_counts = [len(s) for _, s in self._mover_parts]
