@@ -49,11 +49,12 @@ class FrameServer:
 
     def poll(self) -> None:
         """Accept a new client (replacing the old) and push pending bytes."""
+        client: socket.socket | None
         try:
             client, addr = self._listener.accept()
-        except BlockingIOError:
-            pass
-        else:
+        except BlockingIOError:  # nobody is connecting
+            client = None
+        if client is not None:
             self._drop_client()
             client.setblocking(False)
             client.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 8 << 20)

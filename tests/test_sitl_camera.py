@@ -116,8 +116,7 @@ def test_frame_source_errors() -> None:
         open_frame_source("rtsp://camera/stream")
 
     async def connect() -> None:
-        async for _ in SitlFrameSource("127.0.0.1", 5699, timeout_s=1).frames():
-            pass
+        await SitlFrameSource("127.0.0.1", 5699, timeout_s=1).frames().__anext__()
 
     with pytest.raises(CameraError, match="cannot connect"):
         asyncio.run(connect())

@@ -86,21 +86,14 @@ class _Bgr:
         self.image = image
 
 
-def _make_offscreen(width: int, height: int) -> Any:
-    """The process's offscreen renderer for this size, created once and kept.
+_PATCHED: list[bool] = []
 
-    pyrender's ``delete()`` terminates the EGL display that every context of the process shares, so contexts are
-    never deleted while the process lives: scenes come and go, the renderer stays (as a campaign worker wants).
-    """
-    if (width, height) in _OFFSCREEN:
-        return _OFFSCREEN[(width, height)]
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    try:
-        import pyrender
-        import pyrender.renderer
-        from OpenGL import GL
-    except Exception as exc:  # ImportError, or PyOpenGL failing to find libEGL
-        raise RenderError("render.import", f"cannot import pyrender/OpenGL with EGL: {exc}") from None
+
+def _patch_pyrender(pyrender: Any, GL: Any) -> None:
+    """Once per process: MSAA off, and a lean read-back when depth is not wanted."""
+    if _PATCHED:
+        return
+    _PATCHED.append(True)
 
     # pyrender 0.1.45 always allocates a 4x multisampled framebuffer; with 0 samples the same code path runs
     # without MSAA, which costs a third of the frame time on a software rasterizer.
@@ -126,6 +119,24 @@ def _make_offscreen(width: int, height: int) -> Any:
         return _Bgr(np.asarray(bgr, dtype=np.uint8)), None
 
     pyrender.renderer.Renderer._read_main_framebuffer = read_framebuffer
+
+
+def _make_offscreen(width: int, height: int) -> Any:
+    """The process's offscreen renderer for this size, created once and kept.
+
+    pyrender's ``delete()`` terminates the EGL display that every context of the process shares, so contexts are
+    never deleted while the process lives: scenes come and go, the renderer stays (as a campaign worker wants).
+    """
+    if (width, height) in _OFFSCREEN:
+        return _OFFSCREEN[(width, height)]
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    try:
+        import pyrender
+        import pyrender.renderer
+        from OpenGL import GL
+    except Exception as exc:  # ImportError, or PyOpenGL failing to find libEGL
+        raise RenderError("render.import", f"cannot import pyrender/OpenGL with EGL: {exc}") from None
+    _patch_pyrender(pyrender, GL)
     try:
         renderer = pyrender.OffscreenRenderer(width, height)
     except Exception as exc:
