@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: setup demo test lint typecheck pytest bench clean
+.PHONY: setup demo test lint typecheck pytest bench training models clean
 
 setup: $(STAMP)
 
@@ -37,6 +37,15 @@ bench: $(STAMP)
 	$(BIN)/python bench/perception.py
 	$(BIN)/python bench/sitl_speed.py
 	$(BIN)/python bench/render.py
+	$(BIN)/python bench/density.py
+
+# Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
+# quantization, evaluation; about an hour on 2 cores). The drone needs neither.
+training: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[dev,training]'
+
+models: training
+	bash scripts/build-density-models.sh
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache runs

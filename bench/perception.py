@@ -1,7 +1,8 @@
 """Per-stage latency of the SLZ perception pipeline on 640x480 frames, on one CPU thread.
 
 Run: ``.venv/bin/python bench/perception.py [--frames N] [--out bench/results/perception.json]``.
-Frames are rendered from seeded scenes along a slow descent (20 m -> 8 m) so tracking sees a moving camera.
+The density model is the one `mission_configs/perception.yaml` ships. Frames are rendered from seeded planar scenes
+along a slow descent (20 m -> 8 m) so tracking sees a moving camera.
 Prints median and p95 per stage and in total, with and without the network, and writes them as JSON.
 """
 
@@ -20,7 +21,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
-from companion.perception.config import PerceptionConfig  # noqa: E402
+from companion.perception.config import load_perception_config  # noqa: E402
 from companion.perception.geometry import Pose  # noqa: E402
 from companion.perception.pipeline import STAGES, SlzPipeline, camera_from_config  # noqa: E402
 from sitl.flat_scene import FlatScene  # noqa: E402
@@ -34,8 +35,10 @@ def main() -> int:
     args = parser.parse_args()
 
     cv2.setNumThreads(1)
-    config = PerceptionConfig.model_validate(
-        {"model": {"path": str(REPO_ROOT / "models/blob_detector/blob_detector.onnx"), "intra_op_threads": 1}}
+    shipped = load_perception_config(REPO_ROOT / "mission_configs" / "perception.yaml")
+    model_path = shipped.model.path if shipped.model.path.is_absolute() else REPO_ROOT / shipped.model.path
+    config = shipped.model_copy(
+        update={"model": shipped.model.model_copy(update={"path": model_path, "intra_op_threads": 1})}
     )
     pipeline = SlzPipeline.from_config(config)
     camera, T_body_camera = camera_from_config(config.camera)

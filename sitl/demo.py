@@ -1,9 +1,9 @@
 """The main job's current form: the SLZ pipeline on a seeded scene, over a scripted descent.
 
-The vehicle's path here is kinematic (no autopilot yet): from a random start pose above the region of interest it
-moves towards the current target and descends at a fixed rate, one camera frame per step, with a small attitude
-wobble, so tracking sees a moving camera. Outputs an annotated PNG (camera view + top view with ground truth)
-and a JSON summary, and returns the outcome.
+The scene is the SITL's world (park, crowd, pyrender camera). The vehicle's path here is kinematic (no autopilot
+yet): from a random start pose above the region of interest it moves towards the current target and descends at a
+fixed rate, one camera frame per step, with a small attitude wobble, so tracking sees a moving camera. Outputs an
+annotated PNG (camera view + top view with ground truth) and a JSON summary, and returns the outcome.
 """
 
 from __future__ import annotations
@@ -21,7 +21,10 @@ from companion.perception.config import PerceptionConfig
 from companion.perception.geometry import Pose
 from companion.perception.pipeline import FrameResult, SlzPipeline, camera_from_config
 from companion.perception.visualize import draw_camera_overlay, draw_top_view, side_by_side
-from sitl.flat_scene import FlatScene
+from sitl.render.camera import Light, WorldRenderer
+from sitl.world.crowd import Crowd
+from sitl.world.park import Park
+from sitl.world.scenario import ScenarioConfig
 
 logger = logging.getLogger(__name__)
 
@@ -79,32 +82,37 @@ def run(
         )
     pipeline = SlzPipeline.from_config(config)  # first: a model that does not load fails before any work
     rng = np.random.default_rng(seed)
-    # The paper's crowd density (80-120 people in a 30 m square), over a 40 m square that fills the view.
-    scene = FlatScene(seed=seed, n_people=int(rng.integers(80, 121) * 16 // 9), roi_half_m=20.0)
+    # The SITL's world: the paper's crowd density (80-120 people in a 30 m square) in a park, rendered in 3-D.
+    crowd = Crowd(ScenarioConfig(), seed)
     camera, T_body_camera = camera_from_config(config.camera)
+    light = Light.from_angles(float(rng.uniform(35, 75)), float(rng.uniform(0, 360)), 0.5)
+    renderer = WorldRenderer(Park(seed), crowd, camera, T_body_camera, light)
     north, east = (float(v) for v in rng.uniform(-8.0, 8.0, size=2))
     yaw = float(rng.uniform(-math.pi, math.pi))
     altitude = start_altitude_m
     t_s = 0.0
     results: list[FrameResult] = []
     frames = []
-    while altitude >= stop_altitude_m:
-        wobble = 0.03 * math.sin(2.0 * t_s)
-        pose = Pose.from_ned_euler(north, east, -altitude, wobble, -wobble, yaw)
-        frame = scene.render(camera, T_body_camera, pose).image_bgr
-        frames.append(frame)
-        result = pipeline.process(frame, pose, t_s, area_centre_ne_m=(0.0, 0.0))
-        results.append(result)
-        if result.target is not None:
-            dn, de = result.target.north_m - north, result.target.east_m - east
-            step = min(1.0, 0.5 / max(math.hypot(dn, de), 1e-9))
-            north, east = north + dn * step, east + de * step
-        altitude -= descent_per_frame_m
-        t_s += frame_period_s
+    try:
+        while altitude >= stop_altitude_m:
+            wobble = 0.03 * math.sin(2.0 * t_s)
+            pose = Pose.from_ned_euler(north, east, -altitude, wobble, -wobble, yaw)
+            frame = renderer.render(pose, t_s, with_mask=False, with_depth=False).image_bgr
+            frames.append(frame)
+            result = pipeline.process(frame, pose, t_s, area_centre_ne_m=(0.0, 0.0))
+            results.append(result)
+            if result.target is not None:
+                dn, de = result.target.north_m - north, result.target.east_m - east
+                step = min(1.0, 0.5 / max(math.hypot(dn, de), 1e-9))
+                north, east = north + dn * step, east + de * step
+            altitude -= descent_per_frame_m
+            t_s += frame_period_s
+    finally:
+        renderer.close()
     last = results[-1]
     image = side_by_side(
         draw_camera_overlay(frames[-1], last, pipeline.projector),
-        draw_top_view(last, scene.positions_ne_m, scene.radii_m),
+        draw_top_view(last, crowd.positions_ne_m, crowd.radii_m),
     )
     out_dir.mkdir(parents=True, exist_ok=True)
     image_path = out_dir / "perception.png"
@@ -113,12 +121,12 @@ def run(
     nan = float("nan")
     outcome = DemoOutcome(
         seed=seed,
-        n_people=len(scene.people),
+        n_people=len(crowd),
         frames=len(results),
         target_north_m=target.north_m if target else nan,
         target_east_m=target.east_m if target else nan,
         target_radius_m=target.radius_m if target else nan,
-        target_clearance_m=scene.clearance_m(target.north_m, target.east_m) if target else nan,
+        target_clearance_m=crowd.clearance_m(target.north_m, target.east_m) if target else nan,
         final_altitude_m=last.pose.altitude_m,
         median_stage_ms={stage: float(np.median([r.timings_ms[stage] for r in results])) for stage in last.timings_ms},
         image_path=str(image_path),

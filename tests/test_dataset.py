@@ -74,3 +74,14 @@ def test_the_held_out_style_never_appears_in_training() -> None:
     assert heldout_bodies & set(HELDOUT_ONLY_TYPES)
     assert max(train_hues) < 50 <= 85 < min(heldout_hues)  # warm versus cool clothing
     assert not set(WEATHER[Split.TRAIN]) & set(WEATHER[Split.HELDOUT])
+
+
+def test_a_split_rendered_in_chunks_equals_one_run(tmp_path: Path) -> None:
+    generate(tmp_path / "one", Split.TRAIN, frames=3, width_px=160, height_px=120, frames_per_scene=2)
+    generate(tmp_path / "chunk", Split.TRAIN, frames=2, width_px=160, height_px=120, frames_per_scene=2, first=1)
+    assert (tmp_path / "chunk" / "train" / "index.1.jsonl").is_file()
+    for stem in ("000001", "000002"):  # frame 1 ends scene 0, frame 2 starts scene 1
+        for suffix in (".png", ".mask.png", ".json"):
+            one = (tmp_path / "one" / "train" / f"{stem}{suffix}").read_bytes()
+            assert one == (tmp_path / "chunk" / "train" / f"{stem}{suffix}").read_bytes()
+    assert not (tmp_path / "chunk" / "train" / "000000.png").exists()

@@ -97,7 +97,8 @@ def test_real_onnx_model_zones_contain_no_person(
     tilt_deg: float,
     roll_rad: float,
 ) -> None:
-    """The shipped placeholder network end to end, at the altitudes it is good for (it misses people far away)."""
+    """The placeholder blob network end to end on planar scenes, at the altitudes it is good for (it misses people
+    far away). The trained model is tested on the 3-D world in test_density_model.py."""
     runs = run_frames(scenes, config, blob_model, None, altitude_m, tilt_deg, roll_rad)
     assert_zones_free_of_people(runs, config.zones.min_radius_m)
     for _, frame, result in runs:

@@ -30,7 +30,7 @@ class ModelConfig(StrictModel):
     """The density model and how onnxruntime runs it."""
 
     path: Path = Field(
-        default=Path("models/blob_detector/blob_detector.onnx"),
+        default=Path("models/density/slz_lite.onnx"),
         description="ONNX file; relative paths are relative to the working directory.",
     )
     providers: list[str] = Field(

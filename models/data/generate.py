@@ -15,7 +15,11 @@ On-disk format (``OUT/<split>/``):
   "weather": {"kind", "strength"}, "heads": [[u_px, v_px], ...], "people_in_view"}`` where ``heads`` are the
   pixel positions of the centres of the *visible* heads (a head hidden by a tree crown or an umbrella is not
   labelled) and ``people_in_view`` counts every person whose head projects into the frame;
-- ``index.jsonl``: one line per frame with its file stem, altitude, weather and head count.
+- ``index.jsonl`` (``index.<first>.jsonl`` for a chunk that starts at frame ``first``): one line per frame with its
+  file stem, altitude, weather and head count.
+
+Frame ``i`` depends only on the split, the base seed and ``i``, so a split can be rendered in chunks by parallel
+processes (``--first``) and gives the same files as one run.
 
 Run: ``.venv/bin/python -m models.data.generate --split train --frames 500 --out data/synth``.
 """
@@ -78,17 +82,18 @@ def generate(
     width_px: int = 640,
     height_px: int = 480,
     hfov_deg: float = 90.0,
-    frames_per_scene: int = 4,
+    frames_per_scene: int = 8,
+    first: int = 0,
 ) -> list[GeneratedFrame]:
-    """Render ``frames`` labelled frames of ``split`` into ``out_dir/<split>`` (see the module docstring)."""
+    """Render frames ``first .. first + frames - 1`` of ``split`` into ``out_dir/<split>`` (module docstring)."""
     split_dir = out_dir / split.value
     split_dir.mkdir(parents=True, exist_ok=True)
     camera = PinholeCamera.from_hfov(width_px, height_px, hfov_deg)
     written: list[GeneratedFrame] = []
     index_lines = []
     scene_seed = -1
-    renderers: dict[float, WorldRenderer] = {}
-    for i in range(frames):
+    renderer: WorldRenderer | None = None
+    for i in range(first, first + frames):
         scene = i // frames_per_scene
         seed = SEED_OFFSET[split] + base_seed + scene
         rng = np.random.default_rng([seed, 9, i])
@@ -105,12 +110,11 @@ def generate(
                 float(light_rng.uniform(20, 80)), float(light_rng.uniform(0, 360)), float(light_rng.uniform(0.3, 0.7))
             )
             weather = WeatherSchedule(scenario, seed).state_at(0.0)
-            for r in renderers.values():
-                r.close()
-            renderers = {}
-        if tilt_deg not in renderers:
-            renderers[tilt_deg] = WorldRenderer(park, crowd, camera, T_body_camera_from_mount(tilt_deg=tilt_deg), light)
-        renderer = renderers[tilt_deg]
+            if renderer is not None:
+                renderer.close()
+            renderer = WorldRenderer(park, crowd, camera, T_body_camera_from_mount(), light)
+        assert renderer is not None
+        renderer.T_body_camera = T_body_camera_from_mount(tilt_deg=tilt_deg)  # read at each render
         altitude_m = float(rng.uniform(8.0, 40.0))
         north, east = (float(v) for v in rng.uniform(-10.0, 10.0, size=2))
         pose = Pose.from_ned_euler(
@@ -153,9 +157,10 @@ def generate(
             json.dumps({"stem": stem, "altitude_m": altitude_m, "weather": weather.kind.value, "heads": len(heads)})
         )
         written.append(GeneratedFrame(stem, len(heads), in_view, altitude_m, weather.kind.value))
-    for r in renderers.values():
-        r.close()
-    (split_dir / "index.jsonl").write_text("\n".join(index_lines) + "\n", encoding="utf-8")
+    if renderer is not None:
+        renderer.close()
+    index_name = "index.jsonl" if first == 0 else f"index.{first}.jsonl"
+    (split_dir / index_name).write_text("\n".join(index_lines) + "\n", encoding="utf-8")
     return written
 
 
@@ -185,8 +190,9 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=100)
     parser.add_argument("--out", type=Path, default=Path("data/synth"))
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--first", type=int, default=0, help="index of the first frame (to render in chunks)")
     args = parser.parse_args()
-    written = generate(args.out, Split(args.split), args.frames, args.seed)
+    written = generate(args.out, Split(args.split), args.frames, args.seed, first=args.first)
     heads = sum(f.heads for f in written)
     sys.stdout.write(f"wrote {len(written)} frames, {heads} visible heads, to {args.out / args.split}\n")
     return 0

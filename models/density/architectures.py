@@ -1,0 +1,135 @@
+"""Density-map networks (PyTorch, training only): the paper's MCNN-like CCNN and our cheaper embedded network.
+
+Both map a normalised RGB image of shape (N, 3, H, W), H and W multiples of 4, to a density map of shape
+(N, 1, H/4, W/4) whose cells hold people per cell (its sum is the count). Batch normalisation is used for training
+and folded into the convolutions by onnxruntime at load.
+"""
+
+from __future__ import annotations
+
+import enum
+
+import torch
+from torch import nn
+
+OUTPUT_STRIDE = 4
+
+
+class Architecture(str, enum.Enum):
+    """The networks we train."""
+
+    CCNN = "ccnn"
+    """The paper's: three single-layer head columns (9x9, 7x7, 5x5) at full resolution, then a 6-layer backbone."""
+    LITE = "lite"
+    """Ours: strided stem to stride 4, then depthwise-separable dilated blocks; about 15x fewer operations."""
+
+
+def _conv_bn_relu(
+    c_in: int, c_out: int, kernel: int, stride: int = 1, dilation: int = 1, groups: int = 1
+) -> nn.Sequential:
+    padding = dilation * (kernel - 1) // 2
+    return nn.Sequential(
+        nn.Conv2d(c_in, c_out, kernel, stride=stride, padding=padding, dilation=dilation, groups=groups, bias=False),
+        nn.BatchNorm2d(c_out),
+        nn.ReLU(inplace=True),
+    )
+
+
+class _Abs(nn.Module):
+    """Element-wise absolute value (ONNX ``Abs``)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.abs(x)
+
+
+def _density_head(c_in: int) -> nn.Sequential:
+    """1x1 conv to one channel, then the absolute value, as the Bayesian Loss authors do.
+
+    A final ReLU died here within a hundred steps (a map negative everywhere passes no gradient); a leaky ReLU let
+    negative cells cancel positive ones inside the loss's sums, then vanish at inference. The absolute value always
+    passes gradient. It leaves a small positive floor on empty ground, which the export removes with a floor
+    fitted on training frames (``models/density/export.py``). The conv starts near zero (an empty map).
+    """
+    conv = nn.Conv2d(c_in, 1, 1)
+    nn.init.normal_(conv.weight, std=0.01)
+    assert conv.bias is not None
+    nn.init.constant_(conv.bias, 0.01)
+    return nn.Sequential(conv, _Abs())
+
+
+class Ccnn(nn.Module):
+    """MCNN-like compact CNN after the paper (9 convolution layers, about 0.07 M parameters).
+
+    Head: three parallel columns of one convolution each, 10 filters 9x9, 14 filters 7x7 and 16 filters 5x5, at
+    full resolution, concatenated (40 channels). Backbone: 2x2 max-pool, 3x3 conv 40->64, 2x2 max-pool, 3x3 convs
+    64->40->32->16->8, and a 1x1 conv to one channel, made non-negative (see ``_density_head``).
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.small = _conv_bn_relu(3, 10, 9)
+        self.medium = _conv_bn_relu(3, 14, 7)
+        self.large = _conv_bn_relu(3, 16, 5)
+        self.backbone = nn.Sequential(
+            nn.MaxPool2d(2),
+            _conv_bn_relu(40, 64, 3),
+            nn.MaxPool2d(2),
+            _conv_bn_relu(64, 40, 3),
+            _conv_bn_relu(40, 32, 3),
+            _conv_bn_relu(32, 16, 3),
+            _conv_bn_relu(16, 8, 3),
+            _density_head(8),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 3, H, W) -> (N, 1, H/4, W/4)."""
+        return self.backbone(torch.cat([self.small(x), self.medium(x), self.large(x)], dim=1))
+
+
+class _SeparableBlock(nn.Module):
+    """Depthwise 3x3 (dilated) then pointwise 1x1, with a residual connection when the width is kept."""
+
+    def __init__(self, c_in: int, c_out: int, dilation: int) -> None:
+        super().__init__()
+        self.depthwise = _conv_bn_relu(c_in, c_in, 3, dilation=dilation, groups=c_in)
+        self.pointwise = _conv_bn_relu(c_in, c_out, 1)
+        self.residual = c_in == c_out
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = self.pointwise(self.depthwise(x))
+        return x + y if self.residual else y
+
+
+class Lite(nn.Module):
+    """Our embedded network, same output contract at about a fifteenth of the operations.
+
+    A stride-2 3x3 stem (16 channels) and a stride-2 3x3 conv (32), then depthwise-separable blocks at stride 4
+    with dilations 1, 2, 3, 1 (48, 48, 48, 32 channels; receptive field about 60 px), a 1x1 head, made
+    non-negative (see ``_density_head``).
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            _conv_bn_relu(3, 16, 3, stride=2),
+            _conv_bn_relu(16, 32, 3, stride=2),
+            _SeparableBlock(32, 48, 1),
+            _SeparableBlock(48, 48, 2),
+            _SeparableBlock(48, 48, 3),
+            _SeparableBlock(48, 32, 1),
+            _density_head(32),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 3, H, W) -> (N, 1, H/4, W/4)."""
+        return self.body(x)
+
+
+def build(architecture: Architecture) -> nn.Module:
+    """A freshly initialised network."""
+    return Ccnn() if architecture is Architecture.CCNN else Lite()
+
+
+def parameter_count(model: nn.Module) -> int:
+    """Trainable parameters."""
+    return sum(p.numel() for p in model.parameters() if p.requires_grad)

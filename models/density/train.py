@@ -1,0 +1,214 @@
+"""Train a density network on the synthetic dataset (PyTorch; the ``training`` extra).
+
+Run (CPU or CUDA, whichever is there)::
+
+    .venv/bin/python -m models.density.train --arch lite --data data/synth --out runs/train/lite --steps 4000
+
+``--loss mse`` (the default) trains against Gaussian head maps; ``--loss bayesian`` is Ma et al.'s Bayesian Loss,
+which collapsed to an empty map within a few hundred steps when training these small networks from scratch here
+(models/density/MODEL_CARD.md).
+
+Writes ``OUT/model.pt`` (weights, architecture, loss, the training log) and ``OUT/training.json`` (the log: loss
+per step range, validation count MAE, wall time, device). The best checkpoint on the validation frames (the last
+``--val-frames`` of the training split, never the held-out split) is kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader
+
+from models.density.architectures import Architecture, build, parameter_count
+from models.density.dataset import CrowdCrops, LabelledFrame, collate, load_frames
+from models.density.losses import LossKind, density_loss
+from models.density.preprocess import OUTPUT_STRIDE, to_input
+
+logger = logging.getLogger(__name__)
+
+
+FLOORS = tuple(float(f) for f in np.concatenate([[0.0], np.geomspace(1e-4, 0.05, 24)]))
+
+
+def validate(model: torch.nn.Module, frames: list[LabelledFrame], device: torch.device) -> dict[str, float]:
+    """Count MAE, RMSE and bias on whole frames, raw and after the best floor and scale (as the export fits them).
+
+    The calibrated MAE selects the checkpoint: the raw sum is dominated by the small floor on empty ground.
+    """
+    model.eval()
+    maps = []
+    with torch.no_grad():
+        for frame in frames:
+            x = torch.from_numpy(to_input(frame.image_bgr))[None].to(device)
+            maps.append(model(x)[0, 0].cpu().numpy())
+    model.train()
+    truth = np.array([len(f.heads_px) for f in frames], np.float64)
+    e = np.array([float(m.sum()) for m in maps]) - truth
+    best = float("inf")
+    for floor in FLOORS:
+        sums = np.array([np.maximum(m - floor, 0.0).sum() for m in maps], np.float64)
+        if sums.sum() > 0:
+            best = min(best, float(np.abs(sums * truth.sum() / sums.sum() - truth).mean()))
+    return {
+        "count_mae": float(np.abs(e).mean()),
+        "count_rmse": float(np.sqrt((e**2).mean())),
+        "bias": float(e.mean()),
+        "count_mae_calibrated": best,
+    }
+
+
+def train(
+    arch: Architecture,
+    loss_kind: LossKind,
+    data_dir: Path,
+    out_dir: Path,
+    steps: int,
+    batch: int = 16,
+    crop_px: int = 256,
+    lr: float = 1e-3,
+    seed: int = 0,
+    workers: int = 2,
+    val_frames: int = 40,
+    limit_frames: int | None = None,
+    sigma_px: float = 4.0,
+    device_name: str | None = None,
+    validate_every: int = 500,
+    distractors: bool = True,
+) -> dict[str, Any]:
+    """Train and save; returns the training log (also written to ``out_dir/training.json``)."""
+    start = time.monotonic()
+    torch.manual_seed(seed)
+    device = torch.device(device_name or ("cuda" if torch.cuda.is_available() else "cpu"))
+    frames = load_frames(data_dir / "train", limit_frames)
+    n_val = min(val_frames, max(1, len(frames) // 10))
+    train_frames, val_set = frames[:-n_val], frames[-n_val:]
+    dataset = CrowdCrops(
+        train_frames, crop_px, samples_per_epoch=batch * min(steps, 500), seed=seed, distractors=distractors
+    )
+    loader = DataLoader(
+        dataset,
+        batch_size=batch,
+        shuffle=False,
+        num_workers=workers,
+        collate_fn=collate,
+        drop_last=True,
+        persistent_workers=False,
+    )
+    model = build(arch).to(device)
+    optimiser = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(
+        optimiser, max_lr=lr, total_steps=steps, pct_start=max(0.05, 3 / steps)
+    )
+    log: dict[str, Any] = {
+        "architecture": arch.value,
+        "loss": loss_kind.value,
+        "parameters": parameter_count(model),
+        "steps": steps,
+        "batch": batch,
+        "crop_px": crop_px,
+        "lr": lr,
+        "sigma_px": sigma_px,
+        "distractors": distractors,
+        "seed": seed,
+        "train_frames": len(train_frames),
+        "val_frames": len(val_set),
+        "device": torch.cuda.get_device_name(device) if device.type == "cuda" else platform.processor() or "cpu",
+        "torch": str(torch.__version__),
+        "history": [],
+    }
+    best: tuple[float, dict[str, torch.Tensor]] | None = None
+    step, running, count = 0, 0.0, 0
+    model.train()
+    while step < steps:
+        for images, points in loader:
+            images = images.to(device, non_blocking=True)
+            points = [p.to(device) for p in points]
+            loss = density_loss(loss_kind, model(images), points, OUTPUT_STRIDE, sigma_px)
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()  # type: ignore[no-untyped-call]
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
+            optimiser.step()
+            schedule.step()
+            loss_value = float(loss.detach())
+            if not math.isfinite(loss_value):
+                raise RuntimeError(f"training diverged at step {step}: loss {loss_value}")
+            running, count, step = running + loss_value, count + 1, step + 1
+            if step % validate_every == 0 or step == steps:
+                metrics = validate(model, val_set, device)
+                entry = {"step": step, "loss": running / count, **metrics, "elapsed_s": time.monotonic() - start}
+                log["history"].append(entry)
+                logger.info(
+                    "step %d loss %.3f val MAE %.2f bias %+.2f calibrated MAE %.2f",
+                    *(step, entry["loss"], metrics["count_mae"], metrics["bias"], metrics["count_mae_calibrated"]),
+                )
+                running, count = 0.0, 0
+                if best is None or metrics["count_mae_calibrated"] < best[0]:
+                    state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+                    best = (metrics["count_mae_calibrated"], state)
+            if step >= steps:
+                break
+        dataset.epoch += 1
+    assert best is not None
+    log["best_val_count_mae_calibrated"] = best[0]
+    log["wall_s"] = time.monotonic() - start
+    out_dir.mkdir(parents=True, exist_ok=True)
+    torch.save({"architecture": arch.value, "state_dict": best[1], "log": log}, out_dir / "model.pt")
+    (out_dir / "training.json").write_text(json.dumps(log, indent=2) + "\n", encoding="utf-8")
+    return log
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description="Train an SLZ density network on the synthetic dataset.")
+    parser.add_argument("--arch", choices=[a.value for a in Architecture], required=True)
+    parser.add_argument("--loss", choices=[k.value for k in LossKind], default=LossKind.MSE.value)
+    parser.add_argument("--data", type=Path, default=Path("data/synth"), help="folder with train/ inside")
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--steps", type=int, default=6000)
+    parser.add_argument("--batch", type=int, default=16)
+    parser.add_argument("--crop", type=int, default=256)
+    parser.add_argument("--lr", type=float, default=1e-3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--limit-frames", type=int, default=None)
+    parser.add_argument("--val-frames", type=int, default=40)
+    parser.add_argument("--validate-every", type=int, default=500)
+    parser.add_argument("--no-distractors", action="store_true", help="ablation: no procedural hard negatives")
+    parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    log = train(
+        Architecture(args.arch),
+        LossKind(args.loss),
+        args.data,
+        args.out,
+        args.steps,
+        batch=args.batch,
+        crop_px=args.crop,
+        lr=args.lr,
+        seed=args.seed,
+        workers=args.workers,
+        val_frames=args.val_frames,
+        limit_frames=args.limit_frames,
+        device_name=args.device,
+        validate_every=args.validate_every,
+        distractors=not args.no_distractors,
+    )
+    sys.stdout.write(
+        f"{args.arch}: {log['parameters']} parameters, {args.steps} steps in {log['wall_s']:.0f} s on {log['device']}, "
+        f"best validation count MAE (floor and scale fitted) {log['best_val_count_mae_calibrated']:.2f}\n"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

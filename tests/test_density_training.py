@@ -1,0 +1,152 @@
+"""Training path of the density models (needs the `training` extra: PyTorch). Skipped where torch is absent.
+
+A few steps on a tiny generated set, export to ONNX, onnxruntime parity within 1e-4, the companion loads it; the
+Bayesian Loss behaves as its definition says; augmentation keeps labels on the heads.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from companion.perception.density import OnnxDensityModel  # noqa: E402
+from models.data.generate import Split, generate  # noqa: E402
+from models.density.architectures import Architecture, build, parameter_count  # noqa: E402
+from models.density.dataset import CrowdCrops, load_frames, turn_and_flip  # noqa: E402
+from models.density.export import Calibrated, calibrate, export, load_checkpoint, parity  # noqa: E402
+from models.density.losses import LossKind, bayesian_loss, mse_loss, point_density_target  # noqa: E402
+from models.density.onnx_files import CONTRACT_KEY, read_metadata  # noqa: E402
+from models.density.quantize import calibration_frames, quantize  # noqa: E402
+from models.density.train import train  # noqa: E402
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.mark.unit
+def test_paper_network_has_the_papers_size_and_ours_is_smaller() -> None:
+    ccnn, lite = build(Architecture.CCNN), build(Architecture.LITE)
+    n_conv = sum(isinstance(m, torch.nn.Conv2d) for m in ccnn.modules())
+    assert n_conv == 9
+    assert 65_000 <= parameter_count(ccnn) <= 75_000
+    assert parameter_count(lite) < parameter_count(ccnn)
+    x = torch.zeros(1, 3, 64, 96)
+    for net in (ccnn, lite):
+        out = net.eval()(x)
+        assert out.shape == (1, 1, 16, 24)
+        assert bool((out >= 0).all())
+
+
+@pytest.mark.unit
+def test_bayesian_loss_is_zero_for_one_person_per_head_and_counts_misses() -> None:
+    stride, h, w = 4, 16, 16
+    heads = torch.tensor([[10.0, 10.0], [42.0, 30.0]])
+    perfect = torch.zeros(1, 1, h, w)
+    perfect[0, 0, 2, 2] = 1.0  # cell centre (10, 10)
+    perfect[0, 0, 7, 10] = 1.0  # cell centre (42, 30)
+    empty = torch.zeros(1, 1, h, w, requires_grad=True)
+    assert float(bayesian_loss(perfect, [heads], stride, sigma_px=2.0)) < 0.02
+    missed = bayesian_loss(empty, [heads], stride, sigma_px=2.0)
+    assert float(missed.detach()) == pytest.approx(2.0, abs=1e-6)  # two heads, expected count zero each
+    missed.backward()  # type: ignore[no-untyped-call]
+    assert empty.grad is not None
+    assert float(empty.grad.abs().sum()) > 0.0
+    # Density far from any head is background: the loss sees it (no people in the image: |sum|).
+    stray = torch.zeros(1, 1, h, w)
+    stray[0, 0, 15, 0] = 0.7
+    assert float(bayesian_loss(stray, [torch.zeros(0, 2)], stride)) == pytest.approx(0.7, abs=1e-6)
+    with_bg = bayesian_loss(perfect + stray, [heads], stride, sigma_px=2.0, background_px=16.0)
+    assert float(with_bg) > 0.6
+
+
+@pytest.mark.unit
+def test_mse_target_sums_to_the_count() -> None:
+    heads = torch.tensor([[20.0, 20.0], [40.0, 44.0], [8.0, 50.0]])
+    target = point_density_target([heads], 16, 16, 4, sigma_px=4.0)
+    assert float(target.sum()) == pytest.approx(3.0, abs=1e-4)
+    assert float(mse_loss(target, [heads], 4)) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("quarter_turns", [0, 1, 2, 3])
+@pytest.mark.parametrize("mirror", [False, True])
+def test_turns_and_flips_keep_the_label_on_the_head(quarter_turns: int, mirror: bool) -> None:
+    image = np.zeros((24, 24, 3), np.uint8)
+    image[5, 17] = 255  # pixel centre (17.5, 5.5)
+    out, heads = turn_and_flip(image, np.array([[17.5, 5.5]], np.float32), quarter_turns, mirror)
+    row, col = np.argwhere(out[:, :, 0] == 255)[0]
+    assert (heads[0, 0], heads[0, 1]) == pytest.approx((col + 0.5, row + 0.5), abs=1e-6)
+
+
+@pytest.fixture(scope="module")
+def tiny_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("synth")
+    generate(root, Split.TRAIN, frames=6)
+    return root
+
+
+def test_crops_are_deterministic_and_keep_heads_inside(tiny_set: Path) -> None:
+    frames = load_frames(tiny_set / "train")
+    a, b = CrowdCrops(frames, 128, 8, seed=3), CrowdCrops(frames, 128, 8, seed=3)
+    total = 0
+    for i in range(8):
+        (xa, pa), (xb, pb) = a[i], b[i]
+        assert xa.shape == (3, 128, 128)
+        assert torch.equal(xa, xb)
+        assert torch.equal(pa, pb)
+        assert bool(((pa >= 0) & (pa <= 128)).all())
+        total += len(pa)
+    assert total > 0
+
+
+def test_train_export_and_onnxruntime_parity(tiny_set: Path, tmp_path: Path) -> None:
+    log = train(
+        Architecture.LITE,
+        LossKind.BAYESIAN,
+        tiny_set,
+        tmp_path / "run",
+        steps=6,
+        batch=2,
+        crop_px=96,
+        workers=0,
+        val_frames=1,
+        validate_every=3,
+        device_name="cpu",
+    )
+    assert [h["step"] for h in log["history"]] == [3, 6]
+    assert all(np.isfinite(h["loss"]) for h in log["history"])
+    saved = json.loads((tmp_path / "run" / "training.json").read_text())
+    assert saved["architecture"] == "lite"
+    model, _ = load_checkpoint(tmp_path / "run" / "model.pt")
+    onnx_path = tmp_path / "lite.onnx"
+    export(model, log, onnx_path, "slz-lite-test", "0")
+    frames = [f.image_bgr for f in load_frames(tiny_set / "train")[:2]]
+    assert parity(model, onnx_path, frames) <= 1e-4
+    assert CONTRACT_KEY in read_metadata(onnx_path)
+    runner = OnnxDensityModel(onnx_path)
+    assert runner.contract.name == "slz-lite-test"
+    density = runner.predict(frames[0])
+    assert density.values.shape == (120, 160)
+    assert bool(np.isfinite(density.values).all())
+    # Floor and scale fitted on training frames: never worse than uncalibrated, and exported with parity.
+    labelled = load_frames(tiny_set / "train")
+    pairs = [(f.image_bgr, len(f.heads_px)) for f in labelled]
+    floor, scale, mae = calibrate(model, pairs)
+    _, _, mae_raw = calibrate(model, pairs, floors=(0.0,))
+    assert mae <= mae_raw + 1e-9
+    assert floor >= 0.0
+    assert scale > 0.0
+    calibrated = Calibrated(model, floor, scale).eval()
+    calibrated_path = tmp_path / "calibrated.onnx"
+    export(calibrated, log, calibrated_path, "slz-lite-test", "0")
+    assert parity(calibrated, calibrated_path, frames) <= 1e-4
+    # INT8: same contract, same output shape, loads in the companion.
+    int8_path = tmp_path / "lite_int8.onnx"
+    quantize(onnx_path, int8_path, calibration_frames(tiny_set / "train", 3))
+    int8 = OnnxDensityModel(int8_path)
+    assert int8.contract == runner.contract
+    assert int8.predict(frames[0]).values.shape == (120, 160)
