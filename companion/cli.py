@@ -53,6 +53,50 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_fly(args: argparse.Namespace) -> int:
+    import asyncio
+    import datetime
+
+    from companion.app.flight import FlightApp
+    from companion.app.mission import OperatingMode, load_mission_config
+    from companion.app.recorder import FlightRecorder
+    from companion.camera.frames import CameraError, open_frame_source
+    from companion.perception.pipeline import SlzPipeline
+    from companion.vehicle.link import VehicleError
+    from companion.vehicle.mavsdk_link import MavsdkVehicleLink
+
+    config = load_mission_config(args.config)
+    if args.dry_run:
+        config = config.model_copy(update={"mode": OperatingMode.DRY_RUN})
+    pipeline = SlzPipeline.from_config(config.perception)  # a model that does not load fails before any link
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    out = Path(args.out) if args.out else config.recorder.directory / stamp
+    recorder = FlightRecorder(out, config.recorder.frame_every)
+    link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz)
+
+    async def fly() -> int:
+        try:
+            source = open_frame_source(
+                config.camera.url, vehicle_time_s=link.clock.now_s, latency_s=config.camera.latency_s
+            )
+            app = FlightApp(config, link, source, pipeline, recorder)
+            outcome = await app.run(timeout_s=args.timeout)
+        finally:
+            await link.close()
+        sys.stdout.write(f"{config.mode.value}: ended in {outcome.phase} ({outcome.reason}); log {recorder.path}\n")
+        return 0 if outcome.phase in ("done", "yielded") or config.mode is OperatingMode.DRY_RUN else 1
+
+    try:
+        recorder.write("header", None, config=config.model_dump(mode="json"), model=str(config.perception.model.path))
+        return asyncio.run(fly())
+    except (VehicleError, CameraError) as exc:
+        recorder.write("error", None, where="fly", error=str(exc))
+        sys.stderr.write(f"slz fly: {exc}\n")
+        return 1
+    finally:
+        recorder.close()
+
+
 def _cmd_sitl(args: argparse.Namespace) -> int:
     if args.action == "snapshot":
         from sitl.snapshot import contact_sheet
@@ -124,6 +168,13 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--duration", type=float, help="stop after this many simulated seconds")
     sitl.add_argument("--bind", help="local address (default 127.0.0.1)")
     sitl.set_defaults(func=_cmd_sitl)
+
+    fly = sub.add_parser("fly", help="land the vehicle safely (or only watch and decide, with --dry-run)")
+    fly.add_argument("--config", type=Path, required=True, help="mission config (mission_configs/*.yaml)")
+    fly.add_argument("--dry-run", action="store_true", help="perceive and decide, never command the vehicle")
+    fly.add_argument("--out", type=Path, help="flight log folder (default: recorder.directory/<UTC time>)")
+    fly.add_argument("--timeout", type=float, default=600.0, help="wall seconds before the mission gives up")
+    fly.set_defaults(func=_cmd_fly)
 
     demo = sub.add_parser("demo", help="run the SLZ pipeline on a seeded scene and write an annotated image")
     demo.add_argument("--config", type=Path, default=DEFAULT_PERCEPTION_CONFIG)

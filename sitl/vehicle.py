@@ -125,13 +125,15 @@ class SitlVehicle:
         self.setpoints_rejected = 0
         self.commands_by_sender: dict[str, int] = {}
         self.setpoints_by_sender: dict[str, int] = {}
+        self._last_setpoint_ned: tuple[float, float, float, float] | None = None  # any sender: n, e, d, yaw (rad)
+        self._commands_seen: dict[int, int] = {}  # command id -> how many received
         self._last_reject_text_s = -math.inf
         # Lockstep
         self._lockstep_client: tuple[str, int] | None = None
         self._tick_seq = 0
         self._next_tick_s = 0.0
         self._tick_sent_wall = math.nan
-        self._lockstep_ack: dict[str, int] | None = None
+        self._lockstep_ack: dict[str, Any] | None = None
         # Trajectory log
         self._log: TextIO | None = None
         self._next_log_s = 0.0
@@ -261,8 +263,24 @@ class SitlVehicle:
         select.select(sockets, [], [], 0.02)
         return False
 
-    def _ack_covers_mavlink(self, ack: dict[str, int]) -> bool:
-        """The client's MAVLink messages sent before its ack have all been received (no overtaking)."""
+    def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
+        """The client's MAVLink messages sent before its ack have all been received (no overtaking).
+
+        Either the ack counts them (``mavlink_sent`` from ``sysid/compid``), or it says what must have arrived:
+        ``expect = {"setpoint": [north_m, east_m, down_m, yaw_rad]}`` (the latest position setpoint received equals
+        it, to float32 precision) and/or ``{"commands": {"<id>": count}}`` (that many COMMAND_LONG/INT of each id).
+        """
+        expect = ack.get("expect")
+        if expect is not None:
+            setpoint = expect.get("setpoint")
+            if setpoint is not None:
+                last = self._last_setpoint_ned
+                if last is None or any(abs(a - float(b)) > 1e-3 for a, b in zip(last, setpoint, strict=True)):
+                    return False
+            for command, count in (expect.get("commands") or {}).items():
+                if self._commands_seen.get(int(command), 0) < int(count):
+                    return False
+            return True
         source = (ack["sysid"], ack["compid"])
         received = sum(link.stats.per_source.get(source, 0) for link in self.links)
         return bool(received >= ack["mavlink_sent"])
@@ -356,10 +374,12 @@ class SitlVehicle:
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             if self._targets_us(msg) and getattr(msg, "target_component", 0) in (0, 1):
                 self.commands_by_sender[sender] = self.commands_by_sender.get(sender, 0) + 1
+                self._commands_seen[int(msg.command)] = self._commands_seen.get(int(msg.command), 0) + 1
                 self._handle_command(link, msg, kind == "COMMAND_INT")
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             if self._targets_us(msg):
                 self.setpoints_by_sender[sender] = self.setpoints_by_sender.get(sender, 0) + 1
+                self._last_setpoint_ned = (float(msg.x), float(msg.y), float(msg.z), float(msg.yaw))
                 self._handle_setpoint(msg)
         elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
             if self._targets_us(msg):
@@ -559,7 +579,10 @@ class SitlVehicle:
                 self._tick_sent_wall = math.nan  # (re)send the pending tick to the new client
                 reply["tick_period_s"] = self.config.lockstep_period_s
             elif cmd == "lockstep_ack":
-                self._lockstep_ack = {key: int(request[key]) for key in ("seq", "mavlink_sent", "sysid", "compid")}
+                if "expect" in request:  # clients that cannot count their messages (MAVSDK re-sends on its own)
+                    self._lockstep_ack = {"seq": int(request["seq"]), "expect": request["expect"]}
+                else:
+                    self._lockstep_ack = {k: int(request[k]) for k in ("seq", "mavlink_sent", "sysid", "compid")}
                 return
             elif cmd == "people":
                 if self.camera is None:

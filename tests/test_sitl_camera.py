@@ -112,7 +112,9 @@ def test_in_lockstep_a_frame_client_that_leaves_stops_the_sitl_loudly(tmp_path: 
 
 
 def test_frame_source_errors() -> None:
-    with pytest.raises(CameraError, match="unsupported frame source scheme 'rtsp'"):
+    with pytest.raises(CameraError, match="unsupported frame source scheme 'gopher'"):
+        open_frame_source("gopher://camera/stream")
+    with pytest.raises(CameraError, match="needs the vehicle clock"):
         open_frame_source("rtsp://camera/stream")
 
     async def connect() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from pathlib import Path
@@ -160,6 +161,38 @@ def test_an_ack_cannot_overtake_the_setpoints_sent_before_it(tmp_path: Path) -> 
         assert sitl.state()["t_s"] == 0.0
         client.peer.send(position_setpoint(client.peer.mav, 0, 0, -1, target_system=client.peer.vehicle_sysid))
         client.peer.sent -= 1  # the message now sent is the one that was announced
+        assert client.next_tick()["seq"] == 1
+    finally:
+        client.close()
+        sitl.stop()
+
+
+def test_an_ack_can_name_the_setpoint_and_commands_it_waits_for(tmp_path: Path) -> None:
+    """For clients that cannot count their messages (MAVSDK re-sends setpoints on its own thread)."""
+    sitl = SitlProcess(["--lockstep", "--speed", "0"], 14, tmp_path).start()
+    client = LockstepClient(14)
+    try:
+        client.subscribe()
+        client.next_tick()
+        expect = {"setpoint": [1.0, 2.0, -3.0, 0.5], "commands": {str(mavlink.MAV_CMD_NAV_LAND): 1}}
+        client.control._sock.sendto(  # the ack names what must have arrived, not how many messages
+            json.dumps({"cmd": "lockstep_ack", "seq": 0, "expect": expect}).encode(), client.control.address
+        )
+        beats = len(client.peer.heartbeat_wall_times)
+        wait_until(
+            lambda: client.peer.poll() is not None and len(client.peer.heartbeat_wall_times) >= beats + 1, 3, "1 s"
+        )
+        assert sitl.state()["t_s"] == 0.0  # neither has arrived
+        sysid = client.peer.vehicle_sysid
+        client.peer.send(position_setpoint(client.peer.mav, 1.0, 2.0, -3.0, 0.5, target_system=sysid))
+        beats = len(client.peer.heartbeat_wall_times)
+        wait_until(
+            lambda: client.peer.poll() is not None and len(client.peer.heartbeat_wall_times) >= beats + 1, 3, "1 s"
+        )
+        assert sitl.state()["t_s"] == 0.0  # the setpoint, but not yet the land command
+        client.peer.send(
+            client.peer.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0)
+        )
         assert client.next_tick()["seq"] == 1
     finally:
         client.close()

@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import json
 import struct
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from typing import Protocol
 from urllib.parse import urlparse
@@ -103,11 +103,25 @@ class SitlFrameSource:
             writer.close()
 
 
-def open_frame_source(url: str, timeout_s: float = 10.0) -> FrameSource:
-    """A frame source from its URL. Today: ``sitl://HOST:PORT`` (devices and streams come with the app)."""
+def open_frame_source(
+    url: str, timeout_s: float = 10.0, vehicle_time_s: Callable[[], float] | None = None, latency_s: float = 0.0
+) -> FrameSource:
+    """A frame source from its URL.
+
+    ``sitl://HOST:PORT`` (frames carry their own capture times); ``v4l2:///dev/videoN``, ``rtsp://``, ``udp://``,
+    ``file:///path`` or a plain path go through OpenCV and need ``vehicle_time_s`` to stamp frames.
+    """
     parsed = urlparse(url)
     if parsed.scheme == "sitl":
         if not parsed.hostname or not parsed.port:
             raise CameraError(url, "expected sitl://HOST:PORT")
         return SitlFrameSource(parsed.hostname, parsed.port, timeout_s)
-    raise CameraError(url, f"unsupported frame source scheme {parsed.scheme!r} (supported: sitl)")
+    if parsed.scheme in ("v4l2", "rtsp", "rtsps", "udp", "http", "https", "file", ""):
+        if vehicle_time_s is None:
+            raise CameraError(url, "this source needs the vehicle clock to stamp its frames")
+        from companion.camera.opencv_source import OpenCvFrameSource
+
+        return OpenCvFrameSource(url, vehicle_time_s, latency_s, timeout_s)
+    raise CameraError(
+        url, f"unsupported frame source scheme {parsed.scheme!r} (supported: sitl, v4l2, rtsp, udp, file)"
+    )

@@ -1,0 +1,110 @@
+"""The mission config of ``slz fly``: one validated object from ``mission_configs/<name>.yaml``.
+
+Switching between the SITL and a real drone is a change of ``vehicle.url`` and ``camera.url`` here, never of code.
+"""
+
+from __future__ import annotations
+
+import enum
+from pathlib import Path
+
+from pydantic import Field, field_validator
+
+from companion.config import StrictModel, load_yaml_config
+from companion.guidance.geofence import GeofenceConfig
+from companion.guidance.landing import GuidanceConfig
+from companion.perception.config import PerceptionConfig
+
+
+class OperatingMode(str, enum.Enum):
+    """What the companion may do."""
+
+    FLY = "fly"
+    """Perceive, decide and command the vehicle."""
+    DRY_RUN = "dry_run"
+    """Perceive and decide, log and show, but never arm, change mode or send a setpoint."""
+
+
+class StartConfig(StrictModel):
+    """How a mission starts."""
+
+    arm_and_takeoff: bool = Field(
+        default=False,
+        description="Arm and take off to takeoff_altitude_m first (SITL and test benches). In the field the pilot "
+        "flies to the area and the companion starts from the air.",
+    )
+    takeoff_altitude_m: float = Field(default=20.0, gt=1.0, le=120.0)
+    start_north_m: float | None = Field(default=None, description="Fly here before the search (SITL campaigns).")
+    start_east_m: float | None = None
+
+
+class VehicleConfig(StrictModel):
+    """The link to the autopilot (MAVSDK)."""
+
+    url: str = Field(
+        default="udpin://0.0.0.0:14540",
+        description="MAVSDK connection URL: udpin://0.0.0.0:14540 (SITL, PX4 offboard port), "
+        "serial:///dev/ttyTHS1:921600 (Jetson TELEM2), tcpout://host:port.",
+    )
+    connect_timeout_s: float = Field(default=20.0, gt=0.0, le=600.0, description="Wall time to find the autopilot.")
+    telemetry_rate_hz: float = Field(default=50.0, gt=0.0, le=250.0, description="Position and attitude rate asked.")
+    link_lost_after_s: float = Field(default=1.5, gt=0.0, le=30.0, description="No telemetry this long: link lost.")
+    decision_watchdog_s: float = Field(
+        default=0.5,
+        gt=0.0,
+        le=10.0,
+        description="The decision loop silent this long (wall time): stop offboard (MAVSDK keeps re-sending "
+        "the last setpoint on its own thread otherwise).",
+    )
+
+    @field_validator("url")
+    @classmethod
+    def _scheme(cls, url: str) -> str:
+        schemes = ("udpin://", "udpout://", "udp://", "tcpin://", "tcpout://", "tcp://", "serial://")
+        if not url.startswith(schemes):
+            raise ValueError(f"must start with one of {', '.join(schemes)}")
+        return url
+
+
+class CameraSourceConfig(StrictModel):
+    """Where frames come from, chosen by URL."""
+
+    url: str = Field(
+        default="sitl://127.0.0.1:5600",
+        description="sitl://HOST:PORT (the bundled SITL), v4l2:///dev/video0, rtsp://..., udp://..., or a video "
+        "file path (file:///path.mp4).",
+    )
+    max_frame_age_s: float = Field(
+        default=0.5, gt=0.0, le=10.0, description="Frames older than this (vehicle clock) are dropped and counted."
+    )
+    latency_s: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=2.0,
+        description="For sources without capture times (V4L2, RTSP, files): time from exposure to arrival.",
+    )
+
+
+class RecorderConfig(StrictModel):
+    """The flight recorder."""
+
+    directory: Path = Field(default=Path("runs/flights"), description="Each flight gets a sub-folder here.")
+    frame_every: int = Field(default=10, ge=0, le=10000, description="Save every n-th frame (0: none).")
+
+
+class MissionConfig(StrictModel):
+    """Everything ``slz fly`` needs."""
+
+    mode: OperatingMode = OperatingMode.FLY
+    vehicle: VehicleConfig = Field(default_factory=VehicleConfig)
+    camera: CameraSourceConfig = Field(default_factory=CameraSourceConfig)
+    start: StartConfig = Field(default_factory=StartConfig)
+    geofence: GeofenceConfig = Field(default_factory=GeofenceConfig)
+    guidance: GuidanceConfig = Field(default_factory=GuidanceConfig)
+    perception: PerceptionConfig = Field(default_factory=PerceptionConfig)
+    recorder: RecorderConfig = Field(default_factory=RecorderConfig)
+
+
+def load_mission_config(path: str | Path) -> MissionConfig:
+    """Load and validate a mission config (raises ``ConfigError`` naming every bad field)."""
+    return load_yaml_config(MissionConfig, path)

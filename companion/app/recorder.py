@@ -1,0 +1,133 @@
+"""The flight recorder: every decision, state change, tracked zone, target, setpoint and failsafe, as JSON lines.
+
+Each record is one line ``{"t_s": <vehicle clock>, "kind": ..., ...}``. The first record (``header``) holds the
+config, the model's SHA-256 and the software version. Lines are written and flushed as they come; at every phase
+change, failsafe and at close the file is also fsync'd, so a crash of the app loses at most the records since the
+last flush and never a phase change. Frames may be saved beside the log (JPEG, every ``frame_every``-th frame).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+from dataclasses import asdict, is_dataclass
+from enum import Enum
+from pathlib import Path
+from typing import IO, Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+logger = logging.getLogger(__name__)
+
+SYNC_KINDS = frozenset({"header", "phase", "failsafe", "command", "end", "error"})
+
+
+class RecorderError(Exception):
+    """The flight log could not be opened or written (which file, what happened)."""
+
+
+def _plain(value: Any) -> Any:
+    """JSON-able form of dataclasses, enums, numpy values and paths; NaN and inf become None."""
+    if is_dataclass(value) and not isinstance(value, type):
+        return {k: _plain(v) for k, v in asdict(value).items()}
+    if isinstance(value, Enum):
+        return value.value
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        f = float(value)
+        return f if math.isfinite(f) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+class FlightRecorder:
+    """Appends records to ``<directory>/flight.jsonl``.
+
+    Parameters
+    ----------
+    directory : Path
+        Created if missing. The log is ``flight.jsonl``; frames go to ``frames/``.
+    frame_every : int
+        Save every n-th frame given to :meth:`frame` (0: none).
+    """
+
+    def __init__(self, directory: Path, frame_every: int = 0) -> None:
+        self.directory = directory
+        self.path = directory / "flight.jsonl"
+        self.frame_every = frame_every
+        self._frames_seen = 0
+        self.records = 0
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            self._file: IO[str] | None = self.path.open("a", encoding="utf-8")
+        except OSError as exc:
+            raise RecorderError(f"cannot open flight log {self.path}: {exc.strerror or exc}") from None
+
+    def write(self, kind: str, t_s: float | None, **fields: Any) -> None:
+        """Append one record (flushed; fsync'd for phase changes, failsafes, commands and the end)."""
+        if self._file is None:
+            raise RecorderError(f"flight log {self.path} is closed")
+        record = {"t_s": _plain(t_s), "kind": kind, **{k: _plain(v) for k, v in fields.items()}}
+        try:
+            self._file.write(json.dumps(record, separators=(",", ":")) + "\n")
+            self._file.flush()
+            if kind in SYNC_KINDS:
+                os.fsync(self._file.fileno())
+        except OSError as exc:
+            raise RecorderError(f"cannot write flight log {self.path}: {exc.strerror or exc}") from None
+        self.records += 1
+
+    def frame(self, seq: int, t_s: float, image_bgr: npt.NDArray[np.uint8]) -> Path | None:
+        """Save a frame as JPEG if it is one of every ``frame_every``; returns its path."""
+        self._frames_seen += 1
+        if self.frame_every <= 0 or (self._frames_seen - 1) % self.frame_every:
+            return None
+        folder = self.directory / "frames"
+        folder.mkdir(exist_ok=True)
+        path = folder / f"{seq:07d}.jpg"
+        if not cv2.imwrite(str(path), image_bgr, [cv2.IMWRITE_JPEG_QUALITY, 90]):
+            logger.warning("could not write frame %s", path)
+            return None
+        self.write("frame", t_s, seq=seq, path=str(path.relative_to(self.directory)))
+        return path
+
+    def close(self) -> None:
+        """Flush, fsync and close (idempotent)."""
+        if self._file is None:
+            return
+        try:
+            self._file.flush()
+            os.fsync(self._file.fileno())
+        finally:
+            self._file.close()
+            self._file = None
+
+
+def read_log(path: Path) -> list[dict[str, Any]]:
+    """All complete records of a flight log; a torn last line (crash mid-write) is skipped and logged."""
+    records: list[dict[str, Any]] = []
+    with path.open(encoding="utf-8") as f:
+        lines = f.read().split("\n")
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            if number >= len(lines) - 1:
+                logger.warning("%s: last line %d is incomplete (the app stopped mid-write), skipped", path, number)
+            else:
+                raise RecorderError(f"{path}:{number}: not a JSON record") from None
+    return records

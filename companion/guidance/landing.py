@@ -1,0 +1,460 @@
+"""The landing state machine: what the vehicle does after each processed frame.
+
+::
+
+    idle -> search -> approach -> descent -> land -> done
+              ^          |          |
+              +----------+----------+   (target lost, shrunk or occupied: climb back and re-select)
+
+    any active phase -> hold (perception silent for T1) -> failsafe (silent for T2: the configured action)
+    any phase -> yielded (the pilot took over; terminal for the flight)
+
+- **search**: hold position (never below ``search_altitude_m``, climbing to it if lower) until the pipeline
+  selects a target; with none for ``search_timeout_s``, fly a bounded expanding-square pattern inside the geofence.
+- **approach**: fly horizontally towards the target's centre at constant altitude; the target follows the selection
+  policy frame by frame (the paper's loop), so a better zone may take over.
+- **descent**: once within ``capture_radius_m`` of the centre, the target's track is locked and the vehicle descends
+  towards ``approach_height_m`` above ground (the paper: 2 m above the zone). Each frame the locked zone must still be
+  tracked and at least ``min_zone_radius_m`` wide, and no person may be seen inside the footprint; otherwise the
+  vehicle climbs back by ``climb_back_m`` and searches again. Below ``blind_altitude_m`` the head plane is too close
+  to the camera to see the whole zone: the descent continues on the last map that saw the whole footprint, while
+  any occupied cell seen inside the footprint still aborts.
+- **land**: at or below ``land_altitude_m`` over the target, a landing is commanded only when a map no older than
+  ``landing_map_max_age_s`` saw the whole footprint (vehicle radius plus margin) free, and no later frame saw a person
+  in it. Otherwise the vehicle climbs back and re-selects.
+
+Every setpoint goes through one safety filter: inside the geofence (clamped), at most ``max_step_m`` away
+horizontally, and never more than ``descent_rate_limit_mps * autopilot_z_time_constant_s`` below the vehicle (a
+position controller with that time constant then descends no faster than the limit). Times are vehicle-clock
+seconds. This module has no I/O: the application turns decisions into MAVLink, or only logs them in a dry run.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from companion.config import StrictModel
+from companion.guidance.geofence import Geofence
+from companion.perception.pipeline import FrameResult
+from companion.perception.projection import HeadPlaneOccupancy
+from companion.perception.selection import Target
+
+
+class FailsafeAction(str, enum.Enum):
+    """What the companion asks of the autopilot when perception stays silent for T2."""
+
+    HOLD = "hold"
+    """Autopilot hold (loiter) where it is."""
+    LAND = "land"
+    """Land in place (the autopilot's own landing)."""
+    RETURN = "return"
+    """Return to launch."""
+
+
+class GuidanceConfig(StrictModel):
+    """Landing logic parameters (metres, seconds, vehicle clock)."""
+
+    search_altitude_m: float = Field(default=20.0, gt=2.0, le=120.0, description="Minimum altitude while searching.")
+    search_timeout_s: float = Field(default=6.0, gt=0.0, le=600.0, description="No target this long: search pattern.")
+    search_leg_m: float = Field(default=5.0, gt=0.0, le=100.0, description="First leg of the expanding square.")
+    approach_height_m: float = Field(default=2.0, gt=0.0, le=20.0, description="Descent goal above ground (paper).")
+    land_altitude_m: float = Field(default=2.0, gt=0.0, le=20.0, description="At or below: command the landing.")
+    capture_radius_m: float = Field(default=0.75, gt=0.0, le=10.0, description="Horizontal error to start descending.")
+    max_step_m: float = Field(
+        default=4.0, gt=0.0, le=50.0, description="Farthest horizontal setpoint from the vehicle."
+    )
+    descent_rate_limit_mps: float = Field(default=1.0, gt=0.0, le=5.0)
+    autopilot_z_time_constant_s: float = Field(
+        default=1.0, gt=0.0, le=10.0, description="1 / the autopilot's vertical position gain (PX4 MPC_Z_P = 1/s)."
+    )
+    climb_back_m: float = Field(default=4.0, ge=0.0, le=50.0, description="Climb after an aborted descent.")
+    blind_altitude_m: float = Field(
+        default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
+    )
+    landing_map_max_age_s: float = Field(default=6.0, gt=0.0, le=60.0)
+    footprint_known_fraction: float = Field(default=0.95, gt=0.0, le=1.0)
+    lost_frames_to_abort: int = Field(default=3, ge=1, le=100, description="Locked track missing this many frames.")
+    max_reselections: int = Field(default=6, ge=0, le=100, description="Aborted descents before the failsafe.")
+    hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
+    failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
+    failsafe_action: FailsafeAction = FailsafeAction.LAND
+
+    @model_validator(mode="after")
+    def _order(self) -> GuidanceConfig:
+        if self.failsafe_after_silence_s <= self.hold_after_silence_s:
+            raise ValueError("failsafe_after_silence_s (T2) must exceed hold_after_silence_s (T1)")
+        if self.land_altitude_m < self.approach_height_m:
+            raise ValueError("land_altitude_m must be at least approach_height_m, or the descent never reaches it")
+        return self
+
+
+class LandingPhase(str, enum.Enum):
+    """States of the landing logic."""
+
+    IDLE = "idle"
+    SEARCH = "search"
+    APPROACH = "approach"
+    DESCENT = "descent"
+    LAND = "land"
+    DONE = "done"
+    HOLD = "hold"
+    FAILSAFE = "failsafe"
+    YIELDED = "yielded"
+
+
+ACTIVE_PHASES = frozenset({LandingPhase.SEARCH, LandingPhase.APPROACH, LandingPhase.DESCENT})
+
+
+class CommandKind(str, enum.Enum):
+    """What a decision asks of the vehicle link."""
+
+    NONE = "none"
+    SETPOINT = "setpoint"
+    LAND = "land"
+    HOLD = "hold"
+    RETURN = "return"
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """A local position setpoint: NED metres, yaw in degrees (MAVSDK's ``PositionNedYaw``)."""
+
+    north_m: float
+    east_m: float
+    down_m: float
+    yaw_deg: float
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """The vehicle at a decision: vehicle-clock time (s), local NED position (m), yaw (deg)."""
+
+    t_s: float
+    north_m: float
+    east_m: float
+    down_m: float
+    yaw_deg: float
+
+    @property
+    def altitude_m(self) -> float:
+        """Height above the local origin (-down)."""
+        return -self.down_m
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One decision: the phase after it, the command, and why."""
+
+    t_s: float
+    phase: LandingPhase
+    kind: CommandKind
+    setpoint: Setpoint | None
+    target: Target | None
+    reason: str
+
+
+@dataclass(frozen=True)
+class FootprintView:
+    """What one head-plane map says about a disc: the known share of its cells, and whether any is occupied."""
+
+    known_fraction: float
+    occupied_seen: bool
+
+    @property
+    def clear(self) -> bool:
+        """Nothing occupied seen inside."""
+        return not self.occupied_seen
+
+
+def footprint_view(head_plane: HeadPlaneOccupancy, north_m: float, east_m: float, radius_m: float) -> FootprintView:
+    """Inspect the cells of a head-plane map within ``radius_m`` of a point."""
+    g = head_plane.grid
+    n = g.north_centres_m
+    e = g.east_centres_m
+    rows = np.nonzero(np.abs(n - north_m) <= radius_m)[0]
+    cols = np.nonzero(np.abs(e - east_m) <= radius_m)[0]
+    total = math.pi * radius_m**2 / g.resolution_m**2
+    if not len(rows) or not len(cols):
+        return FootprintView(0.0, False)
+    nn, ee = np.meshgrid(n[rows], e[cols], indexing="ij")
+    inside = np.hypot(nn - north_m, ee - east_m) <= radius_m
+    known = head_plane.known[np.ix_(rows, cols)] & inside
+    occupied = known & ~head_plane.free[np.ix_(rows, cols)]
+    return FootprintView(min(1.0, float(known.sum()) / max(total, 1.0)), bool(occupied.any()))
+
+
+class LandingGuidance:
+    """The state machine (see the module docstring).
+
+    Parameters
+    ----------
+    config : GuidanceConfig
+        Its parameters.
+    geofence : Geofence
+        Every setpoint is kept inside it.
+    footprint_radius_m : float
+        Vehicle radius including propellers plus the safety margin: the disc that must be free to land.
+    min_zone_radius_m : float
+        Smallest zone a descent may continue over.
+    """
+
+    def __init__(
+        self, config: GuidanceConfig, geofence: Geofence, footprint_radius_m: float, min_zone_radius_m: float
+    ) -> None:
+        self.config = config
+        self.geofence = geofence
+        self.footprint_radius_m = footprint_radius_m
+        self.min_zone_radius_m = min_zone_radius_m
+        self.phase = LandingPhase.IDLE
+        self.reselections = 0
+        self._phase_since_s = 0.0
+        self._last_target_s: float | None = None
+        self._locked: Target | None = None
+        self._locked_missing = 0
+        self._landing_map_s: float | None = None  # last frame that saw the whole footprint free
+        self._hold: Setpoint | None = None
+        self._search_origin: tuple[float, float] | None = None
+        self._search_started_s = 0.0
+        self._search_altitude_m = config.search_altitude_m
+        self._resume_phase = LandingPhase.SEARCH
+
+    # -- helpers -------------------------------------------------------------------------------------------------
+    def _enter(self, phase: LandingPhase, t_s: float) -> None:
+        if phase is not self.phase:
+            self.phase = phase
+            self._phase_since_s = t_s
+
+    def safe_setpoint(self, state: VehicleState, north_m: float, east_m: float, altitude_m: float) -> Setpoint:
+        """The safety filter every setpoint goes through (geofence, step, descent rate)."""
+        c = self.config
+        dn, de = north_m - state.north_m, east_m - state.east_m
+        dist = math.hypot(dn, de)
+        if dist > c.max_step_m:
+            north_m, east_m = state.north_m + dn * c.max_step_m / dist, state.east_m + de * c.max_step_m / dist
+        lowest = state.altitude_m - c.descent_rate_limit_mps * c.autopilot_z_time_constant_s
+        altitude_m = max(altitude_m, lowest)
+        north_m, east_m, altitude_m = self.geofence.clamp(north_m, east_m, altitude_m)
+        return Setpoint(north_m, east_m, -altitude_m, state.yaw_deg)
+
+    def _setpoint(
+        self,
+        state: VehicleState,
+        phase: LandingPhase,
+        target: Target | None,
+        reason: str,
+        n: float,
+        e: float,
+        alt: float,
+    ) -> Decision:
+        self._enter(phase, state.t_s)
+        return Decision(state.t_s, phase, CommandKind.SETPOINT, self.safe_setpoint(state, n, e, alt), target, reason)
+
+    def _abort_descent(self, state: VehicleState, reason: str) -> Decision:
+        self.reselections += 1
+        self._locked = None
+        self._locked_missing = 0
+        self._landing_map_s = None
+        self._last_target_s = state.t_s
+        self._search_origin = None
+        if self.reselections > self.config.max_reselections:
+            # Never the configured "land": the map has just refused a landing here. Hold, and the pilot decides.
+            self._enter(LandingPhase.FAILSAFE, state.t_s)
+            return Decision(
+                state.t_s,
+                LandingPhase.FAILSAFE,
+                CommandKind.HOLD,
+                None,
+                None,
+                f"{reason}; {self.reselections - 1} re-selections used up: hold",
+            )
+        climb_to = min(state.altitude_m + self.config.climb_back_m, self.config.search_altitude_m)
+        self._search_altitude_m = max(climb_to, state.altitude_m)
+        return self._setpoint(
+            state,
+            LandingPhase.SEARCH,
+            None,
+            f"{reason}: climb back and re-select",
+            state.north_m,
+            state.east_m,
+            climb_to,
+        )
+
+    def _failsafe(self, state: VehicleState, reason: str) -> Decision:
+        self._enter(LandingPhase.FAILSAFE, state.t_s)
+        kind = {
+            FailsafeAction.HOLD: CommandKind.HOLD,
+            FailsafeAction.LAND: CommandKind.LAND,
+            FailsafeAction.RETURN: CommandKind.RETURN,
+        }[self.config.failsafe_action]
+        return Decision(
+            state.t_s, LandingPhase.FAILSAFE, kind, None, None, f"{reason}: {self.config.failsafe_action.value}"
+        )
+
+    # -- events ----------------------------------------------------------------------------------------------------
+    def start(self, state: VehicleState) -> Decision:
+        """Begin the mission from where the vehicle is: search, at least at ``search_altitude_m``."""
+        if self.phase is not LandingPhase.IDLE:
+            raise RuntimeError(f"start() in phase {self.phase.value}")
+        self._last_target_s = state.t_s
+        altitude = max(state.altitude_m, self.config.search_altitude_m)
+        self._search_altitude_m = altitude
+        return self._setpoint(state, LandingPhase.SEARCH, None, "mission start", state.north_m, state.east_m, altitude)
+
+    def on_frame(self, result: FrameResult, state: VehicleState) -> Decision:
+        """Decide after one processed frame (``state`` at the frame's decision time)."""
+        c = self.config
+        if self.phase in (
+            LandingPhase.IDLE,
+            LandingPhase.LAND,
+            LandingPhase.DONE,
+            LandingPhase.FAILSAFE,
+            LandingPhase.YIELDED,
+        ):
+            return Decision(state.t_s, self.phase, CommandKind.NONE, None, None, f"frame ignored in {self.phase.value}")
+        if self.phase is LandingPhase.HOLD:  # perception is back
+            self._enter(self._resume_phase, state.t_s)
+        footprint = footprint_view(result.head_plane, state.north_m, state.east_m, self.footprint_radius_m)
+        if self.phase is LandingPhase.DESCENT:
+            return self._descent(result, state, footprint)
+        target = result.target
+        if target is None:
+            since = state.t_s - (self._last_target_s if self._last_target_s is not None else state.t_s)
+            if since < c.search_timeout_s:
+                return self._setpoint(
+                    state,
+                    LandingPhase.SEARCH,
+                    None,
+                    "no target yet: hold",
+                    state.north_m,
+                    state.east_m,
+                    self._search_altitude_m,
+                )
+            n, e = self._search_waypoint(state)
+            return self._setpoint(
+                state, LandingPhase.SEARCH, None, "no target: search pattern", n, e, self._search_altitude_m
+            )
+        self._last_target_s = state.t_s
+        self._search_origin = None
+        offset = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
+        if offset <= c.capture_radius_m and target.radius_m >= self.min_zone_radius_m:
+            self._locked = target
+            self._locked_missing = 0
+            self._enter(LandingPhase.DESCENT, state.t_s)
+            return self._descent(result, state, footprint)
+        return self._setpoint(
+            state,
+            LandingPhase.APPROACH,
+            target,
+            f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)",
+            target.north_m,
+            target.east_m,
+            max(state.altitude_m, c.land_altitude_m),
+        )
+
+    def _descent(self, result: FrameResult, state: VehicleState, footprint: FootprintView) -> Decision:
+        c = self.config
+        locked = self._locked
+        assert locked is not None
+        if footprint.occupied_seen and state.altitude_m < c.blind_altitude_m + 2.0:
+            return self._abort_descent(state, "person seen inside the footprint")
+        track = next((t for t in result.tracks if t.track_id == locked.track_id), None)
+        blind = state.altitude_m < c.blind_altitude_m
+        if track is not None and track.misses == 0:
+            if track.radius_m < self.min_zone_radius_m and not blind:
+                return self._abort_descent(state, f"zone {locked.track_id} shrank to {track.radius_m:.2f} m")
+            if not blind:
+                self._locked = Target(track.north_m, track.east_m, track.radius_m, track.track_id)
+            self._locked_missing = 0
+        elif locked.track_id is not None and not blind:
+            self._locked_missing += 1
+            if self._locked_missing >= c.lost_frames_to_abort:
+                return self._abort_descent(state, f"zone {locked.track_id} lost")
+        if footprint.known_fraction >= c.footprint_known_fraction and footprint.clear:
+            self._landing_map_s = state.t_s
+        locked = self._locked
+        assert locked is not None
+        offset = math.hypot(locked.north_m - state.north_m, locked.east_m - state.east_m)
+        if state.altitude_m <= c.land_altitude_m + 0.05 and offset <= c.capture_radius_m:
+            age = math.inf if self._landing_map_s is None else state.t_s - self._landing_map_s
+            if age > c.landing_map_max_age_s:
+                return self._abort_descent(
+                    state, f"no map saw the footprint free in the last {c.landing_map_max_age_s:g} s"
+                )
+            self._enter(LandingPhase.LAND, state.t_s)
+            return Decision(
+                state.t_s,
+                LandingPhase.LAND,
+                CommandKind.LAND,
+                None,
+                locked,
+                f"land on zone {locked.track_id} (map {age:.1f} s old)",
+            )
+        goal_alt = c.approach_height_m if offset <= c.capture_radius_m else state.altitude_m
+        return self._setpoint(
+            state,
+            LandingPhase.DESCENT,
+            locked,
+            f"descend over zone {locked.track_id} (offset {offset:.2f} m)",
+            locked.north_m,
+            locked.east_m,
+            goal_alt,
+        )
+
+    def _search_waypoint(self, state: VehicleState) -> tuple[float, float]:
+        """Expanding square around where the search began, one leg per ``search_timeout_s``, inside the fence."""
+        c = self.config
+        if self._search_origin is None:
+            self._search_origin = (state.north_m, state.east_m)
+            self._search_started_s = state.t_s
+        elapsed = state.t_s - self._search_started_s
+        k = int(elapsed // c.search_timeout_s)
+        # Legs: N, E, S, S, W, W, N, N, N, ... lengths 1, 1, 2, 2, 3, 3, ... times the leg.
+        n, e = self._search_origin
+        directions = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)]
+        for leg in range(k + 1):
+            dn, de = directions[leg % 4]
+            length = c.search_leg_m * (leg // 2 + 1)
+            n, e = n + dn * length, e + de * length
+        n, e, _ = self.geofence.clamp(n, e, self._search_altitude_m)
+        return n, e
+
+    def perception_silent(self, state: VehicleState, silent_s: float) -> Decision | None:
+        """No processed frame for ``silent_s`` (wall or vehicle time, the caller's watchdog): T1 hold, T2 failsafe."""
+        c = self.config
+        if self.phase in ACTIVE_PHASES and silent_s >= c.hold_after_silence_s:
+            self._resume_phase = LandingPhase.SEARCH if self.phase is LandingPhase.DESCENT else self.phase
+            if self.phase is LandingPhase.DESCENT:
+                self._locked = None
+            self._hold = self.safe_setpoint(state, state.north_m, state.east_m, state.altitude_m)
+            self._enter(LandingPhase.HOLD, state.t_s)
+            return Decision(
+                state.t_s,
+                LandingPhase.HOLD,
+                CommandKind.SETPOINT,
+                self._hold,
+                None,
+                f"perception silent {silent_s:.1f} s: hold",
+            )
+        if self.phase is LandingPhase.HOLD and silent_s >= c.failsafe_after_silence_s:
+            return self._failsafe(state, f"perception silent {silent_s:.1f} s")
+        return None
+
+    def landed(self, t_s: float) -> Decision:
+        """The autopilot reports the vehicle on the ground."""
+        self._enter(LandingPhase.DONE, t_s)
+        return Decision(t_s, LandingPhase.DONE, CommandKind.NONE, None, self._locked, "landed")
+
+    def pilot_took_over(self, t_s: float, mode: str) -> Decision:
+        """The flight mode left OFFBOARD without us: yield at once, for the rest of the flight."""
+        self._enter(LandingPhase.YIELDED, t_s)
+        return Decision(t_s, LandingPhase.YIELDED, CommandKind.NONE, None, None, f"pilot took over (mode {mode})")
+
+    @property
+    def commanding(self) -> bool:
+        """True while the companion may still send setpoints."""
+        return self.phase in (*ACTIVE_PHASES, LandingPhase.HOLD)

@@ -1,0 +1,52 @@
+"""The vehicle's clock seen from the companion.
+
+Telemetry is stamped by the autopilot (``time_boot_ms``); a message arrives some milliseconds after its stamp. For
+every stamp received at monotonic wall time ``w``, ``stamp - w`` is at most the true offset between the clocks
+(the delay only lowers it), so the largest value over a recent window is the best estimate. Frame sources without
+their own capture times (V4L2, RTSP, files) stamp frames with :meth:`VehicleClock.now_s` minus their latency.
+Only liveness checks use wall time; flight logic uses these vehicle times.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+
+class VehicleClock:
+    """Maps monotonic wall time to vehicle time.
+
+    Parameters
+    ----------
+    window : int
+        Stamps kept for the estimate (at 50 Hz telemetry, 250 is 5 s: a drifting clock is followed).
+    """
+
+    def __init__(self, window: int = 250) -> None:
+        self._offsets: deque[float] = deque(maxlen=window)
+        self._latest_stamp_s: float | None = None
+
+    def observe(self, stamp_s: float, wall_s: float | None = None) -> None:
+        """A telemetry stamp (vehicle seconds) received at ``wall_s`` (monotonic seconds; now if None)."""
+        wall = time.monotonic() if wall_s is None else wall_s
+        if self._latest_stamp_s is not None and stamp_s + 1.0 < self._latest_stamp_s:
+            self._offsets.clear()  # the autopilot rebooted: its clock restarted
+        self._latest_stamp_s = stamp_s
+        self._offsets.append(stamp_s - wall)
+
+    @property
+    def synced(self) -> bool:
+        """At least one stamp seen."""
+        return bool(self._offsets)
+
+    @property
+    def latest_stamp_s(self) -> float | None:
+        """The newest vehicle time received."""
+        return self._latest_stamp_s
+
+    def now_s(self, wall_s: float | None = None) -> float:
+        """Vehicle time at monotonic wall time ``wall_s`` (now if None). Raises RuntimeError before any stamp."""
+        if not self._offsets:
+            raise RuntimeError("vehicle clock not synchronised: no telemetry stamp yet")
+        wall = time.monotonic() if wall_s is None else wall_s
+        return wall + max(self._offsets)

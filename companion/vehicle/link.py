@@ -1,0 +1,105 @@
+"""What the application needs from the vehicle, as a small interface (MAVSDK in flight, fakes in unit tests).
+
+Frames: local NED metres for positions, body FRD to world NED quaternions [w, x, y, z], vehicle-clock seconds.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import Protocol
+
+from companion.guidance.landing import Setpoint
+from companion.vehicle.clock import VehicleClock
+from companion.vehicle.pose_buffer import PoseBuffer
+
+
+class VehicleError(Exception):
+    """The vehicle link failed (what, and which link)."""
+
+    def __init__(self, link: str, what: str) -> None:
+        super().__init__(f"{link}: {what}")
+        self.link = link
+        self.what = what
+
+
+class FlightMode(str, enum.Enum):
+    """Flight modes the companion distinguishes (PX4 names)."""
+
+    UNKNOWN = "UNKNOWN"
+    MANUAL = "MANUAL"
+    ALTCTL = "ALTCTL"
+    POSCTL = "POSCTL"
+    HOLD = "HOLD"
+    TAKEOFF = "TAKEOFF"
+    LAND = "LAND"
+    RETURN_TO_LAUNCH = "RETURN_TO_LAUNCH"
+    OFFBOARD = "OFFBOARD"
+    MISSION = "MISSION"
+    OTHER = "OTHER"
+
+
+@dataclass
+class VehicleStatus:
+    """The latest non-pose telemetry (updated in place by the link)."""
+
+    mode: FlightMode = FlightMode.UNKNOWN
+    armed: bool = False
+    in_air: bool = False
+    landed_state: str = "UNKNOWN"
+    armable: bool = False
+    local_position_ok: bool = False
+    last_telemetry_wall_s: float | None = None
+
+
+class VehicleLink(Protocol):
+    """The companion's view of the autopilot."""
+
+    name: str
+    poses: PoseBuffer
+    clock: VehicleClock
+    status: VehicleStatus
+
+    async def connect(self, timeout_s: float) -> None:
+        """Find the autopilot and start the telemetry streams (raises :class:`VehicleError`)."""
+        ...
+
+    async def arm_and_takeoff(self, altitude_m: float, timeout_s: float) -> None:
+        """Arm and climb to ``altitude_m`` (SITL and benches; never in a dry run)."""
+        ...
+
+    async def start_offboard(self, setpoint: Setpoint) -> None:
+        """Send ``setpoint`` and switch to OFFBOARD."""
+        ...
+
+    async def set_setpoint(self, setpoint: Setpoint) -> None:
+        """Send a position setpoint (local NED, yaw in degrees)."""
+        ...
+
+    async def stop_offboard(self) -> None:
+        """Stop streaming setpoints (the autopilot falls back to its hold)."""
+        ...
+
+    def stop_offboard_blocking(self) -> None:
+        """Stop offboard from another thread when the event loop is stuck."""
+        ...
+
+    async def land(self) -> None:
+        """Land where the vehicle is."""
+        ...
+
+    async def hold(self) -> None:
+        """Hold position (autopilot hold mode)."""
+        ...
+
+    async def return_to_launch(self) -> None:
+        """Return to launch."""
+        ...
+
+    async def status_text(self, text: str) -> None:
+        """A status text to the ground station."""
+        ...
+
+    async def close(self) -> None:
+        """Stop the streams and release the connection."""
+        ...

@@ -1,0 +1,268 @@
+"""The vehicle link through MAVSDK (``mavsdk`` 4.x, ``mavsdk.asyncio``).
+
+Poses are stamped with the autopilot's own clock: ``LOCAL_POSITION_NED`` and ``ATTITUDE_QUATERNION`` are read through
+the MAVLink-direct plugin so that their ``time_boot_ms`` travels with them into the :class:`PoseBuffer` (MAVSDK's
+``position_velocity_ned`` has no timestamp). Mode, armed state and landed state come from the telemetry plugin.
+MAVSDK re-sends the last offboard setpoint on its own thread; the application's watchdog stops offboard when its
+own decision loop stalls. One ``Mavsdk`` instance per process (MAVSDK's own advice).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Any
+
+from companion.guidance.landing import Setpoint
+from companion.vehicle.clock import VehicleClock
+from companion.vehicle.link import FlightMode, VehicleError, VehicleStatus
+from companion.vehicle.pose_buffer import PoseBuffer, PoseBufferError
+
+logger = logging.getLogger(__name__)
+
+_MODES = {
+    "MANUAL": FlightMode.MANUAL,
+    "ALTCTL": FlightMode.ALTCTL,
+    "POSCTL": FlightMode.POSCTL,
+    "HOLD": FlightMode.HOLD,
+    "TAKEOFF": FlightMode.TAKEOFF,
+    "LAND": FlightMode.LAND,
+    "RETURN_TO_LAUNCH": FlightMode.RETURN_TO_LAUNCH,
+    "OFFBOARD": FlightMode.OFFBOARD,
+    "MISSION": FlightMode.MISSION,
+    "UNKNOWN": FlightMode.UNKNOWN,
+}
+
+
+class MavsdkVehicleLink:
+    """:class:`companion.vehicle.link.VehicleLink` over MAVSDK.
+
+    Parameters
+    ----------
+    url : str
+        MAVSDK connection URL (``udpin://0.0.0.0:14540``, ``serial:///dev/ttyTHS1:921600``).
+    telemetry_rate_hz : float
+        Rate asked for the pose messages.
+    """
+
+    def __init__(self, url: str, telemetry_rate_hz: float = 50.0) -> None:
+        self.name = url
+        self.url = url
+        self.telemetry_rate_hz = telemetry_rate_hz
+        self.poses = PoseBuffer(capacity=max(50, int(10 * telemetry_rate_hz)))
+        self.clock = VehicleClock()
+        self.status = VehicleStatus()
+        self.dropped_samples = 0
+        self._mavsdk: Any = None
+        self._system: Any = None
+        self._tasks: list[asyncio.Task[None]] = []
+
+    async def connect(self, timeout_s: float) -> None:
+        """Find the autopilot within ``timeout_s`` (wall) and start the telemetry tasks."""
+        from mavsdk.asyncio import Configuration, Mavsdk
+        from mavsdk.component_type import ComponentType
+
+        config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
+        self._mavsdk = Mavsdk(config)
+        try:
+            await asyncio.wait_for(self._mavsdk.add_any_connection(self.url), timeout_s)
+        except Exception as exc:  # MavsdkConnectionError, bad URL, busy port, missing serial device
+            raise VehicleError(self.url, f"cannot open the connection: {exc}") from None
+        self._system = await self._mavsdk.first_autopilot(timeout_s=timeout_s)
+        if self._system is None:
+            raise VehicleError(self.url, f"no autopilot answered within {timeout_s:g} s")
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+        self._telemetry = TelemetryAsync(self._system)
+        self._direct = MavlinkDirectAsync(self._system)
+        for setter in (self._telemetry.set_rate_landed_state, self._telemetry.set_rate_in_air):
+            try:
+                await asyncio.wait_for(setter(5.0), 5.0)
+            except Exception as exc:  # an autopilot may refuse a rate; telemetry still flows at its default
+                logger.warning("telemetry rate request refused: %s", exc)
+        self._tasks = [
+            asyncio.create_task(self._follow(self._direct.subscribe_message("LOCAL_POSITION_NED"), self._on_position)),
+            asyncio.create_task(self._follow(self._direct.subscribe_message("ATTITUDE_QUATERNION"), self._on_attitude)),
+            asyncio.create_task(self._follow(self._telemetry.subscribe_flight_mode(), self._on_mode)),
+            asyncio.create_task(self._follow(self._telemetry.subscribe_armed(), self._on_armed)),
+            asyncio.create_task(self._follow(self._telemetry.subscribe_in_air(), self._on_in_air)),
+            asyncio.create_task(self._follow(self._telemetry.subscribe_landed_state(), self._on_landed_state)),
+            asyncio.create_task(self._follow(self._telemetry.subscribe_health(), self._on_health)),
+        ]
+
+    async def _follow(self, stream: AsyncIterator[Any], handle: Callable[[Any], None]) -> None:
+        try:
+            async for item in stream:
+                handle(item)
+        finally:
+            close = getattr(stream, "aclose", None)
+            if close is not None:
+                await close()
+
+    def _fields(self, message: Any) -> dict[str, Any] | None:
+        try:
+            fields = json.loads(message.fields_json)
+        except (json.JSONDecodeError, TypeError):
+            self.dropped_samples += 1
+            return None
+        return fields if isinstance(fields, dict) else None
+
+    def _on_position(self, message: Any) -> None:
+        f = self._fields(message)
+        if f is None:
+            return
+        try:
+            t_s = float(f["time_boot_ms"]) / 1000.0
+            self.clock.observe(t_s)
+            self.poses.add_position(t_s, float(f["x"]), float(f["y"]), float(f["z"]))
+        except (KeyError, ValueError, PoseBufferError) as exc:
+            self.dropped_samples += 1
+            logger.debug("position sample dropped: %s", exc)
+            return
+        self.status.last_telemetry_wall_s = time.monotonic()
+
+    def _on_attitude(self, message: Any) -> None:
+        f = self._fields(message)
+        if f is None:
+            return
+        try:
+            t_s = float(f["time_boot_ms"]) / 1000.0
+            self.clock.observe(t_s)
+            self.poses.add_attitude(t_s, [float(f["q1"]), float(f["q2"]), float(f["q3"]), float(f["q4"])])
+        except (KeyError, ValueError, PoseBufferError) as exc:
+            self.dropped_samples += 1
+            logger.debug("attitude sample dropped: %s", exc)
+            return
+        self.status.last_telemetry_wall_s = time.monotonic()
+
+    def _on_mode(self, mode: Any) -> None:
+        self.status.mode = _MODES.get(getattr(mode, "name", str(mode)), FlightMode.OTHER)
+
+    def _on_armed(self, armed: bool) -> None:
+        self.status.armed = bool(armed)
+
+    def _on_in_air(self, in_air: bool) -> None:
+        self.status.in_air = bool(in_air)
+
+    def _on_landed_state(self, state: Any) -> None:
+        self.status.landed_state = str(getattr(state, "name", state))
+
+    def _on_health(self, health: Any) -> None:
+        self.status.armable = bool(health.is_armable)
+        self.status.local_position_ok = bool(health.is_local_position_ok)
+
+    async def _call(self, what: str, action: Callable[[], Awaitable[Any]], timeout_s: float = 10.0) -> None:
+        try:
+            await asyncio.wait_for(action(), timeout_s)
+        except asyncio.TimeoutError:
+            raise VehicleError(self.url, f"{what}: no answer within {timeout_s:g} s") from None
+        except Exception as exc:  # MAVSDK's ActionError / OffboardError carry a .result
+            raise VehicleError(self.url, f"{what} refused: {getattr(exc, 'result', exc)}") from None
+
+    def _plugins(self) -> tuple[Any, Any]:
+        if self._system is None:
+            raise VehicleError(self.url, "not connected")
+        from mavsdk.asyncio.plugins.action import ActionAsync
+        from mavsdk.asyncio.plugins.offboard import OffboardAsync
+
+        if not hasattr(self, "_action"):
+            self._action, self._offboard = ActionAsync(self._system), OffboardAsync(self._system)
+        return self._action, self._offboard
+
+    async def arm_and_takeoff(self, altitude_m: float, timeout_s: float) -> None:
+        """Wait until armable, arm, take off and wait for ``altitude_m`` (within 0.5 m), all within ``timeout_s``."""
+        action, _ = self._plugins()
+        deadline = time.monotonic() + timeout_s
+        await self._until(lambda: self.status.armable and self.status.local_position_ok, deadline, "armable")
+        await self._call("set takeoff altitude", lambda: action.set_takeoff_altitude(altitude_m))
+        await self._call("arm", action.arm)
+        await self._call("takeoff", action.takeoff)
+
+        def high_enough() -> bool:
+            t = self.poses.latest_t_s
+            pose = self.poses.pose_at(t) if t is not None else None
+            return pose is not None and pose.altitude_m >= altitude_m - 0.5
+
+        await self._until(high_enough, deadline, f"takeoff to {altitude_m:g} m")
+
+    async def _until(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
+        while not condition():
+            if time.monotonic() > deadline:
+                raise VehicleError(self.url, f"timed out waiting for {what}")
+            await asyncio.sleep(0.05)  # polls telemetry state the tasks update; bounded by the deadline
+
+    async def start_offboard(self, setpoint: Setpoint) -> None:
+        """Send the first setpoint, then ask for OFFBOARD (PX4 wants a setpoint stream first)."""
+        _, offboard = self._plugins()
+        await self.set_setpoint(setpoint)
+        await self._call("offboard start", offboard.start)
+
+    async def set_setpoint(self, setpoint: Setpoint) -> None:
+        """One SET_POSITION_TARGET_LOCAL_NED (MAVSDK re-sends it at 20 Hz until the next)."""
+        from mavsdk.plugins.offboard import PositionNedYaw
+
+        _, offboard = self._plugins()
+        values = (setpoint.north_m, setpoint.east_m, setpoint.down_m, setpoint.yaw_deg)
+        if not all(math.isfinite(v) for v in values):
+            raise VehicleError(self.url, f"refusing a non-finite setpoint {values}")
+        await self._call("setpoint", lambda: offboard.set_position_ned(PositionNedYaw(*values)), 2.0)
+
+    async def stop_offboard(self) -> None:
+        """Stop offboard: MAVSDK stops re-sending and the autopilot switches to hold."""
+        _, offboard = self._plugins()
+        await self._call("offboard stop", offboard.stop)
+
+    def stop_offboard_blocking(self) -> None:
+        """Stop offboard from any thread, without the event loop (the stall watchdog's way out)."""
+        offboard = getattr(self, "_offboard", None)
+        if offboard is None:
+            return
+        try:
+            offboard._plugin.stop()  # the blocking C call under OffboardAsync.stop
+        except Exception as exc:  # the watchdog must not die; the autopilot's own failsafe remains
+            logger.error("emergency offboard stop failed: %s", exc)
+
+    async def land(self) -> None:
+        """Land in place."""
+        action, _ = self._plugins()
+        await self._call("land", action.land)
+
+    async def hold(self) -> None:
+        """Hold (loiter)."""
+        action, _ = self._plugins()
+        await self._call("hold", action.hold)
+
+    async def return_to_launch(self) -> None:
+        """Return to launch."""
+        action, _ = self._plugins()
+        await self._call("return to launch", action.return_to_launch)
+
+    async def status_text(self, text: str) -> None:
+        """STATUSTEXT to the ground station (best effort: a refused text is logged, not raised)."""
+        if self._system is None:
+            return
+        from mavsdk.asyncio.plugins.server_utility import ServerUtilityAsync
+        from mavsdk.plugins.server_utility import StatusTextType
+
+        try:
+            utility = ServerUtilityAsync(self._system)
+            await asyncio.wait_for(utility.send_status_text(StatusTextType.INFO, text[:50]), 2.0)
+        except Exception as exc:  # the ground station's view is informative only
+            logger.warning("status text not sent: %s", exc)
+
+    async def close(self) -> None:
+        """Cancel the telemetry tasks and destroy the MAVSDK instance."""
+        for task in self._tasks:
+            task.cancel()
+        if self._tasks:
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._tasks = []
+        if self._mavsdk is not None:
+            self._mavsdk.destroy()
+            self._mavsdk = None
+            self._system = None

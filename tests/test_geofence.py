@@ -1,0 +1,44 @@
+"""Geofence: inside/outside, clamping to the nearest allowed point, and config errors that name the field."""
+
+from __future__ import annotations
+
+import pytest
+
+from companion.config import ConfigError, validate_config
+from companion.guidance.geofence import Geofence, GeofenceConfig
+
+pytestmark = pytest.mark.unit
+
+
+def test_inside_outside_and_altitude_band() -> None:
+    fence = Geofence(
+        GeofenceConfig(polygon_ne_m=[(0, 0), (0, 10), (10, 10), (10, 0)], min_altitude_m=2, max_altitude_m=30)
+    )
+    assert fence.contains(5, 5, 10)
+    assert fence.contains(0, 5, 10)  # on the boundary
+    assert not fence.contains(11, 5, 10)
+    assert not fence.contains(5, 5, 31)
+    assert not fence.contains(5, 5, 1)
+    assert fence.distance_inside_m(5, 2) == pytest.approx(2.0)
+    assert fence.distance_inside_m(-3, 5) == pytest.approx(-3.0)
+
+
+def test_a_concave_fence_and_clamping() -> None:
+    l_shape = [(0.0, 0.0), (0.0, 20.0), (10.0, 20.0), (10.0, 10.0), (20.0, 10.0), (20.0, 0.0)]
+    fence = Geofence(GeofenceConfig(polygon_ne_m=l_shape, max_altitude_m=40))
+    assert fence.contains_ne(15, 5)
+    assert not fence.contains_ne(15, 15)  # the notch
+    n, e, alt = fence.clamp(15.0, 16.0, 55.0)
+    assert fence.contains(n, e, alt)
+    assert alt == 40.0
+    assert (n, e) == pytest.approx((10.0, 16.0), abs=0.02)  # the nearest edge is the notch's north side
+    assert fence.clamp(5.0, 5.0, 10.0) == (5.0, 5.0, 10.0)
+
+
+def test_bad_fences_are_named() -> None:
+    with pytest.raises(ConfigError, match=r"geofence\.polygon_ne_m"):
+        validate_config(GeofenceConfig, {"polygon_ne_m": [(0, 0), (1, 1)]}, prefix="geofence")
+    with pytest.raises(ConfigError, match="max_altitude_m"):
+        validate_config(GeofenceConfig, {"min_altitude_m": 50, "max_altitude_m": 40}, prefix="geofence")
+    with pytest.raises(ConfigError, match="1 m"):
+        validate_config(GeofenceConfig, {"polygon_ne_m": [(0, 0), (0, 1), (0, 2)]}, prefix="geofence")

@@ -1,0 +1,223 @@
+"""The landing state machine, frame by frame, on hand-made maps and tracks (no processes, no network).
+
+Each test reads like a flight: where the vehicle is, what perception reports, what the logic commands.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.config import ConfigError, validate_config
+from companion.guidance.geofence import Geofence, GeofenceConfig
+from companion.guidance.landing import (
+    CommandKind,
+    FailsafeAction,
+    GuidanceConfig,
+    LandingGuidance,
+    LandingPhase,
+    VehicleState,
+    footprint_view,
+)
+from companion.perception.density import DensityMap
+from companion.perception.geometry import Pose
+from companion.perception.occupancy import OccupancyImage
+from companion.perception.pipeline import FrameResult
+from companion.perception.projection import GridSpec, HeadPlaneOccupancy
+from companion.perception.selection import Target
+from companion.perception.tracking import TrackedZone
+
+pytestmark = pytest.mark.unit
+
+FENCE = Geofence(GeofenceConfig(polygon_ne_m=[(-20, -20), (-20, 20), (20, 20), (20, -20)], max_altitude_m=40))
+FOOTPRINT_M = 1.0  # vehicle radius 0.5 + margin 0.5
+
+
+def _map(
+    free: bool = True, person_at: tuple[float, float] | None = None, known_radius_m: float = 30.0
+) -> HeadPlaneOccupancy:
+    grid = GridSpec(north_min_m=-20.0, east_min_m=-20.0, resolution_m=0.1, rows=400, cols=400)
+    nn, ee = np.meshgrid(grid.north_centres_m, grid.east_centres_m, indexing="ij")
+    known = np.hypot(nn, ee) <= known_radius_m
+    free_cells = np.full(known.shape, free) & known
+    if person_at is not None:
+        free_cells &= np.hypot(nn - person_at[0], ee - person_at[1]) > 0.8
+    return HeadPlaneOccupancy(grid, free_cells, known)
+
+
+def _track(track_id: int, n: float, e: float, r: float, misses: int = 0) -> TrackedZone:
+    return TrackedZone(track_id, n, e, r, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 5, misses)
+
+
+def _frame(t_s: float, tracks: list[TrackedZone], target: Target | None, head_plane: HeadPlaneOccupancy) -> FrameResult:
+    empty = np.zeros((120, 160), np.float32)
+    return FrameResult(
+        t_s,
+        Pose.from_ned_euler(0, 0, -10),
+        DensityMap(empty, 640, 480),
+        OccupancyImage(np.full((120, 160), 255, np.uint8), 0),
+        head_plane,
+        [],
+        tracks,
+        target,
+    )
+
+
+def _guidance(**overrides: object) -> LandingGuidance:
+    return LandingGuidance(GuidanceConfig.model_validate(overrides), FENCE, FOOTPRINT_M, min_zone_radius_m=1.0)
+
+
+def _fly(state: VehicleState, setpoint_alt: float, n: float, e: float, t: float) -> VehicleState:
+    return VehicleState(t, n, e, -setpoint_alt, 0.0)
+
+
+def test_a_clean_landing_goes_search_approach_descent_land() -> None:
+    g = _guidance()
+    state = VehicleState(0.0, 0.0, 0.0, -15.0, 0.0)
+    start = g.start(state)
+    assert start.phase is LandingPhase.SEARCH
+    assert start.setpoint is not None
+    assert -start.setpoint.down_m == pytest.approx(20.0)  # climbs to the search altitude
+    zone = _track(7, 6.0, 8.0, 2.5)
+    target = Target(6.0, 8.0, 2.5, 7)
+    phases = []
+    t = 0.0
+    while g.phase not in (LandingPhase.LAND, LandingPhase.SEARCH) or t == 0.0:
+        t += 0.1
+        d = g.on_frame(_frame(t, [zone], target, _map()), state)
+        phases.append(d.phase)
+        if d.kind is CommandKind.LAND:
+            break
+        assert d.kind is CommandKind.SETPOINT
+        assert d.setpoint is not None
+        sp = d.setpoint
+        # Safety filter: inside the fence, a bounded step, a bounded drop.
+        assert FENCE.contains(sp.north_m, sp.east_m, -sp.down_m)
+        assert math.hypot(sp.north_m - state.north_m, sp.east_m - state.east_m) <= 4.0 + 1e-9
+        assert -sp.down_m >= state.altitude_m - 1.0 - 1e-9
+        state = _fly(state, -sp.down_m, sp.north_m, sp.east_m, t)
+        assert t < 60.0
+    assert phases[0] is LandingPhase.APPROACH
+    assert LandingPhase.DESCENT in phases
+    assert phases[-1] is LandingPhase.LAND
+    assert math.hypot(state.north_m - 6.0, state.east_m - 8.0) <= 0.75
+    assert state.altitude_m <= 2.05
+    assert g.landed(t + 1).phase is LandingPhase.DONE
+
+
+def _descending_over(g: LandingGuidance, alt: float) -> VehicleState:
+    state = VehicleState(0.0, 0.0, 0.0, -alt, 0.0)
+    g.start(state)
+    d = g.on_frame(_frame(0.1, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map()), state)
+    assert d.phase is LandingPhase.DESCENT
+    return state
+
+
+def test_a_person_walking_into_the_footprint_aborts_the_descent() -> None:
+    g = _guidance()
+    state = _descending_over(g, 5.0)
+    d = g.on_frame(_frame(0.2, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))), state)
+    assert d.phase is LandingPhase.SEARCH
+    assert "person" in d.reason
+    assert d.setpoint is not None
+    assert -d.setpoint.down_m > state.altitude_m  # climbs back
+    assert g.reselections == 1
+
+
+def test_a_lost_or_shrinking_zone_aborts_and_reselects() -> None:
+    g = _guidance()
+    state = _descending_over(g, 12.0)
+    for k in range(2):
+        assert g.on_frame(_frame(0.2 + 0.1 * k, [], None, _map()), state).phase is LandingPhase.DESCENT
+    assert g.on_frame(_frame(0.5, [], None, _map()), state).phase is LandingPhase.SEARCH  # third missing frame
+    g2 = _guidance()
+    state = _descending_over(g2, 12.0)
+    d = g2.on_frame(_frame(0.2, [_track(3, 0.2, 0.0, 0.6)], None, _map()), state)
+    assert d.phase is LandingPhase.SEARCH
+    assert "shrank" in d.reason
+
+
+def test_no_landing_without_a_recent_map_of_a_free_footprint() -> None:
+    g = _guidance()
+    # Descend blind (nothing known around the vehicle), the zone still tracked: at 2 m it must not land.
+    state = VehicleState(0.0, 0.0, 0.0, -2.0, 0.0)
+    g.start(state)
+    blind = _map(known_radius_m=0.0)
+    d = g.on_frame(_frame(0.1, [_track(3, 0.0, 0.0, 3.0)], Target(0.0, 0.0, 3.0, 3), blind), state)
+    assert d.kind is not CommandKind.LAND
+    assert d.phase is LandingPhase.SEARCH
+    assert "no map saw the footprint free" in d.reason
+
+
+def test_silence_holds_then_runs_the_failsafe_action() -> None:
+    g = _guidance(failsafe_action=FailsafeAction.RETURN)
+    state = VehicleState(0.0, 1.0, 2.0, -18.0, 30.0)
+    g.start(state)
+    assert g.perception_silent(state, 0.5) is None
+    hold = g.perception_silent(state, 1.2)
+    assert hold is not None
+    assert hold.phase is LandingPhase.HOLD
+    assert hold.setpoint is not None
+    assert (hold.setpoint.north_m, hold.setpoint.east_m, hold.setpoint.down_m) == pytest.approx((1.0, 2.0, -18.0))
+    action = g.perception_silent(state, 5.5)
+    assert action is not None
+    assert action.kind is CommandKind.RETURN
+    assert not g.commanding
+    # Perception back after a hold (before T2) resumes the search.
+    g2 = _guidance()
+    g2.start(state)
+    g2.perception_silent(state, 1.5)
+    assert g2.on_frame(_frame(2.0, [], None, _map()), state).phase is LandingPhase.SEARCH
+
+
+def test_the_pilot_taking_over_is_final() -> None:
+    g = _guidance()
+    state = _descending_over(g, 8.0)
+    assert g.pilot_took_over(1.0, "POSCTL").phase is LandingPhase.YIELDED
+    d = g.on_frame(_frame(1.1, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map()), state)
+    assert d.kind is CommandKind.NONE
+    assert g.perception_silent(state, 30.0) is None
+    assert not g.commanding
+
+
+def test_no_target_for_a_while_flies_a_search_pattern_inside_the_fence() -> None:
+    g = _guidance(search_timeout_s=1.0, search_leg_m=8.0)
+    state = VehicleState(0.0, 15.0, 15.0, -20.0, 0.0)
+    g.start(state)
+    points = []
+    for k in range(1, 80):
+        state = VehicleState(0.1 * k, 15.0, 15.0, -20.0, 0.0)  # the vehicle clock runs; the vehicle stays put
+        d = g.on_frame(_frame(0.1 * k, [], None, _map()), state)
+        assert d.setpoint is not None
+        points.append((d.setpoint.north_m, d.setpoint.east_m))
+        assert FENCE.contains(d.setpoint.north_m, d.setpoint.east_m, -d.setpoint.down_m)
+    assert len({(round(n), round(e)) for n, e in points}) >= 3  # it moves
+
+
+def test_footprint_view_counts_known_and_occupied_cells() -> None:
+    view = footprint_view(_map(), 0.0, 0.0, 1.0)
+    assert view.known_fraction == pytest.approx(1.0, abs=0.05)
+    assert view.clear
+    assert footprint_view(_map(person_at=(0.9, 0.0)), 0.0, 0.0, 1.0).occupied_seen
+    assert footprint_view(_map(known_radius_m=0.5), 0.0, 0.0, 1.0).known_fraction == pytest.approx(0.25, abs=0.05)
+
+
+def test_inconsistent_guidance_config_is_named() -> None:
+    with pytest.raises(ConfigError, match="failsafe_after_silence_s"):
+        validate_config(GuidanceConfig, {"hold_after_silence_s": 5, "failsafe_after_silence_s": 2}, prefix="guidance")
+    with pytest.raises(ConfigError, match=r"guidance\.capture_radius_m"):
+        validate_config(GuidanceConfig, {"capture_radius_m": -1}, prefix="guidance")
+
+
+def test_used_up_reselections_hold_and_never_land() -> None:
+    g = _guidance(max_reselections=1, failsafe_action=FailsafeAction.LAND)
+    state = _descending_over(g, 5.0)
+    occupied = _map(person_at=(0.5, 0.3))
+    zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
+    assert g.on_frame(_frame(0.2, [zone], target, occupied), state).phase is LandingPhase.SEARCH
+    assert g.on_frame(_frame(0.3, [zone], target, _map()), state).phase is LandingPhase.DESCENT
+    last = g.on_frame(_frame(0.4, [zone], target, occupied), state)
+    assert last.phase is LandingPhase.FAILSAFE
+    assert last.kind is CommandKind.HOLD  # not the configured land: the map just refused a landing here

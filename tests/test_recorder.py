@@ -1,0 +1,65 @@
+"""Flight recorder: records survive a crash of the writer, a torn last line is skipped, values stay JSON."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.app.recorder import FlightRecorder, RecorderError, read_log
+from companion.guidance.landing import LandingPhase, Setpoint
+
+pytestmark = pytest.mark.unit
+
+
+def test_records_are_json_lines_with_plain_values(tmp_path: Path) -> None:
+    rec = FlightRecorder(tmp_path / "run", frame_every=2)
+    rec.write("header", None, config={"a": 1}, model_sha256="ab")
+    rec.write("phase", 1.5, phase=LandingPhase.SEARCH, setpoint=Setpoint(1.0, 2.0, -20.0, 90.0), nan=math.nan)
+    rec.write("zones", 1.6, radii=np.array([1.5, 2.0], np.float32), count=np.int64(2))
+    for seq in range(3):
+        rec.frame(seq, 1.0 + seq, np.zeros((8, 8, 3), np.uint8))
+    rec.close()
+    rec.close()  # idempotent
+    records = read_log(tmp_path / "run" / "flight.jsonl")
+    kinds = [r["kind"] for r in records]
+    assert kinds == ["header", "phase", "zones", "frame", "frame"]  # frames 0 and 2
+    assert records[1]["phase"] == "search"
+    assert records[1]["setpoint"] == {"north_m": 1.0, "east_m": 2.0, "down_m": -20.0, "yaw_deg": 90.0}
+    assert records[1]["nan"] is None
+    assert records[2]["radii"] == [1.5, 2.0]
+    assert (tmp_path / "run" / records[3]["path"]).is_file()
+    with pytest.raises(RecorderError, match="closed"):
+        rec.write("phase", 2.0)
+
+
+def test_the_log_survives_a_killed_writer(tmp_path: Path) -> None:
+    script = (
+        "import os, sys\n"
+        "from pathlib import Path\n"
+        "from companion.app.recorder import FlightRecorder\n"
+        f"rec = FlightRecorder(Path({str(tmp_path)!r}))\n"
+        "for k in range(50):\n"
+        "    rec.write('phase', float(k), phase='search')\n"
+        'rec._file.write(\'{"t_s": 51, "kind": "pha\')\n'  # a torn record, then a hard crash
+        "rec._file.flush()\n"
+        "os._exit(9)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).resolve().parent.parent, timeout=60)
+    assert result.returncode == 9
+    records = read_log(tmp_path / "flight.jsonl")
+    assert len(records) == 50
+    assert records[-1]["t_s"] == 49.0
+    assert json.loads((tmp_path / "flight.jsonl").read_text().splitlines()[0])["kind"] == "phase"
+
+
+def test_an_unwritable_directory_is_named(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(RecorderError, match="cannot open flight log"):
+        FlightRecorder(blocker / "run")
