@@ -137,6 +137,10 @@ class FlightApp:
                 assert decision.setpoint is not None
                 if not self._offboard:
                     await self.link.start_offboard(decision.setpoint)
+                    # Takeover detection starts only once the autopilot reports OFFBOARD (telemetry lags the ack).
+                    await self.link.wait_for(
+                        lambda: self.link.status.mode is FlightMode.OFFBOARD, time.monotonic() + 3.0, "OFFBOARD"
+                    )
                     self._offboard = True
                 else:
                     await self.link.set_setpoint(decision.setpoint)
@@ -196,15 +200,18 @@ class FlightApp:
     async def _pose_for(self, frame: Frame) -> Pose | None:
         """The pose at the frame's capture time, waiting briefly for telemetry to catch up; None drops the frame."""
         max_age = self.config.camera.max_frame_age_s
-        deadline = time.monotonic() + max_age
-        while True:
+
+        def caught_up() -> bool:
             latest = self.link.poses.latest_t_s
-            if latest is not None and latest >= frame.t_capture_s:
-                break
-            if time.monotonic() > deadline:
-                self.outcome.frames_dropped_no_pose += 1
-                return None
-            await asyncio.sleep(0.005)  # telemetry at 50 Hz lands within a tick; bounded by the deadline
+            return latest is not None and latest >= frame.t_capture_s
+
+        try:
+            await self.link.wait_for(caught_up, time.monotonic() + max_age, "telemetry at the frame's capture time")
+        except VehicleError:
+            self.outcome.frames_dropped_no_pose += 1
+            return None
+        latest = self.link.poses.latest_t_s
+        assert latest is not None
         if latest - frame.t_capture_s > max_age:
             self.outcome.frames_dropped_old += 1
             return None
@@ -267,13 +274,9 @@ class FlightApp:
         await self.link.connect(cfg.vehicle.connect_timeout_s)
         if cfg.start.arm_and_takeoff and not self.dry_run:
             await self.link.arm_and_takeoff(cfg.start.takeoff_altitude_m, timeout_s=60.0)
-        deadline = time.monotonic() + 10.0
+        await self.link.wait_for(lambda: self.vehicle_state() is not None, time.monotonic() + 10.0, "a stamped pose")
         state = self.vehicle_state()
-        while state is None:
-            if time.monotonic() > deadline:
-                raise VehicleError(self.link.name, "no stamped pose within 10 s of connecting")
-            await asyncio.sleep(0.02)  # waiting for the first telemetry; bounded by the deadline
-            state = self.vehicle_state()
+        assert state is not None
         self._last_frame_wall = time.monotonic()
         await self.apply(self.guidance.start(state))
         watchdog = threading.Thread(target=self._stall_watchdog, name="stall-watchdog", daemon=True)

@@ -6,6 +6,7 @@ Frames: local NED metres for positions, body FRD to world NED quaternions [w, x,
 from __future__ import annotations
 
 import enum
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -62,6 +63,11 @@ class VehicleLink(Protocol):
 
     async def connect(self, timeout_s: float) -> None:
         """Find the autopilot and start the telemetry streams (raises :class:`VehicleError`)."""
+        ...
+
+    async def wait_for(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
+        """Wait until ``condition()`` holds, re-checked at each telemetry update; :class:`VehicleError` at
+        ``deadline`` (monotonic seconds)."""
         ...
 
     async def arm_and_takeoff(self, altitude_m: float, timeout_s: float) -> None:

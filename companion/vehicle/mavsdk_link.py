@@ -10,6 +10,7 @@ own decision loop stalls. One ``Mavsdk`` instance per process (MAVSDK's own advi
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import math
@@ -60,6 +61,7 @@ class MavsdkVehicleLink:
         self._mavsdk: Any = None
         self._system: Any = None
         self._tasks: list[asyncio.Task[None]] = []
+        self._updated = asyncio.Event()  # set by every telemetry handler
 
     async def connect(self, timeout_s: float) -> None:
         """Find the autopilot within ``timeout_s`` (wall) and start the telemetry tasks."""
@@ -99,6 +101,7 @@ class MavsdkVehicleLink:
         try:
             async for item in stream:
                 handle(item)
+                self._updated.set()
         finally:
             close = getattr(stream, "aclose", None)
             if close is not None:
@@ -178,7 +181,7 @@ class MavsdkVehicleLink:
         """Wait until armable, arm, take off and wait for ``altitude_m`` (within 0.5 m), all within ``timeout_s``."""
         action, _ = self._plugins()
         deadline = time.monotonic() + timeout_s
-        await self._until(lambda: self.status.armable and self.status.local_position_ok, deadline, "armable")
+        await self.wait_for(lambda: self.status.armable and self.status.local_position_ok, deadline, "armable")
         await self._call("set takeoff altitude", lambda: action.set_takeoff_altitude(altitude_m))
         await self._call("arm", action.arm)
         await self._call("takeoff", action.takeoff)
@@ -188,13 +191,23 @@ class MavsdkVehicleLink:
             pose = self.poses.pose_at(t) if t is not None else None
             return pose is not None and pose.altitude_m >= altitude_m - 0.5
 
-        await self._until(high_enough, deadline, f"takeoff to {altitude_m:g} m")
+        await self.wait_for(high_enough, deadline, f"takeoff to {altitude_m:g} m")
 
-    async def _until(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
+    async def wait_for(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
+        """Wait until ``condition()`` holds, re-checked at every telemetry update, until ``deadline`` (monotonic s).
+
+        Raises
+        ------
+        VehicleError
+            The deadline passed first.
+        """
         while not condition():
-            if time.monotonic() > deadline:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
                 raise VehicleError(self.url, f"timed out waiting for {what}")
-            await asyncio.sleep(0.05)  # polls telemetry state the tasks update; bounded by the deadline
+            self._updated.clear()
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(self._updated.wait(), remaining)
 
     async def start_offboard(self, setpoint: Setpoint) -> None:
         """Send the first setpoint, then ask for OFFBOARD (PX4 wants a setpoint stream first)."""

@@ -23,12 +23,8 @@ def emit(event: str, **fields: Any) -> None:
     sys.stdout.flush()
 
 
-async def until(condition: Any, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"timed out waiting for {what}")
-        await asyncio.sleep(0.05)  # polls state the link's tasks update; bounded by the deadline
+async def until(link: MavsdkVehicleLink, condition: Any, timeout_s: float, what: str) -> None:
+    await link.wait_for(condition, time.monotonic() + timeout_s, what)
 
 
 async def main() -> int:
@@ -39,22 +35,22 @@ async def main() -> int:
     try:
         await link.connect(timeout_s=15.0)
         emit("connected")
-        await until(lambda: link.poses.latest_t_s is not None, 10.0, "stamped poses")
+        await until(link, lambda: link.poses.latest_t_s is not None, 10.0, "stamped poses")
         t0 = link.poses.latest_t_s
-        await until(lambda: (link.poses.latest_t_s or 0.0) > (t0 or 0.0) + 1.0, 10.0, "a second of poses")
+        await until(link, lambda: (link.poses.latest_t_s or 0.0) > (t0 or 0.0) + 1.0, 10.0, "a second of poses")
         emit("poses", latest_t_s=link.poses.latest_t_s, clock_now_s=link.clock.now_s())
         await link.arm_and_takeoff(5.0, timeout_s=40.0)
         emit("took_off", mode=link.status.mode.value, armed=link.status.armed)
         target = Setpoint(3.0, 0.0, -5.0, 0.0)
         await link.start_offboard(target)
-        await until(lambda: link.status.mode is FlightMode.OFFBOARD, 10.0, "OFFBOARD")
+        await until(link, lambda: link.status.mode is FlightMode.OFFBOARD, 10.0, "OFFBOARD")
 
         def near() -> bool:
             t = link.poses.latest_t_s
             pose = link.poses.pose_at(t) if t is not None else None
             return pose is not None and abs(pose.position_ned_m[0] - 3.0) < 0.3 and abs(pose.altitude_m - 5.0) < 0.3
 
-        await until(near, 30.0, "the setpoint")
+        await until(link, near, 30.0, "the setpoint")
         t = link.poses.latest_t_s
         assert t is not None
         latest, between = link.poses.pose_at(t), link.poses.pose_at(t - 0.005)  # the second one is interpolated
@@ -68,7 +64,7 @@ async def main() -> int:
             interpolation_step_m=float(abs(latest.position_ned_m - between.position_ned_m).max()),
         )
         await link.land()
-        await until(lambda: not link.status.in_air, 40.0, "on the ground")
+        await until(link, lambda: not link.status.in_air, 40.0, "on the ground")
         emit("landed", dropped=link.dropped_samples)
     except Exception as exc:
         emit("error", error=f"{type(exc).__name__}: {exc}")
