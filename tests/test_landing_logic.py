@@ -117,8 +117,10 @@ def _descending_over(g: LandingGuidance, alt: float) -> VehicleState:
 
 def test_a_person_walking_into_the_footprint_aborts_the_descent() -> None:
     g = _guidance()
-    state = _descending_over(g, 5.0)
-    d = g.on_frame(_frame(0.2, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))), state)
+    state = _descending_over(g, 8.0)
+    zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
+    assert g.on_frame(_frame(0.2, [zone], target, occupied), state).phase is LandingPhase.DESCENT  # one frame: noise?
+    d = g.on_frame(_frame(0.3, [zone], target, occupied), state)  # two in a row: a person
     assert d.phase is LandingPhase.SEARCH
     assert "person" in d.reason
     assert d.setpoint is not None
@@ -213,11 +215,23 @@ def test_inconsistent_guidance_config_is_named() -> None:
 
 def test_used_up_reselections_hold_and_never_land() -> None:
     g = _guidance(max_reselections=1, failsafe_action=FailsafeAction.LAND)
-    state = _descending_over(g, 5.0)
+    state = _descending_over(g, 8.0)
     occupied = _map(person_at=(0.5, 0.3))
     zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
-    assert g.on_frame(_frame(0.2, [zone], target, occupied), state).phase is LandingPhase.SEARCH
+    g.on_frame(_frame(0.2, [zone], target, occupied), state)
+    assert g.on_frame(_frame(0.25, [zone], target, occupied), state).phase is LandingPhase.SEARCH
     assert g.on_frame(_frame(0.3, [zone], target, _map()), state).phase is LandingPhase.DESCENT
+    g.on_frame(_frame(0.35, [zone], target, occupied), state)
     last = g.on_frame(_frame(0.4, [zone], target, occupied), state)
     assert last.phase is LandingPhase.FAILSAFE
     assert last.kind is CommandKind.HOLD  # not the configured land: the map just refused a landing here
+
+
+def test_below_the_models_altitude_range_maps_do_not_decide() -> None:
+    g = _guidance(perception_min_altitude_m=6.0)
+    _descending_over(g, 7.0)  # this frame's map (free footprint) is the landing map
+    low = VehicleState(1.0, 0.2, 0.0, -4.0, 0.0)
+    d = g.on_frame(_frame(1.0, [], None, _map(person_at=(0.3, 0.0))), low)
+    assert d.phase is LandingPhase.DESCENT  # ground texture at 4 m is not trusted to be a person
+    at_two = VehicleState(2.0, 0.2, 0.0, -2.0, 0.0)
+    assert g.on_frame(_frame(2.0, [], None, _map(person_at=(0.3, 0.0))), at_two).kind is CommandKind.LAND

@@ -33,6 +33,7 @@ from companion.app.recorder import FlightRecorder
 from companion.camera.frames import Frame, FrameSource
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase, VehicleState
+from companion.perception.errors import PerceptionError
 from companion.perception.geometry import Pose
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.vehicle.link import FlightMode, VehicleError, VehicleLink
@@ -52,6 +53,7 @@ class FlightOutcome:
     frames_processed: int = 0
     frames_dropped_old: int = 0
     frames_dropped_no_pose: int = 0
+    frames_failed: int = 0
     commands_sent: int = 0
     link_lost: bool = False
     failsafes: list[str] = field(default_factory=list)
@@ -169,9 +171,14 @@ class FlightApp:
                 pose = await self._pose_for(frame)
                 if pose is None:
                     continue
-                result: FrameResult = await loop.run_in_executor(
-                    self._executor, self.pipeline.process, frame.image_bgr, pose, frame.t_capture_s
-                )
+                try:
+                    result: FrameResult = await loop.run_in_executor(
+                        self._executor, self.pipeline.process, frame.image_bgr, pose, frame.t_capture_s
+                    )
+                except PerceptionError as exc:  # one bad frame or pose; a lasting failure trips the silence failsafe
+                    self.outcome.frames_failed += 1
+                    self.recorder.write("frame_error", frame.t_capture_s, seq=frame.seq, error=str(exc))
+                    continue
                 self._last_frame_wall = time.monotonic()
                 self.outcome.frames_processed += 1
                 self.recorder.frame(frame.seq, frame.t_capture_s, frame.image_bgr)

@@ -17,8 +17,8 @@
   towards ``approach_height_m`` above ground (the paper: 2 m above the zone). Each frame the locked zone must still be
   tracked and at least ``min_zone_radius_m`` wide, and no person may be seen inside the footprint; otherwise the
   vehicle climbs back by ``climb_back_m`` and searches again. Below ``blind_altitude_m`` the head plane is too close
-  to the camera to see the whole zone: the descent continues on the last map that saw the whole footprint, while
-  any occupied cell seen inside the footprint still aborts.
+  to the camera to see the whole zone, and below ``perception_min_altitude_m`` the maps are not trusted at all (the
+  density model was trained at 8-40 m): the descent continues on the last map that saw the whole footprint free.
 - **land**: at or below ``land_altitude_m`` over the target, a landing is commanded only when a map no older than
   ``landing_map_max_age_s`` saw the whole footprint (vehicle radius plus margin) free, and no later frame saw a person
   in it. Otherwise the vehicle climbs back and re-selects.
@@ -64,6 +64,9 @@ class GuidanceConfig(StrictModel):
     search_leg_m: float = Field(default=5.0, gt=0.0, le=100.0, description="First leg of the expanding square.")
     approach_height_m: float = Field(default=2.0, gt=0.0, le=20.0, description="Descent goal above ground (paper).")
     land_altitude_m: float = Field(default=2.0, gt=0.0, le=20.0, description="At or below: command the landing.")
+    land_tolerance_m: float = Field(
+        default=0.3, ge=0.0, le=5.0, description="Slack above land_altitude_m (position control converges slowly)."
+    )
     capture_radius_m: float = Field(default=0.75, gt=0.0, le=10.0, description="Horizontal error to start descending.")
     max_step_m: float = Field(
         default=4.0, gt=0.0, le=50.0, description="Farthest horizontal setpoint from the vehicle."
@@ -76,9 +79,19 @@ class GuidanceConfig(StrictModel):
     blind_altitude_m: float = Field(
         default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
     )
+    perception_min_altitude_m: float = Field(
+        default=6.0,
+        ge=0.0,
+        le=50.0,
+        description="Below this, maps do not decide (the density model was trained at 8-40 m and sees ground "
+        "texture as people lower down): the descent continues on the last map from above it.",
+    )
     landing_map_max_age_s: float = Field(default=6.0, gt=0.0, le=60.0)
     footprint_known_fraction: float = Field(default=0.95, gt=0.0, le=1.0)
     lost_frames_to_abort: int = Field(default=3, ge=1, le=100, description="Locked track missing this many frames.")
+    occupied_frames_to_abort: int = Field(
+        default=2, ge=1, le=100, description="Consecutive frames with a person seen inside the footprint to abort."
+    )
     max_reselections: int = Field(default=6, ge=0, le=100, description="Aborted descents before the failsafe.")
     hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
     failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
@@ -216,6 +229,7 @@ class LandingGuidance:
         self._last_target_s: float | None = None
         self._locked: Target | None = None
         self._locked_missing = 0
+        self._occupied_frames = 0
         self._landing_map_s: float | None = None  # last frame that saw the whole footprint free
         self._hold: Setpoint | None = None
         self._search_origin: tuple[float, float] | None = None
@@ -360,7 +374,10 @@ class LandingGuidance:
         c = self.config
         locked = self._locked
         assert locked is not None
-        if footprint.occupied_seen and state.altitude_m < c.blind_altitude_m + 2.0:
+        trusted = state.altitude_m >= c.perception_min_altitude_m
+        self._occupied_frames = self._occupied_frames + 1 if footprint.occupied_seen and trusted else 0
+        if self._occupied_frames >= c.occupied_frames_to_abort:
+            self._occupied_frames = 0
             return self._abort_descent(state, "person seen inside the footprint")
         track = next((t for t in result.tracks if t.track_id == locked.track_id), None)
         blind = state.altitude_m < c.blind_altitude_m
@@ -374,12 +391,12 @@ class LandingGuidance:
             self._locked_missing += 1
             if self._locked_missing >= c.lost_frames_to_abort:
                 return self._abort_descent(state, f"zone {locked.track_id} lost")
-        if footprint.known_fraction >= c.footprint_known_fraction and footprint.clear:
+        if trusted and footprint.known_fraction >= c.footprint_known_fraction and footprint.clear:
             self._landing_map_s = state.t_s
         locked = self._locked
         assert locked is not None
         offset = math.hypot(locked.north_m - state.north_m, locked.east_m - state.east_m)
-        if state.altitude_m <= c.land_altitude_m + 0.05 and offset <= c.capture_radius_m:
+        if state.altitude_m <= c.land_altitude_m + c.land_tolerance_m and offset <= c.capture_radius_m:
             age = math.inf if self._landing_map_s is None else state.t_s - self._landing_map_s
             if age > c.landing_map_max_age_s:
                 return self._abort_descent(
