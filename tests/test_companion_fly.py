@@ -75,3 +75,40 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> N
     end = next(r for r in records if r["kind"] == "end")
     assert end["outcome"]["commands_sent"] == 0
     assert end["outcome"]["frames_processed"] >= 10
+
+
+def test_the_companion_yields_at_once_when_the_pilot_takes_over(tmp_path: Path) -> None:
+    instance = 33
+    sitl_config = tmp_path / "sitl.yaml"
+    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 4\n")
+    mission = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
+    mission = mission.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
+    mission = mission.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
+    (tmp_path / "mission.yaml").write_text(mission)
+    sitl = SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
+    command = ["fly", "--config", str(tmp_path / "mission.yaml"), "--out", str(tmp_path / "flight"), "--timeout", "90"]
+    fly = subprocess.Popen(
+        [sys.executable, "-m", "companion.cli", *command],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        # The companion takes off and starts its search in OFFBOARD; then the pilot switches to position control.
+        state_when(sitl, lambda st: st["mode"] == "OFFBOARD", 60, "the companion in OFFBOARD")
+        assert sitl.request({"cmd": "pilot_mode", "mode": "POSCTL"})["result"] == 0
+        out, err = fly.communicate(timeout=20)  # it must yield and end, not fight the pilot
+        after = sitl.state()
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        sitl.stop()
+    assert fly.returncode == 0, err[-3000:]
+    assert "ended in yielded" in out
+    assert after["mode"] == "POSCTL"
+    records = [json.loads(line) for line in (tmp_path / "flight" / "flight.jsonl").read_text().splitlines()]
+    phases = [r["phase"] for r in records if r["kind"] == "phase"]
+    assert phases[-1] == "yielded"
+    yielded_at = next(r["t_s"] for r in records if r["kind"] == "phase" and r["phase"] == "yielded")
+    assert not [r for r in records if r["kind"] == "command" and r["t_s"] > yielded_at]  # nothing sent after
