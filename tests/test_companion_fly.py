@@ -19,15 +19,20 @@ pytestmark = pytest.mark.sitl
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> None:
-    instance = 32
+def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int) -> SitlProcess:
+    """A SITL instance with its camera, and ``tmp_path/mission.yaml``: mission_configs/sitl.yaml on its ports."""
     sitl_config = tmp_path / "sitl.yaml"
-    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 3\n")
+    sitl_config.write_text(f"sitl:\n  camera:\n    enabled: true\n  seed: {seed}\n")
     mission = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
     mission = mission.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
     mission = mission.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
     (tmp_path / "mission.yaml").write_text(mission)
-    sitl = SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
+    return SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
+
+
+def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> None:
+    instance = 32
+    sitl = start_sitl_with_camera(tmp_path, instance, seed=3)
     gcs = GroundStation(SitlConfig().gcs_port_remote)  # PX4 style: every instance talks to the GCS on 14550
     try:
         # The pilot (a ground station) takes off to 10 m: the camera needs to see the head plane.
@@ -79,13 +84,7 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> N
 
 def test_the_companion_yields_at_once_when_the_pilot_takes_over(tmp_path: Path) -> None:
     instance = 33
-    sitl_config = tmp_path / "sitl.yaml"
-    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 4\n")
-    mission = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
-    mission = mission.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
-    mission = mission.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
-    (tmp_path / "mission.yaml").write_text(mission)
-    sitl = SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
+    sitl = start_sitl_with_camera(tmp_path, instance, seed=4)
     command = ["fly", "--config", str(tmp_path / "mission.yaml"), "--out", str(tmp_path / "flight"), "--timeout", "90"]
     fly = subprocess.Popen(
         [sys.executable, "-m", "companion.cli", *command],

@@ -16,9 +16,9 @@ from companion.perception.config import OccupancyConfig, load_perception_config
 from companion.perception.density import OnnxDensityModel
 from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from models.data.generate import Split, generate
-from models.data.images import read_bgr, read_mask
 from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, read_metadata
-from models.eval.metrics import FrameScore, detect_heads, score_frame
+from models.eval.evaluate import evaluate_model
+from models.eval.metrics import detect_heads
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
@@ -50,18 +50,6 @@ def heldout_frames(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root / "heldout"
 
 
-def _score(model: OnnxDensityModel, split_dir: Path) -> list[FrameScore]:
-    scores = []
-    for label_path in sorted(split_dir.glob("[0-9]*.json")):
-        stem = label_path.stem
-        label = json.loads(label_path.read_text())
-        image = read_bgr(split_dir / f"{stem}.png")
-        mask = read_mask(split_dir / f"{stem}.mask.png")
-        heads = np.asarray(label["heads"], np.float32).reshape(-1, 2)
-        scores.append(score_frame(stem, model.predict(image), heads, mask, label, OccupancyConfig()))
-    return scores
-
-
 # Floors for 4 held-out frames (snow, fog, dust; 10-27 m; 271 visible heads). Measured when the models were
 # built: head recall within 8 px 0.31 (lite), 0.35 (int8), 0.11 (CCNN); person pixels called free 0.04 %, 0 %, 0.8 %.
 RECALL_8PX_FLOOR = {"slz_lite": 0.25, "slz_lite_int8": 0.25, "slz_ccnn": 0.08}
@@ -70,7 +58,9 @@ MISS_RATE_CEILING = 0.03
 
 @pytest.mark.parametrize("name", list(SHIPPED))
 def test_people_are_found_where_the_ground_truth_says(name: str, heldout_frames: Path) -> None:
-    scores = _score(OnnxDensityModel(SHIPPED[name]), heldout_frames)
+    scores = evaluate_model(
+        OnnxDensityModel(SHIPPED[name]), heldout_frames, REPO_ROOT / "mission_configs/perception.yaml"
+    )
     heads = sum(s.true_count for s in scores)
     assert heads > 50
     recall_8px = sum(s.matched["8px"] for s in scores) / heads

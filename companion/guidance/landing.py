@@ -277,15 +277,8 @@ class LandingGuidance:
         self._search_origin = None
         if self.reselections > self.config.max_reselections:
             # Never the configured "land": the map has just refused a landing here. Hold, and the pilot decides.
-            self._enter(LandingPhase.FAILSAFE, state.t_s)
-            return Decision(
-                state.t_s,
-                LandingPhase.FAILSAFE,
-                CommandKind.HOLD,
-                None,
-                None,
-                f"{reason}; {self.reselections - 1} re-selections used up: hold",
-            )
+            used = f"{reason}; {self.reselections - 1} re-selections used up"
+            return self._failsafe(state, used, FailsafeAction.HOLD)
         climb_to = min(state.altitude_m + self.config.climb_back_m, self.config.search_altitude_m)
         self._search_altitude_m = max(climb_to, state.altitude_m)
         return self._setpoint(
@@ -298,16 +291,16 @@ class LandingGuidance:
             climb_to,
         )
 
-    def _failsafe(self, state: VehicleState, reason: str) -> Decision:
+    def _failsafe(self, state: VehicleState, reason: str, action: FailsafeAction | None = None) -> Decision:
+        """Enter the failsafe phase with ``action`` (the configured one when None)."""
+        action = action or self.config.failsafe_action
         self._enter(LandingPhase.FAILSAFE, state.t_s)
         kind = {
             FailsafeAction.HOLD: CommandKind.HOLD,
             FailsafeAction.LAND: CommandKind.LAND,
             FailsafeAction.RETURN: CommandKind.RETURN,
-        }[self.config.failsafe_action]
-        return Decision(
-            state.t_s, LandingPhase.FAILSAFE, kind, None, None, f"{reason}: {self.config.failsafe_action.value}"
-        )
+        }[action]
+        return Decision(state.t_s, LandingPhase.FAILSAFE, kind, None, None, f"{reason}: {action.value}")
 
     # -- events ----------------------------------------------------------------------------------------------------
     def start(self, state: VehicleState) -> Decision:

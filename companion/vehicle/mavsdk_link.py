@@ -115,33 +115,36 @@ class MavsdkVehicleLink:
             return None
         return fields if isinstance(fields, dict) else None
 
-    def _on_position(self, message: Any) -> None:
+    def _on_stamped(self, message: Any, add: Callable[[float, dict[str, Any]], None]) -> None:
+        """A message stamped with ``time_boot_ms``: into the clock and, through ``add``, into the pose buffer.
+
+        A malformed or out-of-order sample is dropped and counted, never raised.
+        """
         f = self._fields(message)
         if f is None:
             return
         try:
             t_s = float(f["time_boot_ms"]) / 1000.0
             self.clock.observe(t_s)
-            self.poses.add_position(t_s, float(f["x"]), float(f["y"]), float(f["z"]))
+            add(t_s, f)
         except (KeyError, ValueError, PoseBufferError) as exc:
             self.dropped_samples += 1
-            logger.debug("position sample dropped: %s", exc)
+            logger.debug("%s sample dropped: %s", message.message_name, exc)
             return
         self.status.last_telemetry_wall_s = time.monotonic()
 
+    def _on_position(self, message: Any) -> None:
+        self._on_stamped(
+            message, lambda t_s, f: self.poses.add_position(t_s, float(f["x"]), float(f["y"]), float(f["z"]))
+        )
+
     def _on_attitude(self, message: Any) -> None:
-        f = self._fields(message)
-        if f is None:
-            return
-        try:
-            t_s = float(f["time_boot_ms"]) / 1000.0
-            self.clock.observe(t_s)
-            self.poses.add_attitude(t_s, [float(f["q1"]), float(f["q2"]), float(f["q3"]), float(f["q4"])])
-        except (KeyError, ValueError, PoseBufferError) as exc:
-            self.dropped_samples += 1
-            logger.debug("attitude sample dropped: %s", exc)
-            return
-        self.status.last_telemetry_wall_s = time.monotonic()
+        self._on_stamped(
+            message,
+            lambda t_s, f: self.poses.add_attitude(
+                t_s, [float(f["q1"]), float(f["q2"]), float(f["q3"]), float(f["q4"])]
+            ),
+        )
 
     def _on_mode(self, mode: Any) -> None:
         self.status.mode = _MODES.get(getattr(mode, "name", str(mode)), FlightMode.OTHER)

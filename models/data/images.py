@@ -26,3 +26,14 @@ def read_mask(path: Path) -> BoolMask:
     if mask is None:
         raise FileNotFoundError(f"mask missing or unreadable: {path}")
     return np.asarray(mask > 127, np.bool_)
+
+
+def frame_paths(split_dir: Path) -> list[Path]:
+    """The frames of a split folder (``NNNNNN.png`` or ``.jpg``; masks and labels left out), sorted by stem.
+
+    Raises FileNotFoundError when there are none.
+    """
+    frames = sorted(p for p in split_dir.iterdir() if p.stem.isdigit() and p.suffix in (".png", ".jpg"))
+    if not frames:
+        raise FileNotFoundError(f"no frames (NNNNNN.png/.jpg) in {split_dir}")
+    return frames

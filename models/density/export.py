@@ -25,7 +25,9 @@ import onnx
 import onnxruntime as ort
 import torch
 
+from models.data.images import frame_paths, read_bgr
 from models.density.architectures import Architecture, build
+from models.density.calibration import FLOORS, fit_floor_and_scale
 from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, set_metadata
 from models.density.preprocess import INPUT_HEIGHT_PX, INPUT_WIDTH_PX, contract, to_input
 
@@ -52,22 +54,11 @@ def calibrate(
     For each candidate floor the scale is the ratio of true to predicted totals; the pair with the lowest mean
     absolute count error wins. Fit on training-split frames only.
     """
-    candidates = floors or tuple(float(f) for f in np.concatenate([[0.0], np.geomspace(1e-4, 0.05, 24)]))
     maps = []
     with torch.no_grad():
         for image, _ in frames:
             maps.append(model(torch.from_numpy(to_input(image))[None])[0, 0].numpy())
-    truth = np.array([k for _, k in frames], np.float64)
-    best = (0.0, 1.0, float("inf"))
-    for floor in candidates:
-        sums = np.array([np.maximum(d - floor, 0.0).sum() for d in maps], np.float64)
-        if sums.sum() <= 0:
-            continue
-        scale = float(truth.sum() / sums.sum())
-        mae = float(np.abs(scale * sums - truth).mean())
-        if mae < best[2]:
-            best = (floor, scale, mae)
-    return best
+    return fit_floor_and_scale(maps, [k for _, k in frames], floors or FLOORS)
 
 
 def load_checkpoint(path: Path) -> tuple[torch.nn.Module, dict[str, Any]]:
@@ -143,10 +134,9 @@ def main() -> int:
     export(model, log, args.out, args.name, args.version)
     frames: list[np.ndarray] = []
     if args.check_frames is not None:
-        for path in sorted(args.check_frames.glob("[0-9]*[0-9].*g"))[:4]:
-            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if image is not None:
-                frames.append(cv2.resize(image, (INPUT_WIDTH_PX, INPUT_HEIGHT_PX), interpolation=cv2.INTER_AREA))
+        for path in frame_paths(args.check_frames)[:4]:  # the first four frames, never their masks
+            image = read_bgr(path)
+            frames.append(cv2.resize(image, (INPUT_WIDTH_PX, INPUT_HEIGHT_PX), interpolation=cv2.INTER_AREA))
     worst = parity(model, args.out, frames)
     ok = worst <= args.tolerance
     sys.stdout.write(

@@ -29,7 +29,7 @@ from onnxruntime.quantization import (
 )
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from models.data.images import read_bgr
+from models.data.images import frame_paths, read_bgr
 from models.density.onnx_files import QUANTIZATION_KEY, read_metadata, set_metadata
 from models.density.preprocess import INPUT_HEIGHT_PX, INPUT_WIDTH_PX, to_input
 
@@ -51,9 +51,7 @@ class FrameReader(CalibrationDataReader):
 
 def calibration_frames(folder: Path, count: int) -> list[Path]:
     """``count`` frames spread evenly over a split folder (``NNNNNN.png`` or ``.jpg``)."""
-    frames = sorted(p for p in folder.iterdir() if p.stem.isdigit() and p.suffix in (".png", ".jpg"))
-    if not frames:
-        raise FileNotFoundError(f"no frames (NNNNNN.png/.jpg) in {folder}")
+    frames = frame_paths(folder)
     step = max(1, len(frames) // count)
     return frames[::step][:count]
 

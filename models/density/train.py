@@ -30,14 +30,12 @@ import torch
 from torch.utils.data import DataLoader
 
 from models.density.architectures import Architecture, build, parameter_count
+from models.density.calibration import fit_floor_and_scale
 from models.density.dataset import CrowdCrops, LabelledFrame, collate, load_frames
 from models.density.losses import LossKind, density_loss
 from models.density.preprocess import OUTPUT_STRIDE, to_input
 
 logger = logging.getLogger(__name__)
-
-
-FLOORS = tuple(float(f) for f in np.concatenate([[0.0], np.geomspace(1e-4, 0.05, 24)]))
 
 
 def validate(model: torch.nn.Module, frames: list[LabelledFrame], device: torch.device) -> dict[str, float]:
@@ -52,13 +50,9 @@ def validate(model: torch.nn.Module, frames: list[LabelledFrame], device: torch.
             x = torch.from_numpy(to_input(frame.image_bgr))[None].to(device)
             maps.append(model(x)[0, 0].cpu().numpy())
     model.train()
-    truth = np.array([len(f.heads_px) for f in frames], np.float64)
-    e = np.array([float(m.sum()) for m in maps]) - truth
-    best = float("inf")
-    for floor in FLOORS:
-        sums = np.array([np.maximum(m - floor, 0.0).sum() for m in maps], np.float64)
-        if sums.sum() > 0:
-            best = min(best, float(np.abs(sums * truth.sum() / sums.sum() - truth).mean()))
+    counts = [len(f.heads_px) for f in frames]
+    e = np.array([float(m.sum()) for m in maps]) - np.asarray(counts, np.float64)
+    _, _, best = fit_floor_and_scale(maps, counts)
     return {
         "count_mae": float(np.abs(e).mean()),
         "count_rmse": float(np.sqrt((e**2).mean())),
