@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml scripts/install-system-deps.sh
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/slz demo --out runs/demo
+	$(BIN)/slz demo --out runs
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -38,6 +38,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/sitl_speed.py
 	$(BIN)/python bench/render.py
 	$(BIN)/python bench/density.py
+	$(BIN)/python bench/companion_latency.py
 
 # Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
 # quantization, evaluation; about an hour on 2 cores). The drone needs neither.

@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -18,7 +17,7 @@ from companion.config import ConfigError
 
 logger = logging.getLogger("slz")
 
-DEFAULT_PERCEPTION_CONFIG = Path("mission_configs/perception.yaml")
+DEFAULT_MISSION_CONFIG = Path("mission_configs/sitl.yaml")
 
 
 def _cmd_check_config(args: argparse.Namespace) -> int:
@@ -32,37 +31,34 @@ def _cmd_check_config(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from companion.perception.config import load_perception_config
+    from companion.app.mission import load_mission_config
+    from companion.perception.pipeline import SlzPipeline
     from sitl import demo
+    from sitl.mission import MissionError
 
-    config = load_perception_config(args.config)
-    outcome = demo.run(Path(args.out), config, seed=args.seed)
-    if math.isnan(outcome.target_north_m):
-        sys.stdout.write(f"no landing zone found in {outcome.frames} frames; see {outcome.image_path}\n")
+    config = load_mission_config(args.config)  # a bad config or a model that does not load fails before any process
+    SlzPipeline.from_config(config.perception)
+    try:
+        outcome = demo.run(Path(args.out), seed=args.seed, mission_config=args.config, instance=args.instance)
+    except MissionError as exc:
+        sys.stderr.write(f"slz demo: {exc}\n")
         return 1
-    stages = ", ".join(f"{k} {v:.1f}" for k, v in outcome.median_stage_ms.items())
-    sys.stdout.write(
-        f"seed {outcome.seed}: {outcome.n_people} people, {outcome.frames} frames down to "
-        f"{outcome.final_altitude_m:.1f} m\n"
-        f"target: north {outcome.target_north_m:.2f} m, east {outcome.target_east_m:.2f} m, "
-        f"radius {outcome.target_radius_m:.2f} m\n"
-        f"ground truth: nearest person's body is {outcome.target_clearance_m:.2f} m from the target centre\n"
-        f"median ms per stage: {stages}\n"
-        f"wrote {outcome.image_path}\n"
-    )
-    return 0
+    sys.stdout.write(demo.describe(outcome) + "\n")
+    return 0 if demo.safe(outcome.result) else 1
 
 
 def _cmd_fly(args: argparse.Namespace) -> int:
     import asyncio
     import datetime
+    import hashlib
 
     from companion.app.flight import FlightApp
-    from companion.app.mission import OperatingMode, load_mission_config
+    from companion.app.mission import FrameFormat, OperatingMode, load_mission_config
     from companion.app.recorder import FlightRecorder
     from companion.camera.frames import CameraError, open_frame_source
     from companion.perception.pipeline import SlzPipeline
     from companion.vehicle.link import VehicleError
+    from companion.vehicle.lockstep import LockstepClient, LockstepError
     from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 
     config = load_mission_config(args.config)
@@ -71,7 +67,10 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     pipeline = SlzPipeline.from_config(config.perception)  # a model that does not load fails before any link
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     out = Path(args.out) if args.out else config.recorder.directory / stamp
-    recorder = FlightRecorder(out, config.recorder.frame_every)
+    sim = config.simulator
+    lockstep = LockstepClient(sim.lockstep_url, sim.tick_timeout_s) if sim.lockstep_url else None
+    lossless = config.recorder.frame_format is FrameFormat.PNG
+    recorder = FlightRecorder(out, config.recorder.frame_every, lossless)
     link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz)
 
     async def fly() -> int:
@@ -79,7 +78,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
             source = open_frame_source(
                 config.camera.url, vehicle_time_s=link.clock.now_s, latency_s=config.camera.latency_s
             )
-            app = FlightApp(config, link, source, pipeline, recorder)
+            app = FlightApp(config, link, source, pipeline, recorder, lockstep)
             outcome = await app.run(timeout_s=args.timeout)
         finally:
             await link.close()
@@ -87,14 +86,44 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         return 0 if outcome.phase in ("done", "yielded") or config.mode is OperatingMode.DRY_RUN else 1
 
     try:
-        recorder.write("header", None, config=config.model_dump(mode="json"), model=str(config.perception.model.path))
+        model_path = config.perception.model.path
+        model_sha256 = hashlib.sha256(model_path.read_bytes()).hexdigest() if model_path.is_file() else None
+        recorder.write(
+            "header",
+            None,
+            config=config.model_dump(mode="json"),
+            model=str(model_path),
+            model_sha256=model_sha256,
+            version=__version__,
+        )
         return asyncio.run(fly())
-    except (VehicleError, CameraError) as exc:
+    except (VehicleError, CameraError, LockstepError) as exc:
         recorder.write("error", None, where="fly", error=str(exc))
         sys.stderr.write(f"slz fly: {exc}\n")
         return 1
     finally:
         recorder.close()
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from companion.app.recorder import RecorderError
+    from companion.app.replay import ReplayError, replay
+
+    try:
+        report = replay(Path(args.flight), video_path=args.video)
+    except (ReplayError, RecorderError, OSError) as exc:
+        sys.stderr.write(f"slz replay: {exc}\n")
+        return 1
+    sys.stdout.write(
+        f"{report.frames} frames, {report.decisions} decisions replayed: {report.frame_mismatches} frame and "
+        f"{report.decision_mismatches} decision differences\n"
+    )
+    for line in report.differences:
+        sys.stdout.write(f"  {line}\n")
+    if args.video:
+        sys.stdout.write(f"wrote {args.video}\n")
+    sys.stdout.write("identical\n" if report.identical else "DIFFERENT\n")
+    return 0 if report.identical else 1
 
 
 def _cmd_sitl(args: argparse.Namespace) -> int:
@@ -176,10 +205,16 @@ def build_parser() -> argparse.ArgumentParser:
     fly.add_argument("--timeout", type=float, default=600.0, help="wall seconds before the mission gives up")
     fly.set_defaults(func=_cmd_fly)
 
-    demo = sub.add_parser("demo", help="run the SLZ pipeline on a seeded scene and write an annotated image")
-    demo.add_argument("--config", type=Path, default=DEFAULT_PERCEPTION_CONFIG)
+    replay = sub.add_parser("replay", help="re-run a recorded flight and check it decides the same")
+    replay.add_argument("flight", type=Path, help="flight folder (flight.jsonl and frames/, recorded with png frames)")
+    replay.add_argument("--video", type=Path, help="also write the annotated camera view here (MP4)")
+    replay.set_defaults(func=_cmd_replay)
+
+    demo = sub.add_parser("demo", help="fly one seeded landing mission in the SITL (lockstep) and draw it")
+    demo.add_argument("--config", type=Path, default=DEFAULT_MISSION_CONFIG, help="the companion's mission config")
     demo.add_argument("--seed", type=int, default=1)
-    demo.add_argument("--out", type=Path, default=Path("runs/demo"))
+    demo.add_argument("--out", type=Path, default=Path("runs"), help="the run goes into OUT/<time>-seed<N>/")
+    demo.add_argument("--instance", type=int, default=0, help="SITL instance (ports), for parallel runs")
     demo.set_defaults(func=_cmd_demo)
     return parser
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 from pathlib import Path
 
 from pydantic import Field, field_validator, model_validator
@@ -30,6 +31,22 @@ class SitlCameraConfig(StrictModel):
     tilt_deg: float = Field(default=0.0, ge=-90.0, le=90.0, description="0 = nadir, positive towards the nose.")
 
 
+class FaultKind(str, enum.Enum):
+    """Faults the SITL can inject at a simulated time (failsafe tests and campaigns)."""
+
+    CAMERA_FAIL = "camera_fail"
+    """The camera delivers nothing from then on."""
+    LINK_LOSS = "link_loss"
+    """The companion's MAVLink link (the API port) goes silent both ways."""
+
+
+class FaultConfig(StrictModel):
+    """One fault at one instant."""
+
+    kind: FaultKind
+    at_s: float = Field(ge=0.0, description="Simulated time of the fault.")
+
+
 class SitlConfig(StrictModel):
     """One simulated vehicle. Ports follow PX4 SITL and shift with ``instance``."""
 
@@ -51,8 +68,14 @@ class SitlConfig(StrictModel):
     params: dict[str, float] = Field(default_factory=dict, description="Parameter overrides, PX4 names.")
     log_path: Path | None = Field(default=None, description="Trajectory log (CSV), ground truth.")
     log_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
+    truth_path: Path | None = Field(
+        default=None,
+        description="Ground-truth log (JSON lines) at every camera frame instant: the vehicle, its landed state and "
+        "every person's position; for metrics, never seen by the companion.",
+    )
     duration_s: float | None = Field(default=None, gt=0.0, description="Stop after this much simulated time.")
     camera: SitlCameraConfig = Field(default_factory=SitlCameraConfig)
+    faults: list[FaultConfig] = Field(default_factory=list, description="Injected at their simulated times.")
     scenario: ScenarioConfig = Field(default_factory=ScenarioConfig)
 
     @field_validator("params")

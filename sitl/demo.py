@@ -1,135 +1,166 @@
-"""The main job's current form: the SLZ pipeline on a seeded scene, over a scripted descent.
+"""The main job: one seeded landing mission in the SITL, flown by the companion in lockstep, and what to look at.
 
-The scene is the SITL's world (park, crowd, pyrender camera). The vehicle's path here is kinematic (no autopilot
-yet): from a random start pose above the region of interest it moves towards the current target and descends at a
-fixed rate, one camera frame per step, with a small attitude wobble, so tracking sees a moving camera. Outputs an
-annotated PNG (camera view + top view with ground truth) and a JSON summary, and returns the outcome.
+``slz demo`` starts the SITL with a seeded random scene (a park with 80-120 people in the 30 m region of interest)
+and the companion with ``mission_configs/sitl.yaml``, flies one mission in lockstep (:mod:`sitl.mission`), and writes
+``runs/<id>/``: the flight log (``flight/flight.jsonl``, with every frame saved losslessly, so ``slz replay`` re-runs
+it), the SITL's ground truth, ``top_view.png`` (people, the zones tracked when the landing was decided, the path,
+the touchdown), ``camera.mp4`` (the camera view with occupancy, zones and target, from a replay of the log) and
+``summary.json``.
 """
 
 from __future__ import annotations
 
+import datetime
 import json
 import logging
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
-from companion.perception.config import PerceptionConfig
-from companion.perception.geometry import Pose
-from companion.perception.pipeline import FrameResult, SlzPipeline, camera_from_config
-from companion.perception.visualize import draw_camera_overlay, draw_top_view, side_by_side
-from sitl.render.camera import Light, WorldRenderer
-from sitl.world.crowd import Crowd
-from sitl.world.park import Park
-from sitl.world.scenario import ScenarioConfig
+from companion.app.recorder import read_log
+from companion.app.replay import replay
+from sitl.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly, people_at, read_truth, touchdown
 
 logger = logging.getLogger(__name__)
+
+PERSON_BGR = (160, 40, 200)
+PATH_BGR = (40, 40, 40)
+ZONE_BGR = (200, 160, 0)
+TARGET_BGR = (0, 200, 230)
+TOUCHDOWN_BGR = (0, 140, 0)
+FENCE_BGR = (0, 0, 200)
 
 
 @dataclass(frozen=True)
 class DemoOutcome:
-    """What the demo found.
+    """The mission's result plus the demo's files."""
 
-    Attributes
-    ----------
-    seed : int
-        Scene and start-pose seed.
-    n_people : int
-        People in the scene.
-    frames : int
-        Frames processed.
-    target_north_m, target_east_m, target_radius_m : float
-        The final target (world NED, m); NaN if none was ever selected.
-    target_clearance_m : float
-        Ground truth: distance from the target centre to the nearest person's body edge.
-    final_altitude_m : float
-        Altitude of the last frame.
-    median_stage_ms : dict
-        Median wall time per stage.
-    image_path : str
-        The annotated PNG.
-    """
-
-    seed: int
-    n_people: int
-    frames: int
-    target_north_m: float
-    target_east_m: float
-    target_radius_m: float
-    target_clearance_m: float
-    final_altitude_m: float
-    median_stage_ms: dict[str, float]
-    image_path: str
+    result: MissionResult
+    replay_identical: bool
+    top_view_path: Path
+    video_path: Path
 
 
 def run(
-    out_dir: Path,
-    config: PerceptionConfig,
+    out_root: Path,
     seed: int = 1,
-    start_altitude_m: float = 20.0,
-    stop_altitude_m: float = 8.0,
-    descent_per_frame_m: float = 0.4,
-    frame_period_s: float = 0.1,
+    mission_config: Path = DEFAULT_MISSION_CONFIG,
+    instance: int = 0,
+    timeout_s: float = 600.0,
 ) -> DemoOutcome:
-    """Fly the scripted descent and write ``perception.png`` and ``summary.json`` into ``out_dir``."""
-    if not (start_altitude_m >= stop_altitude_m > 0 and descent_per_frame_m > 0 and frame_period_s > 0):
-        raise ValueError(
-            f"need start_altitude_m >= stop_altitude_m > 0 and positive steps, got {start_altitude_m}, "
-            f"{stop_altitude_m}, {descent_per_frame_m}, {frame_period_s}"
-        )
-    pipeline = SlzPipeline.from_config(config)  # first: a model that does not load fails before any work
-    rng = np.random.default_rng(seed)
-    # The SITL's world: the paper's crowd density (80-120 people in a 30 m square) in a park, rendered in 3-D.
-    crowd = Crowd(ScenarioConfig(), seed)
-    camera, T_body_camera = camera_from_config(config.camera)
-    light = Light.from_angles(float(rng.uniform(35, 75)), float(rng.uniform(0, 360)), 0.5)
-    renderer = WorldRenderer(Park(seed), crowd, camera, T_body_camera, light)
-    north, east = (float(v) for v in rng.uniform(-8.0, 8.0, size=2))
-    yaw = float(rng.uniform(-math.pi, math.pi))
-    altitude = start_altitude_m
-    t_s = 0.0
-    results: list[FrameResult] = []
-    frames = []
-    try:
-        while altitude >= stop_altitude_m:
-            wobble = 0.03 * math.sin(2.0 * t_s)
-            pose = Pose.from_ned_euler(north, east, -altitude, wobble, -wobble, yaw)
-            frame = renderer.render(pose, t_s, with_mask=False, with_depth=False).image_bgr
-            frames.append(frame)
-            result = pipeline.process(frame, pose, t_s, area_centre_ne_m=(0.0, 0.0))
-            results.append(result)
-            if result.target is not None:
-                dn, de = result.target.north_m - north, result.target.east_m - east
-                step = min(1.0, 0.5 / max(math.hypot(dn, de), 1e-9))
-                north, east = north + dn * step, east + de * step
-            altitude -= descent_per_frame_m
-            t_s += frame_period_s
-    finally:
-        renderer.close()
-    last = results[-1]
-    image = side_by_side(
-        draw_camera_overlay(frames[-1], last, pipeline.projector),
-        draw_top_view(last, crowd.positions_ne_m, crowd.radii_m),
-    )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    image_path = out_dir / "perception.png"
-    cv2.imwrite(str(image_path), image)
-    target = last.target
-    nan = float("nan")
-    outcome = DemoOutcome(
+    """Fly the demo mission into ``out_root/<id>/`` and draw it (see the module docstring)."""
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    run_dir = out_root / f"{stamp}-seed{seed}"
+    spec = MissionSpec(
         seed=seed,
-        n_people=len(crowd),
-        frames=len(results),
-        target_north_m=target.north_m if target else nan,
-        target_east_m=target.east_m if target else nan,
-        target_radius_m=target.radius_m if target else nan,
-        target_clearance_m=crowd.clearance_m(target.north_m, target.east_m) if target else nan,
-        final_altitude_m=last.pose.altitude_m,
-        median_stage_ms={stage: float(np.median([r.timings_ms[stage] for r in results])) for stage in last.timings_ms},
-        image_path=str(image_path),
+        run_dir=run_dir,
+        instance=instance,
+        mission_config=mission_config,
+        record_frames=True,
+        timeout_s=timeout_s,
     )
-    (out_dir / "summary.json").write_text(json.dumps(asdict(outcome), indent=2) + "\n", encoding="utf-8")
-    return outcome
+    result = fly(spec)
+    video_path = run_dir / "camera.mp4"
+    report = replay(run_dir / "flight", video_path=video_path)
+    top_view_path = run_dir / "top_view.png"
+    cv2.imwrite(str(top_view_path), draw_mission_top_view(run_dir))
+    summary = {**result.to_json(), "replay_identical": report.identical, "video": str(video_path)}
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return DemoOutcome(result, report.identical, top_view_path, video_path)
+
+
+def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: float = 27.0) -> np.ndarray:
+    """North-up top view of a flown mission: ground-truth people (magenta, at touchdown or at the end), the zones
+    tracked at the landing decision (cyan), the target (yellow), the true path (grey), the touchdown (green cross)
+    and the geofence (red)."""
+    header, records = read_truth(run_dir / "truth.jsonl")
+    flight = read_log(run_dir / "flight" / "flight.jsonl")
+    config = next(r for r in flight if r["kind"] == "header")["config"]
+    down = touchdown(records)
+    at = down if down is not None else (records[-1] if records else {"t_s": 0.0})
+    positions, radii = people_at(header, at)
+    px_per_m = size_px / (2.0 * half_extent_m)
+    view = np.full((size_px, size_px, 3), 245, np.uint8)
+
+    def to_px(north_m: float, east_m: float) -> tuple[int, int]:
+        return round((east_m + half_extent_m) * px_per_m), round((half_extent_m - north_m) * px_per_m)
+
+    for step in range(-25, 26, 5):  # a 5 m grid
+        a, b = to_px(step, -half_extent_m), to_px(step, half_extent_m)
+        cv2.line(view, a, b, (225, 225, 225), 1)
+        a, b = to_px(-half_extent_m, step), to_px(half_extent_m, step)
+        cv2.line(view, a, b, (225, 225, 225), 1)
+    fence = [to_px(n, e) for n, e in config["geofence"]["polygon_ne_m"]]
+    cv2.polylines(view, [np.array(fence, np.int32)], True, FENCE_BGR, 1, cv2.LINE_AA)
+    for (n, e), r in zip(positions, radii, strict=True):
+        cv2.circle(view, to_px(n, e), max(2, round(r * px_per_m)), PERSON_BGR, -1, cv2.LINE_AA)
+    path = [to_px(r["position_ned_m"][0], r["position_ned_m"][1]) for r in records]
+    if len(path) > 1:
+        cv2.polylines(view, [np.array(path, np.int32)], False, PATH_BGR, 1, cv2.LINE_AA)
+    tracks, target = _tracks_at_landing(flight)
+    for track in tracks:
+        centre = to_px(track["north_m"], track["east_m"])
+        cv2.circle(view, centre, round(track["radius_m"] * px_per_m), ZONE_BGR, 1, cv2.LINE_AA)
+    if target is not None:
+        centre = to_px(target["north_m"], target["east_m"])
+        cv2.circle(view, centre, round(target["radius_m"] * px_per_m), TARGET_BGR, 2, cv2.LINE_AA)
+    if down is not None:
+        n, e = down["position_ned_m"][:2]
+        cv2.drawMarker(view, to_px(n, e), TOUCHDOWN_BGR, cv2.MARKER_CROSS, 22, 3)
+    caption = f"seed {header['seed']}  t {at['t_s']:.1f} s  " + (
+        "touchdown (green)" if down is not None else "no touchdown"
+    )
+    cv2.putText(view, caption, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(
+        view,
+        "people (magenta), zones (cyan), target (yellow), path (grey), geofence (red)",
+        (8, size_px - 10),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.45,
+        (60, 60, 60),
+        1,
+        cv2.LINE_AA,
+    )
+    return view
+
+
+def _tracks_at_landing(flight: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+    """The tracked zones of the last processed frame before the landing (or the last frame) and the target."""
+    tracks: list[dict[str, Any]] = []
+    target = None
+    for record in flight:
+        if record["kind"] == "frame_result":
+            tracks = record["tracks"] or []
+        elif record["kind"] == "decision" and record["decision"]["target"] is not None:
+            target = record["decision"]["target"]
+            if record["decision"]["kind"] == "land":
+                break
+    return tracks, target
+
+
+def describe(outcome: DemoOutcome) -> str:
+    """The demo's outcome for a terminal."""
+    r = outcome.result
+    lines = [f"seed {r.seed}: the companion ended in '{r.phase}' ({r.reason})"]
+    if r.landed and r.touchdown_ne_m is not None:
+        lines.append(
+            f"touchdown at north {r.touchdown_ne_m[0]:.2f} m, east {r.touchdown_ne_m[1]:.2f} m, "
+            f"t = {r.touchdown_t_s:.1f} s simulated ({r.wall_s:.0f} s wall)"
+        )
+        lines.append(f"ground truth: the nearest person's body is {r.nearest_person_m:.2f} m from the touchdown point")
+        if r.target_radius_m is not None:
+            lines.append(f"landing zone radius {r.target_radius_m:.2f} m")
+    else:
+        lines.append("no touchdown")
+    lines.append(f"replay of the log: {'identical' if outcome.replay_identical else 'DIFFERENT'}")
+    lines.append(f"wrote {r.run_dir}: flight/, truth.jsonl, {outcome.top_view_path.name}, {outcome.video_path.name}")
+    return "\n".join(lines)
+
+
+def safe(result: MissionResult, clearance_m: float = 1.5) -> bool:
+    """Touched down with no person's body within ``clearance_m``."""
+    return result.landed and math.isfinite(result.nearest_person_m) and result.nearest_person_m >= clearance_m

@@ -118,6 +118,11 @@ class SitlProcess:
         """Ground truth and counters."""
         return self.request({"cmd": "state"})
 
+    @property
+    def running(self) -> bool:
+        """Started and not exited."""
+        return self._proc is not None and self._proc.poll() is None
+
     def wait(self, timeout_s: float) -> int:
         """Wait for the process to exit by itself; its exit code."""
         assert self._proc is not None

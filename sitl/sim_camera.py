@@ -57,6 +57,11 @@ class SimCamera:
         self.seq += 1
         return sent
 
+    def people_at(self, t_s: float) -> dict[str, Any]:
+        """Ground truth at simulated time ``t_s`` (the crowd walks there first, as a frame would)."""
+        self.crowd.advance_to(t_s)
+        return self.people()
+
     def people(self) -> dict[str, Any]:
         """Ground truth: every person's head-plane position, body radius and whether they walk, now."""
         return {

@@ -7,6 +7,7 @@ mode or arming change), so MAVSDK stays connected at any simulation speed.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import select
@@ -35,7 +36,7 @@ from sitl.autopilot.telemetry import (
     TelemetryBuilder,
 )
 from sitl.clock import SimClock
-from sitl.config import SitlConfig
+from sitl.config import FaultKind, SitlConfig
 from sitl.control_channel import ControlChannel
 from sitl.dynamics.base import DynamicsError, make_dynamics
 
@@ -65,6 +66,8 @@ class SitlVehicle:
 
     def __init__(self, config: SitlConfig) -> None:
         self.config = config
+        self._log: TextIO | None = None  # first, so close() works from any failure below
+        self._truth_file: TextIO | None = None
         try:
             self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz)
         except DynamicsError as exc:
@@ -134,8 +137,14 @@ class SitlVehicle:
         self._next_tick_s = 0.0
         self._tick_sent_wall = math.nan
         self._lockstep_ack: dict[str, Any] | None = None
-        # Trajectory log
-        self._log: TextIO | None = None
+        self._lockstep_released = False
+        self._faults = sorted(config.faults, key=lambda f: f.at_s)
+        self.camera_failed = False  # injected: the camera delivers nothing (ticks go on without frames)
+        # Ground truth and trajectory logs
+        self._truth_header_written = False
+        if config.truth_path is not None and self.camera is not None:
+            Path(config.truth_path).parent.mkdir(parents=True, exist_ok=True)
+            self._truth_file = open(config.truth_path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
         self._next_log_s = 0.0
         if config.log_path is not None:
             Path(config.log_path).parent.mkdir(parents=True, exist_ok=True)
@@ -168,6 +177,9 @@ class SitlVehicle:
         if self._log is not None:
             self._log.close()
             self._log = None
+        if self._truth_file is not None:
+            self._truth_file.close()
+            self._truth_file = None
 
     def describe(self) -> str:
         """One line with the endpoints."""
@@ -192,13 +204,16 @@ class SitlVehicle:
                 if self.config.duration_s is not None and self.clock.now_s >= self.config.duration_s - 1e-9:
                     logger.info("duration reached at %.3f s simulated", self.clock.now_s)
                     break
-                if self.camera is not None and not self.config.lockstep:
+                free_running = not self.config.lockstep or self._lockstep_released
+                if self.camera is not None and free_running:
                     if self.clock.now_s >= self._next_frame_s - 1e-9:  # free-running: frames go out, or are dropped
-                        self.camera.capture(self.clock.now_s, self.dynamics.state())
+                        self._write_truth()
+                        if not self.camera_failed:
+                            self.camera.capture(self.clock.now_s, self.dynamics.state())
                         self._next_frame_s += self.camera.period_s
                     else:
                         self.camera.server.poll()
-                at_tick = self.config.lockstep and self.clock.now_s >= self._next_tick_s - 1e-9
+                at_tick = not free_running and self.clock.now_s >= self._next_tick_s - 1e-9
                 if at_tick and not self._lockstep_gate(sockets):
                     continue
                 wait = self.clock.wall_time_until_next_step()
@@ -219,7 +234,8 @@ class SitlVehicle:
             return False
         if math.isnan(self._tick_sent_wall):
             assert self.control is not None
-            if self.camera is not None:
+            frame_seq: int | None = None
+            if self.camera is not None and not self.camera_failed:
                 # Every tick is a frame: it goes out whole before the tick, so the client has it to acknowledge.
                 self.camera.server.poll()
                 if not self.camera.server.connected:
@@ -235,12 +251,16 @@ class SitlVehicle:
                     return False
                 self._frame_client_lost_wall = math.nan
                 self.camera.capture(self.clock.now_s, self.dynamics.state())
+                frame_seq = self.camera.seq - 1
                 if not self.camera.server.flush(time.monotonic() + self.config.lockstep_timeout_s):
                     logger.error("lockstep: the frame client did not take frame %d; stopping", self.camera.seq - 1)
                     self._exit_code = 3
                     self._running = False
                     return False
-            self.control.send({"event": "tick", "seq": self._tick_seq, "t_s": self.clock.now_s}, self._lockstep_client)
+            self._send_tick_pose()
+            self._write_truth()
+            tick = {"event": "tick", "seq": self._tick_seq, "t_s": self.clock.now_s, "frame_seq": frame_seq}
+            self.control.send(tick, self._lockstep_client)
             self._tick_sent_wall = time.monotonic()
         ack = self._lockstep_ack
         if ack is not None and ack.get("seq") == self._tick_seq and self._ack_covers_mavlink(ack):
@@ -262,6 +282,40 @@ class SitlVehicle:
             return False
         select.select(sockets, [], [], 0.02)
         return False
+
+    def _write_truth(self) -> None:
+        """One ground-truth record at this instant (people positions only when some walk)."""
+        if self._truth_file is None or self.camera is None:
+            return
+        t_s = self.clock.now_s
+        people = self.camera.people_at(t_s)
+        if not self._truth_header_written:
+            self._truth_header_written = True
+            header = {"kind": "header", "seed": self.config.seed, **people}
+            self._truth_file.write(json.dumps(header) + "\n")
+        s = self.dynamics.state()
+        cmd = self.commander
+        record: dict[str, Any] = {
+            "kind": "truth",
+            "t_s": t_s,
+            "position_ned_m": [round(float(v), 4) for v in s.position_ned_m],
+            "armed": cmd.armed,
+            "mode": cmd.mode.px4_name,
+            "landed_state": cmd.landed_state.name,
+            "on_ground": bool(s.on_ground),
+        }
+        if any(people["moving"]):
+            record["positions_ne_m"] = [[round(n, 4), round(e, 4)] for n, e in people["positions_ne_m"]]
+        self._truth_file.write(json.dumps(record) + "\n")
+        self._truth_file.flush()
+
+    def _send_tick_pose(self) -> None:
+        """The pose at the tick instant goes out on the API link before the tick, so the client can pair the tick's
+        frame with a pose stamped at its capture time (the scheduled streams need not fall on tick instants)."""
+        api = self.links[0]
+        state = self.dynamics.state()
+        for name in ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION"):
+            api.send(self.telemetry.build(name, api.mav, self.clock.now_s, state, self.commander, self.battery))
 
     def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
         """The client's MAVLink messages sent before its ack have all been received (no overtaking).
@@ -286,8 +340,19 @@ class SitlVehicle:
         return bool(received >= ack["mavlink_sent"])
 
     # -- the physics step ----------------------------------------------------------------------------------------
+    def _inject_faults(self, t_s: float) -> None:
+        while self._faults and t_s >= self._faults[0].at_s - 1e-9:
+            fault = self._faults.pop(0)
+            logger.warning("fault injected at %.3f s: %s", t_s, fault.kind.value)
+            if fault.kind is FaultKind.CAMERA_FAIL:
+                self.camera_failed = True
+            elif fault.kind is FaultKind.LINK_LOSS:
+                self.links[0].cut = True
+
     def _step(self) -> None:
         t_s = self.clock.now_s
+        if self._faults:
+            self._inject_faults(t_s)
         dt_s = self.clock.step_s
         state = self.dynamics.state()
         if self.clock.steps % self._outer_every == 0:
@@ -576,8 +641,18 @@ class SitlVehicle:
                 if not self.config.lockstep:
                     raise ValueError("this SITL does not run in lockstep")
                 self._lockstep_client = addr
+                self._lockstep_released = False
                 self._tick_sent_wall = math.nan  # (re)send the pending tick to the new client
                 reply["tick_period_s"] = self.config.lockstep_period_s
+            elif cmd == "lockstep_release":  # the client is leaving: run free from here on
+                self._lockstep_released = True
+                self.clock.resync()
+            elif cmd == "camera_fail":
+                if self.camera is None:
+                    raise ValueError("this SITL has no camera")
+                self.camera_failed = bool(request["failed"])
+            elif cmd == "link_loss":
+                self.links[0].cut = bool(request["lost"])
             elif cmd == "lockstep_ack":
                 if "expect" in request:  # clients that cannot count their messages (MAVSDK re-sends on its own)
                     self._lockstep_ack = {"seq": int(request["seq"]), "expect": request["expect"]}
@@ -614,6 +689,9 @@ class SitlVehicle:
             "failsafe": cmd.failsafe,
             "failsafe_since_s": None if math.isnan(cmd.failsafe_since_s) else cmd.failsafe_since_s,
             "rc_lost": cmd.rc_lost,
+            "camera_failed": self.camera_failed,
+            "api_link_cut": self.links[0].cut,
+            "lockstep_tick": self._tick_seq,
             "setpoints_rejected": self.setpoints_rejected,
             "frames": None
             if self.camera is None

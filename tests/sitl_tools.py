@@ -134,9 +134,9 @@ class LockstepClient:
         self.control = LockstepControl(instance, system_id, component_id)
 
     def subscribe(self, timeout_s: float = 10.0) -> None:
-        """Register for ticks and wait until the vehicle has been heard on MAVLink."""
+        """Register for ticks and wait for the vehicle's heartbeat (its system id; telemetry may come first)."""
         self.control.subscribe()
-        wait_until(lambda: self.peer.poll() is not None and self.peer.vehicle_addr, timeout_s, "the vehicle")
+        wait_until(lambda: self.peer.poll() is not None and self.peer.heartbeat_wall_times, timeout_s, "a heartbeat")
 
     def next_tick(self, timeout_s: float = 10.0) -> dict[str, Any]:
         """Wait for the next tick event."""

@@ -41,19 +41,6 @@ def test_check_config_names_the_bad_field(tmp_path: Path) -> None:
     assert "Traceback" not in result.stderr
 
 
-def test_demo_writes_an_annotated_image_and_lands_clear_of_people(tmp_path: Path) -> None:
-    out = tmp_path / "demo"
-    result = slz("demo", "--seed", "3", "--out", str(out))
-    assert result.returncode == 0, result.stderr
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["frames"] >= 20
-    assert summary["target_clearance_m"] >= summary["target_radius_m"] > 0
-    png = (out / "perception.png").read_bytes()
-    assert png[:8] == b"\x89PNG\r\n\x1a\n"
-    assert len(png) > 50_000
-    assert "ground truth: nearest person" in result.stdout
-
-
 def test_demo_with_a_missing_model_fails_clearly(tmp_path: Path) -> None:
     config = tmp_path / "c.yaml"
     config.write_text(f"perception:\n  model:\n    path: {tmp_path / 'none.onnx'}\n")
@@ -73,3 +60,67 @@ def test_sitl_snapshot_writes_a_contact_sheet(tmp_path: Path) -> None:
     assert sheet is not None
     assert sheet.shape == (6 * 244, 3 * (2 * 320 + 4), 3)  # six conditions x three altitudes, frame + mask each
     assert sheet[:, 320:640].max() == 255  # the first mask column shows people
+
+
+def _mission(tmp_path: Path, **sections: str) -> Path:
+    """A mission config: mission_configs/sitl.yaml with some sections replaced (YAML snippets)."""
+    import yaml
+
+    mission = yaml.safe_load((REPO_ROOT / "mission_configs" / "sitl.yaml").read_text())
+    for name, text in sections.items():
+        mission[name] = yaml.safe_load(text)
+    path = tmp_path / "mission.yaml"
+    path.write_text(yaml.safe_dump(mission))
+    return path
+
+
+def test_fly_with_a_bad_value_names_the_field_and_starts_nothing(tmp_path: Path) -> None:
+    config = _mission(tmp_path, guidance="descent_rate_limit_mps: 9.0")
+    result = slz("fly", "--config", str(config), "--out", str(tmp_path / "flight"))
+    assert result.returncode == 2
+    assert "guidance.descent_rate_limit_mps" in result.stderr
+    assert "less than or equal to 5" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "flight").exists()
+
+
+def test_fly_with_a_missing_model_fails_before_any_link(tmp_path: Path) -> None:
+    config = _mission(tmp_path, perception=f"model: {{path: {tmp_path / 'none.onnx'}}}")
+    result = slz("fly", "--config", str(config), "--out", str(tmp_path / "flight"))
+    assert result.returncode == 1
+    assert "model file not found" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "flight").exists()
+
+
+def test_fly_with_no_camera_fails_before_touching_the_vehicle(tmp_path: Path) -> None:
+    config = _mission(tmp_path, camera="url: sitl://127.0.0.1:5999")  # nobody serves frames there
+    result = slz("fly", "--config", str(config), "--out", str(tmp_path / "flight"), timeout_s=60)
+    assert result.returncode == 1
+    assert "sitl://127.0.0.1:5999: cannot connect" in result.stderr
+    assert "Traceback" not in result.stderr
+    records = [json.loads(line) for line in (tmp_path / "flight" / "flight.jsonl").read_text().splitlines()]
+    assert records[-1]["kind"] == "error"
+    assert "cannot connect" in records[-1]["error"]
+    assert "command" not in [r["kind"] for r in records]
+
+
+def test_fly_with_no_autopilot_says_so_within_the_connect_timeout(tmp_path: Path) -> None:
+    import cv2
+    import numpy as np
+
+    video = tmp_path / "clip.avi"  # a camera that works: a short video file
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 48))  # type: ignore[attr-defined]
+    for k in range(5):
+        writer.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    writer.release()
+    config = _mission(
+        tmp_path,
+        vehicle="{url: 'udpin://0.0.0.0:14999', connect_timeout_s: 2.0}",
+        camera=f"url: 'file://{video}'",
+    )
+    result = slz("fly", "--config", str(config), "--out", str(tmp_path / "flight"), timeout_s=60)
+    assert result.returncode == 1
+    assert "udpin://0.0.0.0:14999" in result.stderr
+    assert "no autopilot answered within 2 s" in result.stderr
+    assert "Traceback" not in result.stderr

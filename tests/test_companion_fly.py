@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.app.replay import replay
 from sitl.config import SitlConfig
 from sitl.process import SitlProcess
 from tests.sitl_tools import GroundStation, state_when, wait_until
@@ -26,6 +27,8 @@ def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int) -> SitlProc
     mission = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
     mission = mission.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
     mission = mission.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
+    mission = mission.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + instance}")  # runs free: no lockstep
+    mission = mission.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
     (tmp_path / "mission.yaml").write_text(mission)
     return SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
 
@@ -80,6 +83,11 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> N
     end = next(r for r in records if r["kind"] == "end")
     assert end["outcome"]["commands_sent"] == 0
     assert end["outcome"]["frames_processed"] >= 10
+    # The logged decisions are the flight logic's, the ones `fly` would send: the same inputs replayed through the
+    # same pipeline and state machine give every one of them again.
+    report = replay(tmp_path / "flight")
+    assert report.decisions == kinds.count("decision")
+    assert report.identical, report.differences
 
 
 def test_the_companion_yields_at_once_when_the_pilot_takes_over(tmp_path: Path) -> None:

@@ -1,19 +1,24 @@
 """The flight loop of ``slz fly``: frames and telemetry in, decisions out, everything recorded.
 
-Concurrency (structured, Python 3.10-compatible: tasks are created together, kept, and cancelled together when
-one ends or fails):
+Two drivers, one logic. Each camera frame goes through :meth:`FlightApp.on_frame` (pose pairing at its capture time,
+the pipeline in a one-thread executor so the event loop never blocks, then the state machine); each *tick* goes
+through :meth:`FlightApp.on_tick` (the start sequence, pilot takeover, touchdown, perception silence). Times are the
+vehicle's clock throughout.
 
-- **perception**: each frame is paired with the pose interpolated at its capture time (frames too old, or with no
-  pose, are dropped and counted), the pipeline runs in a one-thread executor (onnxruntime releases the GIL; the
-  event loop never blocks), and the state machine decides;
-- **supervisor** (wall clock, liveness only): perception silence (T1 hold, T2 failsafe action), pilot takeover
-  (mode left OFFBOARD: yield at once, for the rest of the flight), link loss (stop commanding, let the autopilot's
-  own failsafe act), touchdown;
-- **stall watchdog** (a thread): if the event loop stops beating for ``decision_watchdog_s``, it stops offboard
-  from outside the loop, since MAVSDK keeps re-sending the last setpoint on its own thread.
+- **Free running** (a real vehicle, or a SITL outside lockstep): frames are handled as they arrive; ticks come from
+  a 10 Hz wall-clock timer, which also watches the link (no telemetry for ``link_lost_after_s``: stop commanding,
+  let the autopilot's own failsafe act).
+- **Lockstep** (``simulator.lockstep_url``, the bundled SITL stepping with us): the simulator stops at every tick
+  with the tick's frame and pose already sent; the app handles the frame, then the tick, then acknowledges, naming
+  the setpoint the simulator must have received first. The same seed gives the same flight at any speed.
+
+Tasks are created together, kept, and cancelled together when one ends or fails (structured concurrency that also
+runs on Python 3.10). A **stall watchdog** thread stops offboard from outside the event loop when the loop stops
+beating for ``decision_watchdog_s``, since MAVSDK keeps re-sending the last setpoint on its own thread.
 
 In a dry run the same perception and decisions run and are recorded, but nothing is sent: no arming, no mode
-change, no setpoint.
+change, no setpoint. Every decision is recorded with what produced it (``source``) and its inputs, so ``slz replay``
+can re-run a flight from its log.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import enum
 import logging
 import math
 import threading
@@ -30,17 +36,33 @@ from typing import Any
 
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.recorder import FlightRecorder
-from companion.camera.frames import Frame, FrameSource
+from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase, VehicleState
 from companion.perception.errors import PerceptionError
 from companion.perception.geometry import Pose
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.vehicle.link import FlightMode, VehicleError, VehicleLink
+from companion.vehicle.lockstep import LockstepClient, Tick
 
 logger = logging.getLogger(__name__)
 
 TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAILSAFE})
+CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
+TICK_PERIOD_S = 0.1  # free running: the wall-clock tick of the supervision
+TAKEOFF_RETRY_S = 1.0  # vehicle time between arming attempts while the autopilot refuses
+START_TIMEOUT_S = 90.0  # vehicle time from the first tick to the start of the search
+
+
+class StartStage(str, enum.Enum):
+    """Before the landing logic starts."""
+
+    WAITING = "waiting"
+    """For the autopilot to accept arming and takeoff (SITL), or for the first pose."""
+    CLIMBING = "climbing"
+    """Taking off to the start altitude."""
+    STARTED = "started"
+    """The landing logic runs."""
 
 
 @dataclass
@@ -50,19 +72,35 @@ class FlightOutcome:
     phase: str = LandingPhase.IDLE.value
     reason: str = ""
     touchdown_ne_m: tuple[float, float] | None = None
+    touchdown_t_s: float | None = None
+    ticks: int = 0
+    lockstep: bool = False
     frames_processed: int = 0
+    frames_before_start: int = 0
     frames_dropped_old: int = 0
     frames_dropped_no_pose: int = 0
+    frames_missing: int = 0
     frames_failed: int = 0
+    takeoff_refusals: int = 0
     commands_sent: int = 0
+    camera_lost: bool = False
     link_lost: bool = False
     failsafes: list[str] = field(default_factory=list)
+    wall_s: float = 0.0
+    cpu_s: float = 0.0
+    """Process CPU time (all threads) over the flight: ``cpu_s / wall_s`` is the companion's CPU share."""
 
 
 def yaw_deg_of(pose: Pose) -> float:
     """Heading of the body x axis in the world NED frame, degrees."""
     R = pose.T_world_body
     return math.degrees(math.atan2(R[1, 0], R[0, 0]))
+
+
+def state_of(t_s: float, pose: Pose) -> VehicleState:
+    """The landing logic's view of a pose at vehicle time ``t_s``."""
+    n, e, d = (float(v) for v in pose.position_ned_m)
+    return VehicleState(t_s, n, e, d, yaw_deg_of(pose))
 
 
 class FlightApp:
@@ -80,6 +118,8 @@ class FlightApp:
         Perception.
     recorder : FlightRecorder
         Where every record goes.
+    lockstep : LockstepClient or None
+        The simulator's lockstep channel; when it agrees to step, the flight is driven by its ticks.
     """
 
     def __init__(
@@ -89,12 +129,14 @@ class FlightApp:
         source: FrameSource,
         pipeline: SlzPipeline,
         recorder: FlightRecorder,
+        lockstep: LockstepClient | None = None,
     ) -> None:
         self.config = config
         self.link = link
         self.source = source
         self.pipeline = pipeline
         self.recorder = recorder
+        self.lockstep = lockstep
         self.dry_run = config.mode is OperatingMode.DRY_RUN
         zones = config.perception.zones
         self.guidance = LandingGuidance(
@@ -102,50 +144,61 @@ class FlightApp:
         )
         self.outcome = FlightOutcome()
         self._executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="perception")
-        self._last_frame_wall = time.monotonic()
         self._beat_wall = time.monotonic()
         self._offboard = False
         self._commanding = not self.dry_run
         self._stop = threading.Event()
         self._done = asyncio.Event()
+        self._start_stage = StartStage.WAITING
+        self._first_tick_t_s: float | None = None
+        self._last_takeoff_try_t_s = -math.inf
+        self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
+        self._tick_setpoint: tuple[float, float, float, float] | None = None  # sent during this lockstep tick
+        self._early_frame: Frame | None = None
 
     # -- vehicle state ------------------------------------------------------------------------------------------
     def vehicle_state(self) -> VehicleState | None:
         """The vehicle at its newest stamped pose."""
         t = self.link.poses.latest_t_s
         pose = self.link.poses.pose_at(t) if t is not None else None
-        if t is None or pose is None:
-            return None
-        n, e, d = (float(v) for v in pose.position_ned_m)
-        return VehicleState(t, n, e, d, yaw_deg_of(pose))
+        return None if t is None or pose is None else state_of(t, pose)
 
     # -- applying decisions --------------------------------------------------------------------------------------
-    async def apply(self, decision: Decision) -> None:
-        """Record a decision and, when flying, send it."""
+    async def apply(self, decision: Decision, source: str, state: VehicleState | None, **inputs: Any) -> None:
+        """Record a decision (with what produced it and from which inputs) and, when flying, send it."""
         previous = self.outcome.phase
         self.outcome.phase = decision.phase.value
         self.outcome.reason = decision.reason
-        self.recorder.write("decision", decision.t_s, decision=decision)
+        self.recorder.write("decision", decision.t_s, decision=decision, source=source, state=state, inputs=inputs)
         if decision.phase.value != previous:
             self.recorder.write("phase", decision.t_s, phase=decision.phase, previous=previous, reason=decision.reason)
             await self.link.status_text(f"SLZ {decision.phase.value}: {decision.reason}")
         if decision.phase is LandingPhase.FAILSAFE:
             self.outcome.failsafes.append(decision.reason)
             self.recorder.write("failsafe", decision.t_s, reason=decision.reason, action=decision.kind)
+        try:
+            await self._send(decision)
+        finally:
+            if decision.phase in TERMINAL:
+                self._done.set()  # after its command went out: ending cancels the tasks
+
+    async def _send(self, decision: Decision) -> None:
         if not self._commanding or decision.kind is CommandKind.NONE:
             return
         try:
             if decision.kind is CommandKind.SETPOINT:
-                assert decision.setpoint is not None
+                sp = decision.setpoint
+                assert sp is not None
                 if not self._offboard:
-                    await self.link.start_offboard(decision.setpoint)
+                    await self.link.start_offboard(sp)
                     # Takeover detection starts only once the autopilot reports OFFBOARD (telemetry lags the ack).
                     await self.link.wait_for(
                         lambda: self.link.status.mode is FlightMode.OFFBOARD, time.monotonic() + 3.0, "OFFBOARD"
                     )
                     self._offboard = True
                 else:
-                    await self.link.set_setpoint(decision.setpoint)
+                    await self.link.set_setpoint(sp)
+                self._tick_setpoint = (sp.north_m, sp.east_m, sp.down_m, math.radians(sp.yaw_deg))
             elif decision.kind is CommandKind.LAND:
                 await self.link.land()
             elif decision.kind is CommandKind.HOLD:
@@ -160,57 +213,60 @@ class FlightApp:
         if decision.kind is not CommandKind.SETPOINT:
             self._offboard = False  # the autopilot's own mode now
 
-    # -- tasks ---------------------------------------------------------------------------------------------------
-    async def _perception(self) -> None:
+    # -- one frame -------------------------------------------------------------------------------------------------
+    async def on_frame(self, frame: Frame) -> None:
+        """Pair the frame with its pose, run the pipeline and let the landing logic decide."""
+        if self._start_stage is not StartStage.STARTED:
+            self.outcome.frames_before_start += 1
+            return
+        if self.guidance.phase in TERMINAL:
+            return
+        paired = await self._pose_for(frame)
+        if paired is None:
+            return
+        t_pose_s, pose = paired
         loop = asyncio.get_running_loop()
-        max_age = self.config.camera.max_frame_age_s
-        frames = self.source.frames()
         try:
-            async for frame in frames:
-                self._beat_wall = time.monotonic()
-                pose = await self._pose_for(frame)
-                if pose is None:
-                    continue
-                try:
-                    result: FrameResult = await loop.run_in_executor(
-                        self._executor, self.pipeline.process, frame.image_bgr, pose, frame.t_capture_s
-                    )
-                except PerceptionError as exc:  # one bad frame or pose; a lasting failure trips the silence failsafe
-                    self.outcome.frames_failed += 1
-                    self.recorder.write("frame_error", frame.t_capture_s, seq=frame.seq, error=str(exc))
-                    continue
-                self._last_frame_wall = time.monotonic()
-                self.outcome.frames_processed += 1
-                self.recorder.frame(frame.seq, frame.t_capture_s, frame.image_bgr)
-                self.recorder.write(
-                    "frame_result",
-                    frame.t_capture_s,
-                    seq=frame.seq,
-                    T_world_body=pose.T_world_body,
-                    tracks=result.tracks,
-                    target=result.target,
-                    timings_ms=result.timings_ms,
-                )
-                state = self.vehicle_state()
-                if state is None or self.guidance.phase in TERMINAL:
-                    continue
-                latest = self.link.poses.latest_t_s or frame.t_capture_s
-                if latest - frame.t_capture_s > max_age:  # processing fell behind: decide on fresh frames only
-                    self.outcome.frames_dropped_old += 1
-                    continue
-                await self.apply(self.guidance.on_frame(result, state))
-                if self.guidance.phase in TERMINAL:
-                    self._done.set()
-        finally:
-            await frames.aclose()  # type: ignore[attr-defined]
+            result: FrameResult = await loop.run_in_executor(
+                self._executor, self.pipeline.process, frame.image_bgr, pose, frame.t_capture_s
+            )
+        except PerceptionError as exc:  # one bad frame or pose; a lasting failure trips the silence failsafe
+            self.outcome.frames_failed += 1
+            self.recorder.write("frame_error", frame.t_capture_s, seq=frame.seq, error=str(exc))
+            return
+        self._last_frame_t_s = max(self._last_frame_t_s, t_pose_s)
+        self.outcome.frames_processed += 1
+        self.recorder.frame(frame.seq, frame.t_capture_s, frame.image_bgr)
+        self.recorder.write(
+            "frame_result",
+            frame.t_capture_s,
+            seq=frame.seq,
+            T_world_body=pose.T_world_body,
+            tracks=result.tracks,
+            target=result.target,
+            timings_ms=result.timings_ms,
+        )
+        state = self.vehicle_state()
+        if state is None:
+            return
+        if state.t_s - t_pose_s > self.config.camera.max_frame_age_s:  # fell behind: decide on fresh frames only
+            self.outcome.frames_dropped_old += 1
+            return
+        decision = self.guidance.on_frame(result, state)
+        await self.apply(decision, "frame", state, seq=frame.seq)
+        if self._commanding and decision.kind is not CommandKind.NONE and math.isfinite(frame.arrival_wall_s):
+            latency_ms = 1000.0 * (time.monotonic() - frame.arrival_wall_s)
+            self.recorder.write("latency", frame.t_capture_s, seq=frame.seq, frame_to_command_ms=latency_ms)
 
-    async def _pose_for(self, frame: Frame) -> Pose | None:
-        """The pose at the frame's capture time, waiting briefly for telemetry to catch up; None drops the frame."""
+    async def _pose_for(self, frame: Frame) -> tuple[float, Pose] | None:
+        """The pose at the frame's capture time (waiting briefly for telemetry to catch up) and the vehicle time it
+        is stamped with; None drops the frame (counted)."""
         max_age = self.config.camera.max_frame_age_s
+        t_s = frame.t_capture_s
 
         def caught_up() -> bool:
             latest = self.link.poses.latest_t_s
-            return latest is not None and latest >= frame.t_capture_s
+            return latest is not None and latest >= t_s - CLOCK_RESOLUTION_S
 
         try:
             await self.link.wait_for(caught_up, time.monotonic() + max_age, "telemetry at the frame's capture time")
@@ -219,50 +275,187 @@ class FlightApp:
             return None
         latest = self.link.poses.latest_t_s
         assert latest is not None
-        if latest - frame.t_capture_s > max_age:
+        if latest - t_s > max_age:
             self.outcome.frames_dropped_old += 1
             return None
-        pose = self.link.poses.pose_at(frame.t_capture_s)
+        t_s = min(t_s, latest)  # within the vehicle clock's resolution of the newest sample
+        pose = self.link.poses.pose_at(t_s)
         if pose is None:
             self.outcome.frames_dropped_no_pose += 1
-        return pose
+            return None
+        return t_s, pose
 
-    async def _supervise(self) -> None:
-        cfg = self.config
+    # -- one tick ----------------------------------------------------------------------------------------------------
+    async def on_tick(self, state: VehicleState) -> None:
+        """The start sequence, then pilot takeover, touchdown and perception silence, at vehicle time ``state.t_s``."""
+        self.outcome.ticks += 1
+        if self._start_stage is not StartStage.STARTED:
+            await self._start_step(state)
+            return
+        if self.guidance.phase in TERMINAL:
+            self._done.set()
+            return
+        status = self.link.status
+        if self._offboard and status.mode not in (FlightMode.OFFBOARD, FlightMode.UNKNOWN) and not self.dry_run:
+            self._offboard = False
+            self._commanding = False  # never take control back in this flight
+            mode = status.mode.value
+            await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
+            return
+        if self.guidance.phase is LandingPhase.LAND and not status.in_air:
+            self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
+            self.outcome.touchdown_t_s = state.t_s
+            await self.apply(self.guidance.landed(state.t_s), "landed", state)
+            return
+        silent_s = state.t_s - self._last_frame_t_s
+        decision = self.guidance.perception_silent(state, silent_s)
+        if decision is not None:
+            await self.apply(decision, "silence", state, silent_s=silent_s)
+
+    async def _start_step(self, state: VehicleState) -> None:
+        """Arm and take off when configured (retrying while the autopilot refuses), climb, then start the search."""
+        start = self.config.start
+        if self._first_tick_t_s is None:
+            self._first_tick_t_s = state.t_s
+        if state.t_s - self._first_tick_t_s > START_TIMEOUT_S:
+            stage = self._start_stage.value
+            raise VehicleError(self.link.name, f"not ready to search {START_TIMEOUT_S:g} s after the start ({stage})")
+        takeoff = start.arm_and_takeoff and not self.dry_run
+        if takeoff and self._start_stage is StartStage.WAITING:
+            if state.t_s - self._last_takeoff_try_t_s < TAKEOFF_RETRY_S:
+                return
+            self._last_takeoff_try_t_s = state.t_s
+            try:
+                await self.link.take_off(start.takeoff_altitude_m)
+            except VehicleError as exc:  # pre-arm checks not passed yet: try again later (vehicle time)
+                self.outcome.takeoff_refusals += 1
+                logger.info("takeoff not accepted yet: %s", exc)
+                return
+            self._start_stage = StartStage.CLIMBING
+            self.recorder.write("takeoff", state.t_s, altitude_m=start.takeoff_altitude_m)
+            return
+        if takeoff and state.altitude_m < start.takeoff_altitude_m - 0.5:
+            return
+        self._start_stage = StartStage.STARTED
+        self._last_frame_t_s = state.t_s  # perception silence counts from here
+        await self.apply(self.guidance.start(state), "start", state)
+
+    # -- drivers -------------------------------------------------------------------------------------------------------
+    async def _read_frames(self, queue: asyncio.Queue[Frame | None]) -> None:
+        """Lockstep: frames into ``queue`` (None once the camera is gone)."""
+        frames = self.source.frames()
+        try:
+            async for frame in frames:
+                queue.put_nowait(frame)
+        except CameraError as exc:
+            self._camera_lost(exc)
+        finally:
+            queue.put_nowait(None)
+            await frames.aclose()  # type: ignore[attr-defined]
+
+    def _camera_lost(self, exc: CameraError) -> None:
+        self.outcome.camera_lost = True
+        logger.error("camera lost: %s (the perception-silence failsafe acts)", exc)
+        t_s = self.link.poses.latest_t_s
+        self.recorder.write("error", t_s, where="camera", error=str(exc))
+
+    async def _frame_of(self, tick: Tick, queue: asyncio.Queue[Frame | None]) -> Frame | None:
+        """Lockstep: the frame the simulator sent before ``tick`` (None, counted, if it never comes)."""
+        assert self.lockstep is not None
+        assert tick.frame_seq is not None
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + self.lockstep.tick_timeout_s
+        while True:
+            frame, self._early_frame = self._early_frame, None
+            if frame is None:
+                try:
+                    frame = await asyncio.wait_for(queue.get(), max(0.0, deadline - loop.time()))
+                except asyncio.TimeoutError:
+                    frame = None
+                if frame is None:  # the camera is gone (or silent past the deadline)
+                    if not self.outcome.camera_lost:
+                        queue.put_nowait(None)
+                    self.outcome.frames_missing += 1
+                    return None
+            if frame.seq == tick.frame_seq:
+                return frame
+            if frame.seq > tick.frame_seq:  # ours never came
+                self._early_frame = frame
+                self.outcome.frames_missing += 1
+                return None
+
+    async def _lockstep_loop(self) -> None:
+        assert self.lockstep is not None
+        queue: asyncio.Queue[Frame | None] = asyncio.Queue()
+        reader = asyncio.create_task(self._read_frames(queue), name="frames")
+        link_lost_after_s = self.config.vehicle.link_lost_after_s
+        try:
+            while not self._done.is_set():
+                tick = await self.lockstep.next_tick()
+
+                def pose_at_tick(t_s: float = tick.t_s) -> bool:
+                    latest = self.link.poses.latest_t_s
+                    return latest is not None and latest >= t_s - CLOCK_RESOLUTION_S
+
+                try:
+                    await self.link.wait_for(pose_at_tick, time.monotonic() + link_lost_after_s, "the tick's pose")
+                except VehicleError:
+                    self._link_lost(link_lost_after_s)
+                    return
+                if tick.frame_seq is not None and not self.outcome.camera_lost:
+                    frame = await self._frame_of(tick, queue)
+                    if frame is not None:
+                        await self.on_frame(frame)
+                state = self.vehicle_state()
+                if state is not None and not self._done.is_set():
+                    await self.on_tick(state)
+                self.lockstep.ack(tick, self._tick_setpoint)
+                self._tick_setpoint = None
+        finally:
+            reader.cancel()
+            await asyncio.gather(reader, return_exceptions=True)
+
+    async def _free_frames(self) -> None:
+        frames = self.source.frames()
+        try:
+            async for frame in frames:
+                await self.on_frame(frame)
+        except CameraError as exc:
+            self._camera_lost(exc)
+        finally:
+            await frames.aclose()  # type: ignore[attr-defined]
+        await self._done.wait()  # no more frames: the silence failsafe decides from here
+
+    async def _free_ticks(self) -> None:
+        link_lost_after_s = self.config.vehicle.link_lost_after_s
+        while not self._done.is_set():
+            last_telemetry = self.link.status.last_telemetry_wall_s
+            if last_telemetry is not None and time.monotonic() - last_telemetry > link_lost_after_s:
+                self._link_lost(time.monotonic() - last_telemetry)
+                return
+            state = self.vehicle_state()
+            if state is not None:
+                await self.on_tick(state)
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(self._done.wait(), TICK_PERIOD_S)
+
+    def _link_lost(self, silent_s: float) -> None:
+        self.outcome.link_lost = True
+        self._commanding = False
+        self._offboard = False
+        state = self.vehicle_state()
+        self.recorder.write("failsafe", state.t_s if state else None, reason="link lost: stop commanding")
+        logger.error("link lost: no telemetry for %.1f s; the autopilot's failsafe acts", silent_s)
+        if self.lockstep is not None:
+            self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act
+        self._done.set()
+
+    async def _beat(self) -> None:
+        """The event loop's heartbeat for the stall watchdog."""
         while not self._done.is_set():
             self._beat_wall = time.monotonic()
-            now = time.monotonic()
-            status = self.link.status
-            state = self.vehicle_state()
-            phase = self.guidance.phase
-            last_telemetry = status.last_telemetry_wall_s
-            if last_telemetry is not None and now - last_telemetry > cfg.vehicle.link_lost_after_s:
-                self.outcome.link_lost = True
-                self._commanding = False
-                self.recorder.write("failsafe", state.t_s if state else None, reason="link lost: stop commanding")
-                logger.error("link lost: no telemetry for %.1f s; the autopilot's failsafe acts", now - last_telemetry)
-                self._done.set()
-                return
-            if state is not None:
-                if self._offboard and status.mode not in (FlightMode.OFFBOARD, FlightMode.UNKNOWN) and not self.dry_run:
-                    self._offboard = False
-                    self._commanding = False  # never take control back in this flight
-                    await self.apply(self.guidance.pilot_took_over(state.t_s, status.mode.value))
-                    self._done.set()
-                    return
-                if phase is LandingPhase.LAND and not status.in_air:
-                    self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
-                    await self.apply(self.guidance.landed(state.t_s))
-                    self._done.set()
-                    return
-                decision = self.guidance.perception_silent(state, now - self._last_frame_wall)
-                if decision is not None:
-                    await self.apply(decision)
-                    if self.guidance.phase in TERMINAL:
-                        self._done.set()
-                        return
-            with contextlib.suppress(asyncio.TimeoutError):  # the supervisor's 10 Hz tick
-                await asyncio.wait_for(self._done.wait(), 0.1)
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(self._done.wait(), self.config.vehicle.decision_watchdog_s / 5)
 
     def _stall_watchdog(self) -> None:
         limit = self.config.vehicle.decision_watchdog_s
@@ -277,20 +470,20 @@ class FlightApp:
     async def run(self, timeout_s: float) -> FlightOutcome:
         """Connect, (take off,) land safely or end in a defined failsafe, within ``timeout_s`` of wall time."""
         cfg = self.config
+        wall0, cpu0 = time.monotonic(), time.process_time()
         self.recorder.write("start", None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
+        await self.source.open()  # a missing camera fails the start, before the vehicle is touched
         await self.link.connect(cfg.vehicle.connect_timeout_s)
-        if cfg.start.arm_and_takeoff and not self.dry_run:
-            await self.link.arm_and_takeoff(cfg.start.takeoff_altitude_m, timeout_s=60.0)
-        await self.link.wait_for(lambda: self.vehicle_state() is not None, time.monotonic() + 10.0, "a stamped pose")
-        state = self.vehicle_state()
-        assert state is not None
-        self._last_frame_wall = time.monotonic()
-        await self.apply(self.guidance.start(state))
+        if self.lockstep is not None and not await self.lockstep.open():
+            self.lockstep = None
+        self.outcome.lockstep = self.lockstep is not None
+        self.recorder.write("clock", None, lockstep=self.outcome.lockstep)
         watchdog = threading.Thread(target=self._stall_watchdog, name="stall-watchdog", daemon=True)
         watchdog.start()
+        drivers = [self._lockstep_loop()] if self.lockstep is not None else [self._free_frames(), self._free_ticks()]
         tasks: list[asyncio.Task[Any]] = [
-            asyncio.create_task(self._perception(), name="perception"),
-            asyncio.create_task(self._supervise(), name="supervisor"),
+            *(asyncio.create_task(driver) for driver in drivers),
+            asyncio.create_task(self._beat(), name="beat"),
             asyncio.create_task(self._done.wait(), name="done"),
         ]
         try:
@@ -307,5 +500,10 @@ class FlightApp:
             self._stop.set()
             watchdog.join(timeout=2.0)
             self._executor.shutdown(wait=True)
+            if self.lockstep is not None:
+                self.lockstep.release()
+                self.lockstep.close()
+            self.outcome.wall_s = time.monotonic() - wall0
+            self.outcome.cpu_s = time.process_time() - cpu0
             self.recorder.write("end", None, outcome=self.outcome)
         return self.outcome

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import enum
 from pathlib import Path
+from urllib.parse import urlparse
 
 from pydantic import Field, field_validator
 
@@ -85,11 +86,47 @@ class CameraSourceConfig(StrictModel):
     )
 
 
+class SimulatorConfig(StrictModel):
+    """Stepping with a simulator (the bundled SITL); absent on a real vehicle."""
+
+    lockstep_url: str | None = Field(
+        default=None,
+        description="udp://HOST:PORT of the SITL's control channel (4560 + instance). The companion subscribes to "
+        "its ticks; a SITL that runs free says so and the companion runs free too. None: never step.",
+    )
+    tick_timeout_s: float = Field(default=30.0, gt=0.0, le=600.0, description="Wall time to wait for a tick.")
+
+    @field_validator("lockstep_url")
+    @classmethod
+    def _udp(cls, url: str | None) -> str | None:
+        if url is not None:
+            parsed = urlparse(url)
+            try:
+                port = parsed.port
+            except ValueError:
+                port = None
+            if parsed.scheme != "udp" or not parsed.hostname or port is None:
+                raise ValueError(f"must be udp://HOST:PORT, got {url!r}")
+        return url
+
+
+class FrameFormat(str, enum.Enum):
+    """How the recorder saves frames."""
+
+    JPEG = "jpeg"
+    """Small, lossy: for looking at."""
+    PNG = "png"
+    """Lossless: ``slz replay`` re-runs the pipeline on them bit for bit."""
+
+
 class RecorderConfig(StrictModel):
     """The flight recorder."""
 
     directory: Path = Field(default=Path("runs/flights"), description="Each flight gets a sub-folder here.")
-    frame_every: int = Field(default=10, ge=0, le=10000, description="Save every n-th frame (0: none).")
+    frame_every: int = Field(
+        default=10, ge=0, le=10000, description="Save every n-th frame (0: none; 1 with png makes a replayable log)."
+    )
+    frame_format: FrameFormat = FrameFormat.JPEG
 
 
 class MissionConfig(StrictModel):
@@ -103,6 +140,7 @@ class MissionConfig(StrictModel):
     guidance: GuidanceConfig = Field(default_factory=GuidanceConfig)
     perception: PerceptionConfig = Field(default_factory=PerceptionConfig)
     recorder: RecorderConfig = Field(default_factory=RecorderConfig)
+    simulator: SimulatorConfig = Field(default_factory=SimulatorConfig)
 
 
 def load_mission_config(path: str | Path) -> MissionConfig:

@@ -3,7 +3,8 @@
 Each record is one line ``{"t_s": <vehicle clock>, "kind": ..., ...}``. The first record (``header``) holds the
 config, the model's SHA-256 and the software version. Lines are written and flushed as they come; at every phase
 change, failsafe and at close the file is also fsync'd, so a crash of the app loses at most the records since the
-last flush and never a phase change. Frames may be saved beside the log (JPEG, every ``frame_every``-th frame).
+last flush and never a phase change. Frames may be saved beside the log, every ``frame_every``-th frame: JPEG to look
+at, or PNG (lossless) for ``slz replay``.
 """
 
 from __future__ import annotations
@@ -30,18 +31,18 @@ class RecorderError(Exception):
     """The flight log could not be opened or written (which file, what happened)."""
 
 
-def _plain(value: Any) -> Any:
+def plain(value: Any) -> Any:
     """JSON-able form of dataclasses, enums, numpy values and paths; NaN and inf become None."""
     if is_dataclass(value) and not isinstance(value, type):
-        return {k: _plain(v) for k, v in asdict(value).items()}
+        return {k: plain(v) for k, v in asdict(value).items()}
     if isinstance(value, Enum):
         return value.value
     if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
+        return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
+        return plain(value.tolist())
     if isinstance(value, (np.floating, float)):
         f = float(value)
         return f if math.isfinite(f) else None
@@ -61,12 +62,15 @@ class FlightRecorder:
         Created if missing. The log is ``flight.jsonl``; frames go to ``frames/``.
     frame_every : int
         Save every n-th frame given to :meth:`frame` (0: none).
+    lossless : bool
+        PNG instead of JPEG.
     """
 
-    def __init__(self, directory: Path, frame_every: int = 0) -> None:
+    def __init__(self, directory: Path, frame_every: int = 0, lossless: bool = False) -> None:
         self.directory = directory
         self.path = directory / "flight.jsonl"
         self.frame_every = frame_every
+        self.lossless = lossless
         self._frames_seen = 0
         self.records = 0
         try:
@@ -79,7 +83,7 @@ class FlightRecorder:
         """Append one record (flushed; fsync'd for phase changes, failsafes, commands and the end)."""
         if self._file is None:
             raise RecorderError(f"flight log {self.path} is closed")
-        record = {"t_s": _plain(t_s), "kind": kind, **{k: _plain(v) for k, v in fields.items()}}
+        record = {"t_s": plain(t_s), "kind": kind, **{k: plain(v) for k, v in fields.items()}}
         try:
             self._file.write(json.dumps(record, separators=(",", ":")) + "\n")
             self._file.flush()
@@ -90,14 +94,17 @@ class FlightRecorder:
         self.records += 1
 
     def frame(self, seq: int, t_s: float, image_bgr: npt.NDArray[np.uint8]) -> Path | None:
-        """Save a frame as JPEG if it is one of every ``frame_every``; returns its path."""
+        """Save a frame (JPEG, or PNG when lossless) if it is one of every ``frame_every``; returns its path."""
         self._frames_seen += 1
         if self.frame_every <= 0 or (self._frames_seen - 1) % self.frame_every:
             return None
         folder = self.directory / "frames"
         folder.mkdir(exist_ok=True)
-        path = folder / f"{seq:07d}.jpg"
-        if not cv2.imwrite(str(path), image_bgr, [cv2.IMWRITE_JPEG_QUALITY, 90]):
+        if self.lossless:
+            path, params = folder / f"{seq:07d}.png", [cv2.IMWRITE_PNG_COMPRESSION, 1]
+        else:
+            path, params = folder / f"{seq:07d}.jpg", [cv2.IMWRITE_JPEG_QUALITY, 90]
+        if not cv2.imwrite(str(path), image_bgr, params):
             logger.warning("could not write frame %s", path)
             return None
         self.write("frame", t_s, seq=seq, path=str(path.relative_to(self.directory)))

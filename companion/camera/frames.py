@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import struct
+import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -36,15 +38,22 @@ class CameraError(Exception):
 
 @dataclass(frozen=True)
 class Frame:
-    """One camera frame: ``image_bgr`` (H, W, 3) uint8, captured at ``t_capture_s`` on the vehicle's clock."""
+    """One camera frame: ``image_bgr`` (H, W, 3) uint8, captured at ``t_capture_s`` on the vehicle's clock, and
+    ``arrival_wall_s`` (``time.monotonic()``) when the companion had all of it (latency measurements only)."""
 
     seq: int
     t_capture_s: float
     image_bgr: U8Image
+    arrival_wall_s: float = math.nan
 
 
 class FrameSource(Protocol):
     """Anything that yields frames."""
+
+    async def open(self) -> None:
+        """Open the device or connection now (raises :class:`CameraError`), so a missing camera fails the start
+        instead of the flight; :meth:`frames` opens it itself when this was not called."""
+        ...
 
     def frames(self) -> AsyncIterator[Frame]:
         """Frames in capture order until the source ends."""
@@ -73,13 +82,23 @@ class SitlFrameSource:
     def __init__(self, host: str, port: int, timeout_s: float = 10.0) -> None:
         self.host, self.port, self.timeout_s = host, port, timeout_s
         self.name = f"sitl://{host}:{port}"
+        self._connection: tuple[asyncio.StreamReader, asyncio.StreamWriter] | None = None
+
+    async def open(self) -> None:
+        """Connect to the SITL's frame stream."""
+        if self._connection is not None:
+            return
+        try:
+            self._connection = await asyncio.wait_for(asyncio.open_connection(self.host, self.port), self.timeout_s)
+        except (OSError, asyncio.TimeoutError) as exc:
+            raise CameraError(self.name, f"cannot connect: {exc or 'timed out'}") from None
 
     async def frames(self) -> AsyncIterator[Frame]:
-        """Connect, then yield frames until the SITL closes the stream."""
-        try:
-            reader, writer = await asyncio.wait_for(asyncio.open_connection(self.host, self.port), self.timeout_s)
-        except (OSError, asyncio.TimeoutError) as exc:
-            raise CameraError(self.name, f"cannot connect: {exc}") from None
+        """Connect (unless :meth:`open` did), then yield frames until the SITL closes the stream."""
+        await self.open()
+        assert self._connection is not None
+        reader, writer = self._connection
+        self._connection = None  # one stream per connection
         try:
             while True:
                 try:
@@ -98,7 +117,7 @@ class SitlFrameSource:
                 if header.get("encoding") != "bgr8" or payload_len != h * w * 3:
                     raise CameraError(self.name, f"unsupported frame {header} with {payload_len} bytes")
                 image = np.frombuffer(payload, dtype=np.uint8).reshape(h, w, 3)
-                yield Frame(int(header["seq"]), float(header["t_capture_s"]), image)
+                yield Frame(int(header["seq"]), float(header["t_capture_s"]), image, time.monotonic())
         finally:
             writer.close()
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from urllib.parse import urlparse
@@ -55,17 +56,31 @@ class OpenCvFrameSource:
             self._target, self._backend = url, cv2.CAP_FFMPEG
         else:
             raise CameraError(url, f"unsupported scheme {parsed.scheme!r}")
+        self._capture: cv2.VideoCapture | None = None
 
-    async def frames(self) -> AsyncIterator[Frame]:
-        """Open the source and yield frames until it ends (files) or fails."""
+    async def open(self) -> None:
+        """Open the device, stream or file."""
+        if self._capture is not None:
+            return
 
         def open_capture() -> cv2.VideoCapture:
             return cv2.VideoCapture(self._target, self._backend)
 
-        capture = await asyncio.wait_for(asyncio.to_thread(open_capture), self.timeout_s)
         try:
-            if not capture.isOpened():
-                raise CameraError(self.url, "cannot open")
+            capture = await asyncio.wait_for(asyncio.to_thread(open_capture), self.timeout_s)
+        except asyncio.TimeoutError:
+            raise CameraError(self.url, f"cannot open within {self.timeout_s:g} s") from None
+        if not capture.isOpened():
+            capture.release()
+            raise CameraError(self.url, "cannot open")
+        self._capture = capture
+
+    async def frames(self) -> AsyncIterator[Frame]:
+        """Open the source (unless :meth:`open` did) and yield frames until it ends (files) or fails."""
+        await self.open()
+        capture, self._capture = self._capture, None
+        assert capture is not None
+        try:
             start_s = self.vehicle_time_s()
             seq = 0
             while True:
@@ -83,7 +98,7 @@ class OpenCvFrameSource:
                     t_s = self.vehicle_time_s() - self.latency_s
                 if image.ndim == 2:
                     image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-                yield Frame(seq, t_s, np.ascontiguousarray(image, dtype=np.uint8))
+                yield Frame(seq, t_s, np.ascontiguousarray(image, dtype=np.uint8), time.monotonic())
                 seq += 1
         finally:
             capture.release()

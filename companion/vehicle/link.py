@@ -74,6 +74,11 @@ class VehicleLink(Protocol):
         """Arm and climb to ``altitude_m`` (SITL and benches; never in a dry run)."""
         ...
 
+    async def take_off(self, altitude_m: float) -> None:
+        """Arm and command a takeoff to ``altitude_m``; returns once the autopilot accepted both (it does not wait
+        for the climb). :class:`VehicleError` when refused."""
+        ...
+
     async def start_offboard(self, setpoint: Setpoint) -> None:
         """Send ``setpoint`` and switch to OFFBOARD."""
         ...

@@ -182,12 +182,9 @@ class MavsdkVehicleLink:
 
     async def arm_and_takeoff(self, altitude_m: float, timeout_s: float) -> None:
         """Wait until armable, arm, take off and wait for ``altitude_m`` (within 0.5 m), all within ``timeout_s``."""
-        action, _ = self._plugins()
         deadline = time.monotonic() + timeout_s
         await self.wait_for(lambda: self.status.armable and self.status.local_position_ok, deadline, "armable")
-        await self._call("set takeoff altitude", lambda: action.set_takeoff_altitude(altitude_m))
-        await self._call("arm", action.arm)
-        await self._call("takeoff", action.takeoff)
+        await self.take_off(altitude_m)
 
         def high_enough() -> bool:
             t = self.poses.latest_t_s
@@ -195,6 +192,13 @@ class MavsdkVehicleLink:
             return pose is not None and pose.altitude_m >= altitude_m - 0.5
 
         await self.wait_for(high_enough, deadline, f"takeoff to {altitude_m:g} m")
+
+    async def take_off(self, altitude_m: float) -> None:
+        """Set the takeoff altitude, arm and take off; returns when the autopilot has acknowledged all three."""
+        action, _ = self._plugins()
+        await self._call("set takeoff altitude", lambda: action.set_takeoff_altitude(altitude_m))
+        await self._call("arm", action.arm)
+        await self._call("takeoff", action.takeoff)
 
     async def wait_for(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
         """Wait until ``condition()`` holds, re-checked at every telemetry update, until ``deadline`` (monotonic s).

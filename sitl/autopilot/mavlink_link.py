@@ -70,6 +70,7 @@ class MavlinkLink:
         host = "127.0.0.1" if bind_address in ("", "0.0.0.0") else bind_address
         self.remote: tuple[str, int] = (host, remote_port)
         self.peer_seen = False
+        self.cut = False  # a simulated link loss: nothing goes out, everything coming in is discarded
         self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._mav.robust_parsing = True
 
@@ -86,6 +87,8 @@ class MavlinkLink:
         """Pack and send one message to the current remote; network errors are logged, not raised."""
         buf = msg.pack(self._mav)
         self._mav.seq = (self._mav.seq + 1) % 256
+        if self.cut:
+            return
         try:
             self._sock.sendto(buf, self.remote)
             self.stats.sent += 1
@@ -105,6 +108,8 @@ class MavlinkLink:
                 if exc.errno == errno.ECONNREFUSED:
                     continue
                 raise
+            if self.cut:
+                continue
             parser = mavlink.MAVLink(None)
             parser.robust_parsing = True
             try:

@@ -1,0 +1,182 @@
+"""``slz replay``: re-run the pipeline and the landing logic on a recorded flight and check that they decide the same.
+
+A replayable log is one recorded with every processed frame saved losslessly (``recorder.frame_every: 1``,
+``frame_format: png``). The replay takes the config from the log's header, feeds each frame with the pose it was paired
+with, and each decision's inputs (the vehicle state, and for ticks the silence or the mode) to a fresh pipeline and
+state machine, in the logged order. Every recomputed track list, target and decision is compared with the logged one
+after the same JSON encoding: a replay on the machine that flew reproduces the flight exactly, so any difference is a
+change of behaviour (a regression, or a different model). Optionally it writes the annotated camera video.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from companion.app.mission import MissionConfig
+from companion.app.recorder import plain, read_log
+from companion.guidance.geofence import Geofence
+from companion.guidance.landing import Decision, LandingGuidance, VehicleState
+from companion.perception.errors import PerceptionError
+from companion.perception.geometry import Pose
+from companion.perception.pipeline import FrameResult, SlzPipeline
+from companion.perception.visualize import draw_camera_overlay
+
+logger = logging.getLogger(__name__)
+
+MAX_LISTED = 20
+
+
+class ReplayError(Exception):
+    """The log cannot be replayed (which file, what is missing)."""
+
+
+@dataclass
+class ReplayReport:
+    """What a replay found: counts and the first differences (``MAX_LISTED`` at most)."""
+
+    frames: int = 0
+    decisions: int = 0
+    frame_mismatches: int = 0
+    decision_mismatches: int = 0
+    differences: list[str] = field(default_factory=list)
+
+    @property
+    def identical(self) -> bool:
+        """Every frame result and decision matched."""
+        return self.frame_mismatches == 0 and self.decision_mismatches == 0
+
+    def note(self, what: str) -> None:
+        """Keep a difference (the first ``MAX_LISTED``)."""
+        if len(self.differences) < MAX_LISTED:
+            self.differences.append(what)
+
+
+def _json(value: Any) -> Any:
+    """``value`` as the recorder wrote it (so floats compare exactly after the round trip)."""
+    return json.loads(json.dumps(plain(value), separators=(",", ":")))
+
+
+class VideoWriter:
+    """The annotated camera view (occupancy, zones, target, phase) as an MP4 file."""
+
+    def __init__(self, path: Path, rate_hz: float) -> None:
+        self.path = path
+        self.rate_hz = rate_hz
+        self._writer: cv2.VideoWriter | None = None
+
+    def add(self, image_bgr: np.ndarray, caption: str) -> None:
+        """Append one frame with a caption along its top edge."""
+        if self._writer is None:
+            h, w = image_bgr.shape[:2]
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fourcc = cv2.VideoWriter_fourcc(*"mp4v")  # type: ignore[attr-defined]
+            self._writer = cv2.VideoWriter(str(self.path), fourcc, self.rate_hz, (w, h))
+            if not self._writer.isOpened():
+                raise ReplayError(f"cannot write video {self.path}")
+        out = image_bgr.copy()
+        cv2.rectangle(out, (0, 0), (out.shape[1], 22), (0, 0, 0), -1)
+        cv2.putText(out, caption, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+        self._writer.write(out)
+
+    def close(self) -> None:
+        """Finish the file."""
+        if self._writer is not None:
+            self._writer.release()
+            self._writer = None
+
+
+def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float = 10.0) -> ReplayReport:
+    """Replay the flight in ``log_dir`` (its ``flight.jsonl`` and ``frames/``); see the module docstring.
+
+    Raises
+    ------
+    ReplayError
+        No header, or a processed frame that was not saved losslessly.
+    """
+    records = read_log(log_dir / "flight.jsonl")
+    header = next((r for r in records if r["kind"] == "header"), None)
+    if header is None:
+        raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
+    config = MissionConfig.model_validate(header["config"])
+    frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in records if r["kind"] == "frame"}
+    pipeline = SlzPipeline.from_config(config.perception)
+    zones = config.perception.zones
+    guidance = LandingGuidance(config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m)
+    report = ReplayReport()
+    results: dict[int, FrameResult] = {}
+    video = VideoWriter(video_path, video_rate_hz) if video_path is not None else None
+    phase = "idle"
+    try:
+        for record in records:
+            kind = record["kind"]
+            if kind == "frame_result":
+                seq = int(record["seq"])
+                path = frame_paths.get(seq)
+                if path is None or path.suffix != ".png":
+                    raise ReplayError(
+                        f"frame {seq} was not saved losslessly: record with recorder.frame_every 1 and "
+                        "frame_format png to replay"
+                    )
+                raw = cv2.imread(str(path), cv2.IMREAD_COLOR)
+                if raw is None:
+                    raise ReplayError(f"cannot read {path}")
+                image = np.asarray(raw, dtype=np.uint8)
+                pose = Pose(np.asarray(record["T_world_body"], dtype=np.float64))
+                try:
+                    result = pipeline.process(image, pose, float(record["t_s"]))
+                except PerceptionError as exc:
+                    report.frame_mismatches += 1
+                    report.note(f"frame {seq}: the pipeline failed in replay: {exc}")
+                    continue
+                results[seq] = result
+                report.frames += 1
+                for name in ("tracks", "target"):
+                    if _json(getattr(result, name)) != record[name]:
+                        report.frame_mismatches += 1
+                        report.note(f"frame {seq} (t = {record['t_s']:.2f} s): {name} differ")
+                        break
+                if video is not None:
+                    altitude = -float(pose.position_ned_m[2])
+                    caption = f"t {record['t_s']:6.1f} s  alt {altitude:5.1f} m  {phase}"
+                    video.add(draw_camera_overlay(image, result, pipeline.projector), caption)
+            elif kind == "decision":
+                decision = _decide(guidance, record, results)
+                report.decisions += 1
+                phase = f"{record['decision']['phase']}: {record['decision']['reason']}"[:70]
+                if decision is None or _json(decision) != record["decision"]:
+                    report.decision_mismatches += 1
+                    got = "nothing" if decision is None else f"{decision.phase.value} ({decision.reason})"
+                    want = f"{record['decision']['phase']} ({record['decision']['reason']})"
+                    report.note(f"decision at t = {record['t_s']:.2f} s ({record['source']}): {got}, logged {want}")
+    finally:
+        if video is not None:
+            video.close()
+    return report
+
+
+def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int, FrameResult]) -> Decision | None:
+    """Call the state machine as the flight did for this decision record."""
+    source = record.get("source")
+    state = VehicleState(**record["state"])
+    inputs = record.get("inputs") or {}
+    calls: dict[str, Callable[[], Decision | None]] = {
+        "start": lambda: guidance.start(state),
+        "silence": lambda: guidance.perception_silent(state, float(inputs["silent_s"])),
+        "landed": lambda: guidance.landed(state.t_s),
+        "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
+    }
+    if source == "frame":
+        result = results.get(int(inputs["seq"]))
+        return None if result is None else guidance.on_frame(result, state)
+    call = calls.get(str(source))
+    if call is None:
+        raise ReplayError(f"decision at t = {record['t_s']} s has no known source ({source!r})")
+    return call()

@@ -1,0 +1,153 @@
+"""The companion's side of a simulator's lockstep: one tick per camera frame, acknowledged once it is handled.
+
+A simulator in lockstep (the bundled SITL, ``slz sitl --lockstep``) stops its clock at every tick until the client
+acknowledges it. Before a tick it has sent the tick's camera frame (``frame_seq``; None when the camera delivers
+nothing) and the vehicle's pose stamped at the tick instant. The companion handles the frame, decides, sends its
+commands and then acknowledges, saying what the simulator must have received first (the position setpoint it sent
+while handling the tick): MAVSDK re-sends setpoints on its own thread, so the companion cannot count its messages,
+and an acknowledgement must never overtake them. The result: the same seed gives the same flight at any speed.
+
+On a real vehicle there is no lockstep and nothing here runs; the protocol is JSON over UDP on the simulator's
+control port (``udp://127.0.0.1:4560``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import urlparse
+
+logger = logging.getLogger(__name__)
+
+
+class LockstepError(Exception):
+    """The simulator's lockstep channel failed (what, and which channel)."""
+
+    def __init__(self, url: str, what: str) -> None:
+        super().__init__(f"{url}: {what}")
+        self.url = url
+
+
+@dataclass(frozen=True)
+class Tick:
+    """One lockstep tick: its number, the simulated time (s) and the frame sent before it (None: no frame)."""
+
+    seq: int
+    t_s: float
+    frame_seq: int | None
+
+
+class _Protocol(asyncio.DatagramProtocol):
+    def __init__(self, queue: asyncio.Queue[dict[str, Any]]) -> None:
+        self.queue = queue
+        self.malformed = 0
+
+    def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
+        try:
+            event = json.loads(data)
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            self.malformed += 1  # dropped and counted, never raised
+            return
+        if isinstance(event, dict):
+            self.queue.put_nowait(event)
+        else:
+            self.malformed += 1
+
+
+class LockstepClient:
+    """Subscribe to a simulator's ticks, wait for them, acknowledge them.
+
+    Parameters
+    ----------
+    url : str
+        ``udp://HOST:PORT`` of the simulator's control channel.
+    tick_timeout_s : float
+        Longest wall-clock wait for a tick or a reply.
+    """
+
+    def __init__(self, url: str, tick_timeout_s: float = 30.0) -> None:
+        parsed = urlparse(url)
+        if parsed.scheme != "udp" or not parsed.hostname or not parsed.port:
+            raise LockstepError(url, "expected udp://HOST:PORT")
+        self.url = url
+        self.address = (parsed.hostname, parsed.port)
+        self.tick_timeout_s = tick_timeout_s
+        self.period_s = math.nan
+        self._queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._transport: asyncio.DatagramTransport | None = None
+        self._protocol: _Protocol | None = None
+
+    async def open(self) -> bool:
+        """Subscribe; True when the simulator steps with us, False when it runs free (it said so)."""
+        loop = asyncio.get_running_loop()
+        try:
+            transport, protocol = await loop.create_datagram_endpoint(
+                lambda: _Protocol(self._queue), local_addr=("127.0.0.1", 0)
+            )
+        except OSError as exc:
+            raise LockstepError(self.url, f"cannot open a socket: {exc}") from None
+        self._transport, self._protocol = transport, protocol
+        self._send({"cmd": "lockstep_subscribe", "id": 1})
+        reply = await self._next(lambda e: e.get("id") == 1, "the reply to lockstep_subscribe")
+        if reply.get("event") == "error":
+            logger.info("%s runs free (%s): no lockstep", self.url, reply.get("error"))
+            self.close()
+            return False
+        self.period_s = float(reply.get("tick_period_s", math.nan))
+        logger.info("lockstep with %s, tick %.3f s", self.url, self.period_s)
+        return True
+
+    def _send(self, request: dict[str, Any]) -> None:
+        if self._transport is None:
+            raise LockstepError(self.url, "not open")
+        self._transport.sendto(json.dumps(request).encode(), self.address)
+
+    async def _next(self, wanted: Any, what: str) -> dict[str, Any]:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + self.tick_timeout_s
+        while True:
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                raise LockstepError(self.url, f"no {what} within {self.tick_timeout_s:g} s")
+            try:
+                event = await asyncio.wait_for(self._queue.get(), remaining)
+            except asyncio.TimeoutError:
+                continue
+            if wanted(event):
+                return event
+
+    async def next_tick(self) -> Tick:
+        """The next tick (raises :class:`LockstepError` after ``tick_timeout_s`` of silence)."""
+        event = await self._next(lambda e: e.get("event") == "tick", "tick")
+        frame_seq = event.get("frame_seq")
+        return Tick(int(event["seq"]), float(event["t_s"]), None if frame_seq is None else int(frame_seq))
+
+    def ack(self, tick: Tick, setpoint_ned_yaw_rad: tuple[float, float, float, float] | None = None) -> None:
+        """Let the simulator pass ``tick`` once it has received ``setpoint_ned_yaw_rad`` (north, east, down m; yaw rad),
+        the position setpoint sent while handling the tick (None: nothing to wait for)."""
+        expect: dict[str, Any] = {}
+        if setpoint_ned_yaw_rad is not None:
+            expect["setpoint"] = [float(v) for v in setpoint_ned_yaw_rad]
+        self._send({"cmd": "lockstep_ack", "seq": tick.seq, "expect": expect})
+
+    def release(self) -> None:
+        """Leave the lockstep: the simulator runs free from here (its own failsafes act without us)."""
+        if self._transport is not None:
+            with contextlib.suppress(OSError):
+                self._send({"cmd": "lockstep_release"})
+
+    @property
+    def malformed(self) -> int:
+        """Datagrams that were not JSON objects (dropped)."""
+        return 0 if self._protocol is None else self._protocol.malformed
+
+    def close(self) -> None:
+        """Close the socket (idempotent)."""
+        if self._transport is not None:
+            self._transport.close()
+            self._transport = None

@@ -1,0 +1,308 @@
+"""One seeded landing mission: the SITL and the companion (``slz fly``) as two processes in lockstep, and its outcome
+measured on the SITL's ground truth.
+
+The companion runs with ``mission_configs/sitl.yaml`` (or another mission config) moved onto the SITL instance's
+ports; only the ports, the output folder and the given overrides change. The SITL runs at full speed in lockstep and
+writes its ground truth (vehicle, landed state, every person) at each frame instant, which the companion never sees.
+The same seed and overrides give the same mission on any machine at any speed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from companion.app.recorder import read_log
+from sitl.config import SitlConfig
+from sitl.process import SitlProcess
+
+logger = logging.getLogger(__name__)
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_MISSION_CONFIG = REPO_ROOT / "mission_configs" / "sitl.yaml"
+SETTLE_WALL_S = 60.0  # after the companion ends: how long the SITL may run to finish an autopilot landing
+
+
+class MissionError(Exception):
+    """A mission could not be flown (which process, what happened, the end of its log)."""
+
+
+def deep_merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``overrides`` merged in, recursively for nested mappings."""
+    out = dict(base)
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+@dataclass(frozen=True)
+class MissionSpec:
+    """What to fly.
+
+    Attributes
+    ----------
+    seed : int
+        The scene, its people and their walks, the weather, the sensor noise.
+    run_dir : Path
+        Everything of the mission goes here (``flight/``, ``truth.jsonl``, logs, ``result.json``).
+    instance : int
+        SITL instance (its ports); parallel missions need different ones.
+    mission_config : Path
+        The companion's mission config.
+    sitl_overrides : dict
+        Merged into the SITL config (``scenario``, ``faults``, ``wind_ned_mps``...).
+    mission_overrides : dict
+        Merged into the mission config (``guidance``, ``perception``...).
+    record_frames : bool
+        Save every processed frame losslessly (for ``slz replay`` and the annotated video).
+    timeout_s : float
+        Wall-clock limit of the companion.
+    """
+
+    seed: int
+    run_dir: Path
+    instance: int = 0
+    mission_config: Path = DEFAULT_MISSION_CONFIG
+    sitl_overrides: dict[str, Any] = field(default_factory=dict)
+    mission_overrides: dict[str, Any] = field(default_factory=dict)
+    record_frames: bool = False
+    timeout_s: float = 600.0
+
+
+@dataclass
+class MissionResult:
+    """How one mission went, from the companion's log and the SITL's ground truth.
+
+    Distances are horizontal, metres; a person's distance is to the edge of their body (centre distance minus body
+    radius). ``nearest_person_m`` is at the touchdown instant (NaN when the vehicle did not touch down).
+    """
+
+    seed: int
+    phase: str
+    reason: str
+    companion_exit_code: int
+    landed: bool
+    touchdown_ne_m: tuple[float, float] | None
+    touchdown_t_s: float | None
+    nearest_person_m: float
+    people_within_1m: int
+    people_within_1_5m: int
+    target_radius_m: float | None
+    failsafes: list[str]
+    sim_time_s: float
+    wall_s: float
+    run_dir: str
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-able form (NaN as None)."""
+        out = asdict(self)
+        for key, value in out.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                out[key] = None
+        return out
+
+
+class CompanionProcess:
+    """One ``slz fly`` child process: start, wait with a deadline, terminate, kill."""
+
+    def __init__(self, config_path: Path, out_dir: Path, timeout_s: float, log_path: Path) -> None:
+        self.command = [sys.executable, "-m", "companion.cli", "fly", "--config", str(config_path)]
+        self.command += ["--out", str(out_dir), "--timeout", f"{timeout_s:g}"]
+        self.log_path = log_path
+        self._proc: subprocess.Popen[bytes] | None = None
+
+    def start(self) -> CompanionProcess:
+        """Start it (its output goes to ``log_path``)."""
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        with self.log_path.open("wb") as log:
+            env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+            self._proc = subprocess.Popen(self.command, cwd=REPO_ROOT, stdout=log, stderr=subprocess.STDOUT, env=env)
+        return self
+
+    def wait(self, timeout_s: float) -> int:
+        """Its exit code; :class:`MissionError` (after stopping it) if it runs past ``timeout_s``."""
+        assert self._proc is not None
+        try:
+            return self._proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.stop()
+            raise MissionError(f"the companion ran past {timeout_s:g} s:\n{self.log_tail()}") from None
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Terminate, then kill."""
+        proc = self._proc
+        if proc is None or proc.poll() is not None:
+            return
+        proc.terminate()
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+    def log_tail(self, lines: int = 30) -> str:
+        """The end of its output."""
+        try:
+            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
+        except OSError:
+            return "(no log)"
+
+
+def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
+    """The SITL and mission configs of ``spec`` in its run folder; returns their paths."""
+    spec.run_dir.mkdir(parents=True, exist_ok=True)
+    ports = SitlConfig(instance=spec.instance)
+    sitl_section = deep_merge(
+        {
+            "seed": spec.seed,
+            "lockstep": True,
+            "speed_factor": 0.0,
+            "camera": {"enabled": True},
+            "truth_path": str(spec.run_dir / "truth.jsonl"),
+            "log_path": str(spec.run_dir / "trajectory.csv"),
+        },
+        spec.sitl_overrides,
+    )
+    sitl_path = spec.run_dir / "sitl.yaml"
+    sitl_path.write_text(yaml.safe_dump({"sitl": sitl_section}, sort_keys=False))
+    mission = yaml.safe_load(spec.mission_config.read_text())
+    frames = {"frame_every": 1, "frame_format": "png"} if spec.record_frames else {"frame_every": 0}
+    mission = deep_merge(
+        mission,
+        {
+            "vehicle": {"url": f"udpin://0.0.0.0:{ports.api_port_remote}"},
+            "camera": {"url": f"sitl://127.0.0.1:{ports.frame_port}"},
+            "simulator": {"lockstep_url": f"udp://127.0.0.1:{ports.control_port}"},
+            "recorder": {"directory": str(spec.run_dir), **frames},
+        },
+    )
+    mission = deep_merge(mission, spec.mission_overrides)
+    mission_path = spec.run_dir / "mission.yaml"
+    mission_path.write_text(yaml.safe_dump(mission, sort_keys=False))
+    return sitl_path, mission_path
+
+
+def read_truth(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The ground-truth log: its header (``radii_m``, ``positions_ne_m`` at the start, ``moving``) and records."""
+    lines = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    if not lines or lines[0].get("kind") != "header":
+        raise MissionError(f"{path}: no ground-truth header")
+    return lines[0], lines[1:]
+
+
+def people_at(header: dict[str, Any], record: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (N, 2) north/east m and body radii (N,) m at a ground-truth record."""
+    positions = record.get("positions_ne_m", header["positions_ne_m"])
+    return np.asarray(positions, dtype=np.float64).reshape(-1, 2), np.asarray(header["radii_m"], dtype=np.float64)
+
+
+def touchdown(records: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The first ground-truth record on the ground after having flown, or None."""
+    flown = False
+    for record in records:
+        if not record["on_ground"]:
+            flown = True
+        elif flown:
+            return record
+    return None
+
+
+def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
+    """The mission's result from its flight log and ground truth."""
+    header, records = read_truth(spec.run_dir / "truth.jsonl")
+    flight = read_log(spec.run_dir / "flight" / "flight.jsonl")
+    end = next((r for r in reversed(flight) if r["kind"] == "end"), None)
+    outcome = end["outcome"] if end else {}
+    land = next(
+        (r for r in reversed(flight) if r["kind"] == "decision" and r["decision"]["kind"] == "land"),
+        None,
+    )
+    target = land["decision"]["target"] if land else None
+    down = touchdown(records)
+    nearest, within_1, within_15 = math.nan, 0, 0
+    touchdown_ne = None
+    if down is not None:
+        n, e = down["position_ned_m"][0], down["position_ned_m"][1]
+        touchdown_ne = (float(n), float(e))
+        positions, radii = people_at(header, down)
+        if len(radii):
+            edge = np.hypot(positions[:, 0] - n, positions[:, 1] - e) - radii
+            nearest = float(edge.min())
+            within_1, within_15 = int((edge < 1.0).sum()), int((edge < 1.5).sum())
+    return MissionResult(
+        seed=spec.seed,
+        phase=str(outcome.get("phase", "unknown")),
+        reason=str(outcome.get("reason", "")),
+        companion_exit_code=exit_code,
+        landed=down is not None,
+        touchdown_ne_m=touchdown_ne,
+        touchdown_t_s=None if down is None else float(down["t_s"]),
+        nearest_person_m=nearest,
+        people_within_1m=within_1,
+        people_within_1_5m=within_15,
+        target_radius_m=None if target is None else float(target["radius_m"]),
+        failsafes=list(outcome.get("failsafes", [])),
+        sim_time_s=float(records[-1]["t_s"]) if records else 0.0,
+        wall_s=wall_s,
+        run_dir=str(spec.run_dir),
+    )
+
+
+def _autopilot_lands(spec: MissionSpec) -> bool:
+    """Whether the vehicle comes down without the companion: it asked for a landing or a return, or it stopped
+    commanding in OFFBOARD (the autopilot's offboard-loss failsafe lands); not after a hold or a pilot takeover."""
+    path = spec.run_dir / "flight" / "flight.jsonl"
+    if not path.is_file():
+        return True
+    records = read_log(path)
+    commands = [r for r in records if r["kind"] == "command"]
+    if any(r["kind"] == "phase" and r["phase"] == "yielded" for r in records):
+        return False
+    return not commands or commands[-1]["command"] != "hold"
+
+
+def fly(spec: MissionSpec) -> MissionResult:
+    """Fly one mission (see the module docstring); writes ``result.json`` in the run folder."""
+    sitl_path, mission_path = write_configs(spec)
+    started = time.monotonic()
+    sitl = SitlProcess(["--config", str(sitl_path)], spec.instance, spec.run_dir)
+    companion = CompanionProcess(mission_path, spec.run_dir / "flight", spec.timeout_s, spec.run_dir / "companion.log")
+    try:
+        sitl.start()
+        companion.start()
+        exit_code = companion.wait(spec.timeout_s + 30.0)
+        # The companion has let go of the lockstep: an autopilot landing it asked for finishes at full speed.
+        deadline = time.monotonic() + (SETTLE_WALL_S if _autopilot_lands(spec) else 0.0)
+        while time.monotonic() < deadline and sitl.running:
+            try:
+                state = sitl.state()
+            except TimeoutError:
+                break  # it stopped (a lockstep timeout when the companion died without letting go)
+            if state["on_ground"] or not state["armed"]:
+                break
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                sitl.wait(0.1)  # paces the loop; returns early if the SITL exits
+    finally:
+        companion.stop()
+        sitl.stop()
+    wall_s = time.monotonic() - started
+    if not (spec.run_dir / "flight" / "flight.jsonl").is_file():
+        raise MissionError(f"the companion wrote no flight log (exit {exit_code}):\n{companion.log_tail()}")
+    result = evaluate(spec, exit_code, wall_s)
+    (spec.run_dir / "result.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
+    return result

@@ -1,0 +1,178 @@
+"""End-to-end landing missions: the SITL and ``slz fly`` as real processes over real UDP and TCP, the shipped model,
+lockstep (so each mission is the same on any machine at any speed), outcomes read from the SITL's ground truth.
+
+Each test reads like a flight card: the scene (seed, walkers, injected fault), what the companion must do, and the
+tolerances it is held to.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from companion.app.recorder import read_log
+from companion.guidance.geofence import Geofence, GeofenceConfig
+from sitl.mission import MissionResult, MissionSpec, fly, read_truth
+
+pytestmark = pytest.mark.sitl
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+CLEARANCE_M = 1.5  # the issue's bar: no person's body within 1.5 m of the touchdown point
+STATIC_SEED = 5
+WALKING_SEED = 6
+FAULT_AT_S = 18.0  # simulated: the companion is searching or approaching by then (takeoff ends near 13 s)
+
+
+def _fly(tmp_path: Path, name: str, seed: int, instance: int, **spec: object) -> MissionResult:
+    return fly(MissionSpec(seed=seed, run_dir=tmp_path / name, instance=instance, timeout_s=300.0, **spec))  # type: ignore[arg-type]
+
+
+def _records(run_dir: str | Path) -> list[dict[str, Any]]:
+    return read_log(Path(run_dir) / "flight" / "flight.jsonl")
+
+
+def _phases(run_dir: str | Path) -> list[tuple[float, str]]:
+    return [(float(r["t_s"]), str(r["phase"])) for r in _records(run_dir) if r["kind"] == "phase"]
+
+
+@dataclass(frozen=True)
+class Demo:
+    """``slz demo`` as a user runs it: its output and its run folder."""
+
+    stdout: str
+    run_dir: Path
+    summary: dict[str, Any]
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> Demo:
+    """The main job on a static crowd (80-120 people): one mission, every frame saved losslessly."""
+    out = tmp_path_factory.mktemp("demo")
+    command = [sys.executable, "-m", "companion.cli", "demo", "--seed", str(STATIC_SEED), "--out", str(out)]
+    done = subprocess.run(
+        [*command, "--instance", "34"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False
+    )
+    runs = [p for p in out.iterdir() if p.is_dir()]
+    assert len(runs) == 1, done.stderr[-3000:]
+    assert done.returncode == 0, done.stdout + done.stderr[-3000:]
+    return Demo(done.stdout, runs[0], json.loads((runs[0] / "summary.json").read_text()))
+
+
+def test_the_demo_lands_a_static_crowd_mission_clear_of_people(demo: Demo) -> None:
+    s = demo.summary
+    assert s["companion_exit_code"] == 0
+    assert s["phase"] == "done"
+    assert s["landed"]
+    assert s["nearest_person_m"] >= CLEARANCE_M
+    assert s["people_within_1_5m"] == 0
+    assert f"nearest person's body is {s['nearest_person_m']:.2f} m" in demo.stdout
+    phases = [p for _, p in _phases(demo.run_dir)]
+    assert phases[0] == "search"
+    assert "descent" in phases
+    assert phases[-2:] == ["land", "done"]
+
+
+def test_the_demo_writes_a_top_view_and_an_annotated_video(demo: Demo) -> None:
+    top = cv2.imread(str(demo.run_dir / "top_view.png"))
+    assert top is not None
+    assert top.shape[0] >= 400
+    assert (top != top[0, 0]).any(axis=2).mean() > 0.05  # drawn on, not blank
+    video = cv2.VideoCapture(str(demo.run_dir / "camera.mp4"))
+    frames = int(video.get(cv2.CAP_PROP_FRAME_COUNT))
+    video.release()
+    processed = sum(1 for r in _records(demo.run_dir) if r["kind"] == "frame_result")
+    assert frames == processed > 100
+    assert demo.summary["replay_identical"]
+
+
+def test_every_setpoint_stays_in_the_geofence_and_within_the_descent_rate(demo: Demo) -> None:
+    records = _records(demo.run_dir)
+    config = next(r for r in records if r["kind"] == "header")["config"]
+    fence = Geofence(GeofenceConfig.model_validate(config["geofence"]))
+    limit_mps = float(config["guidance"]["descent_rate_limit_mps"])
+    setpoints = [r["setpoint"] for r in records if r["kind"] == "command" and r["command"] == "setpoint"]
+    assert len(setpoints) > 100
+    for sp in setpoints:
+        assert fence.contains(sp["north_m"], sp["east_m"], -sp["down_m"])
+    # At the SITL's side: while the companion commanded (OFFBOARD), the true descent never exceeded the limit
+    # (10 % for the position controller's overshoot, over 0.5 s windows).
+    _, truth = read_truth(demo.run_dir / "truth.jsonl")
+    offboard = [(t["t_s"], t["position_ned_m"][2]) for t in truth if t["mode"] == "OFFBOARD"]
+    t_s, down_m = np.array(offboard).T
+    window = 5  # frames of 0.1 s
+    rates = (down_m[window:] - down_m[:-window]) / (t_s[window:] - t_s[:-window])
+    contiguous = np.isclose(t_s[window:] - t_s[:-window], window * 0.1, atol=1e-6)
+    assert rates[contiguous].max() <= 1.1 * limit_mps
+
+
+def test_slz_replay_reproduces_every_logged_decision(demo: Demo) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "companion.cli", "replay", str(demo.run_dir / "flight")],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr[-2000:]
+    assert "0 frame and 0 decision differences" in done.stdout
+    assert done.stdout.strip().endswith("identical")
+
+
+def test_a_mission_with_walking_people_lands_safely(tmp_path: Path) -> None:
+    walkers = {"scenario": {"moving_fraction": 0.2}}  # the paper's hardest condition: 20 % of people walk
+    r = _fly(tmp_path, "walking", WALKING_SEED, instance=35, sitl_overrides=walkers)
+    assert r.companion_exit_code == 0, Path(r.run_dir, "companion.log").read_text()[-3000:]
+    assert r.phase == "done"
+    assert r.landed
+    assert r.nearest_person_m >= CLEARANCE_M
+    header, _ = read_truth(Path(r.run_dir) / "truth.jsonl")
+    assert sum(header["moving"]) >= 10  # the walkers were there
+
+
+def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path) -> None:
+    fault = {"faults": [{"kind": "camera_fail", "at_s": FAULT_AT_S}]}
+    r = _fly(tmp_path, "camera", STATIC_SEED, instance=36, sitl_overrides=fault)
+    records = _records(r.run_dir)
+    config = next(x for x in records if x["kind"] == "header")["config"]
+    t1 = float(config["guidance"]["hold_after_silence_s"])
+    t2 = float(config["guidance"]["failsafe_after_silence_s"])
+    phases = _phases(r.run_dir)
+    hold_at = next(t for t, p in phases if p == "hold")
+    failsafe_at = next(t for t, p in phases if p == "failsafe")
+    frame_period_s = 0.1
+    assert FAULT_AT_S + t1 - frame_period_s <= hold_at <= FAULT_AT_S + t1 + 2 * frame_period_s
+    assert FAULT_AT_S + t2 - frame_period_s <= failsafe_at <= FAULT_AT_S + t2 + 2 * frame_period_s
+    commands = [x for x in records if x["kind"] == "command"]
+    assert commands[-1]["command"] == "land"  # the configured T2 action
+    assert r.phase == "failsafe"
+    assert r.landed  # the autopilot landed where it was
+    assert not [x for x in records if x["kind"] == "frame_result" and float(x["t_s"]) > FAULT_AT_S]
+
+
+def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path: Path) -> None:
+    fault = {"faults": [{"kind": "link_loss", "at_s": FAULT_AT_S}]}
+    r = _fly(tmp_path, "link", STATIC_SEED, instance=37, sitl_overrides=fault)
+    records = _records(r.run_dir)
+    failsafes = [x for x in records if x["kind"] == "failsafe"]
+    assert failsafes
+    assert "link lost" in str(failsafes[-1]["reason"])
+    lost_index = records.index(failsafes[-1])
+    assert not [x for x in records[lost_index:] if x["kind"] == "command"]  # nothing sent once the link was lost
+    end = next(x for x in records if x["kind"] == "end")
+    assert end["outcome"]["link_lost"]
+    # At the SITL's side: its own offboard-loss failsafe took over and landed the vehicle.
+    _, truth = read_truth(Path(r.run_dir) / "truth.jsonl")
+    modes_after = {t["mode"] for t in truth if t["t_s"] > FAULT_AT_S}
+    assert "AUTO.LAND" in modes_after
+    assert r.landed
+    assert math.isfinite(r.touchdown_t_s or math.nan)
