@@ -75,7 +75,7 @@ def run(
 
 def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: float = 27.0) -> np.ndarray:
     """North-up top view of a flown mission: ground-truth people (magenta, at touchdown or at the end), the zones
-    tracked at the landing decision (cyan), the target (yellow), the true path (grey), the touchdown (green cross)
+    tracked when the final descent began (cyan), the target (yellow), the true path (grey), the touchdown (green cross)
     and the geofence (red)."""
     header, records = read_truth(run_dir / "truth.jsonl")
     flight = read_log(run_dir / "flight" / "flight.jsonl")
@@ -100,7 +100,7 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
         cv2.circle(view, to_px(n, e), max(2, round(r * px_per_m)), PERSON_BGR, -1, cv2.LINE_AA)
     path = [to_px(r["position_ned_m"][0], r["position_ned_m"][1]) for r in records]
     if len(path) > 1:
-        cv2.polylines(view, [np.array(path, np.int32)], False, PATH_BGR, 1, cv2.LINE_AA)
+        cv2.polylines(view, [np.array(path, np.int32)], False, PATH_BGR, 2, cv2.LINE_AA)
     tracks, target = _tracks_at_landing(flight)
     for track in tracks:
         centre = to_px(track["north_m"], track["east_m"])
@@ -129,17 +129,25 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
 
 
 def _tracks_at_landing(flight: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
-    """The tracked zones of the last processed frame before the landing (or the last frame) and the target."""
+    """The tracked zones when the final descent began (the last entry into descent before the landing, or the last
+    frame) and the target landed on (or the last one)."""
     tracks: list[dict[str, Any]] = []
+    at_descent: list[dict[str, Any]] | None = None
     target = None
+    previous_phase = ""
     for record in flight:
         if record["kind"] == "frame_result":
             tracks = record["tracks"] or []
-        elif record["kind"] == "decision" and record["decision"]["target"] is not None:
-            target = record["decision"]["target"]
-            if record["decision"]["kind"] == "land":
+        elif record["kind"] == "decision":
+            decision = record["decision"]
+            if decision["target"] is not None:
+                target = decision["target"]
+            if decision["phase"] == "descent" and previous_phase != "descent":
+                at_descent = tracks
+            previous_phase = decision["phase"]
+            if decision["kind"] == "land":
                 break
-    return tracks, target
+    return (at_descent if at_descent is not None else tracks), target
 
 
 def describe(outcome: DemoOutcome) -> str:

@@ -26,7 +26,7 @@ import yaml
 
 from companion.app.recorder import read_log
 from sitl.config import SitlConfig
-from sitl.process import SitlProcess
+from sitl.process import SitlProcess, log_tail, terminate_then_kill
 
 logger = logging.getLogger(__name__)
 
@@ -145,22 +145,12 @@ class CompanionProcess:
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Terminate, then kill."""
-        proc = self._proc
-        if proc is None or proc.poll() is not None:
-            return
-        proc.terminate()
-        try:
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        if self._proc is not None:
+            terminate_then_kill(self._proc, timeout_s)
 
     def log_tail(self, lines: int = 30) -> str:
         """The end of its output."""
-        try:
-            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
-        except OSError:
-            return "(no log)"
+        return log_tail(self.log_path, lines)
 
 
 def write_configs(spec: MissionSpec) -> tuple[Path, Path]:

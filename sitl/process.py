@@ -23,6 +23,26 @@ from sitl.config import CONTROL_PORT
 logger = logging.getLogger(__name__)
 
 
+def terminate_then_kill(proc: subprocess.Popen[bytes], timeout_s: float) -> None:
+    """SIGTERM, wait up to ``timeout_s``, then SIGKILL and reap."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def log_tail(path: Path, lines: int) -> str:
+    """The last ``lines`` lines of a process's log file."""
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    except OSError:
+        return "(no log)"
+
+
 class SitlProcessError(Exception):
     """The SITL process failed to start, answer or stop (what, and the end of its log)."""
 
@@ -139,12 +159,7 @@ class SitlProcess:
             try:
                 proc.wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:
-                proc.terminate()
-                try:
-                    proc.wait(timeout=timeout_s)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+                terminate_then_kill(proc, timeout_s)
         if self._sock is not None:
             self._sock.close()
             self._sock = None
@@ -154,10 +169,7 @@ class SitlProcess:
 
     def log_tail(self, lines: int = 40) -> str:
         """The last lines of the process's log."""
-        try:
-            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
-        except OSError:
-            return "(no log)"
+        return log_tail(self.log_path, lines)
 
     def __enter__(self) -> SitlProcess:
         return self.start()

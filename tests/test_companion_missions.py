@@ -139,10 +139,16 @@ def test_a_mission_with_walking_people_lands_safely(tmp_path: Path) -> None:
     assert sum(header["moving"]) >= 10  # the walkers were there
 
 
-def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path) -> None:
-    fault = {"faults": [{"kind": "camera_fail", "at_s": FAULT_AT_S}]}
+def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path, demo: Demo) -> None:
+    # The demo's scene and seed, paced at 4x real time instead of full speed, the camera lost at 18 s.
+    fault = {"faults": [{"kind": "camera_fail", "at_s": FAULT_AT_S}], "speed_factor": 4.0}
     r = _fly(tmp_path, "camera", STATIC_SEED, instance=36, sitl_overrides=fault)
     records = _records(r.run_dir)
+    # Lockstep: the same seed decides the same at another speed, until the fault makes the flights differ.
+    before = [x["decision"] for x in records if x["kind"] == "decision" and x["t_s"] < FAULT_AT_S]
+    demo_before = [x["decision"] for x in _records(demo.run_dir) if x["kind"] == "decision" and x["t_s"] < FAULT_AT_S]
+    assert len(before) > 30
+    assert before == demo_before
     config = next(x for x in records if x["kind"] == "header")["config"]
     t1 = float(config["guidance"]["hold_after_silence_s"])
     t2 = float(config["guidance"]["failsafe_after_silence_s"])
