@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: setup demo test lint typecheck pytest bench training models clean
+.PHONY: setup demo test lint typecheck pytest bench paper-table training models clean
 
 setup: $(STAMP)
 
@@ -39,6 +39,10 @@ bench: $(STAMP)
 	$(BIN)/python bench/render.py
 	$(BIN)/python bench/density.py
 	$(BIN)/python bench/companion_latency.py
+
+# The paper's Table I at 100 runs per cell (900 missions; resumable: run it again to continue).
+paper-table: $(STAMP)
+	$(BIN)/slz campaign --spec mission_configs/campaigns/paper_table1.yaml --out runs/campaigns/paper_table1
 
 # Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
 # quantization, evaluation; about an hour on 2 cores). The drone needs neither.

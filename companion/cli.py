@@ -126,6 +126,73 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0 if report.identical else 1
 
 
+def _cmd_campaign(args: argparse.Namespace) -> int:
+    from sitl.campaign.report import build_report
+    from sitl.campaign.runner import CampaignError, read_results, run_campaign
+    from sitl.campaign.spec import load_campaign_spec
+
+    if args.action == "replay":
+        return _campaign_replay(args)
+    if args.spec is None:
+        sys.stderr.write("slz campaign: --spec is required\n")
+        return 2
+    spec = load_campaign_spec(args.spec)
+    out = Path(args.out) if args.out else Path("runs") / "campaigns" / spec.name
+    if args.report_only:
+        results = read_results(out / "results.jsonl")
+    else:
+        try:
+            results = run_campaign(
+                spec, out, workers=args.workers, keep_runs=args.keep_runs, instance_base=args.instance_base
+            )
+        except CampaignError as exc:
+            sys.stderr.write(f"slz campaign: {exc}\n")
+            return 1
+    summary = build_report(spec, results, out)
+    for name, cell in summary["cells"].items():
+        success = cell["success"]
+        sys.stdout.write(
+            f"{name}: {cell['missions']} missions, success {100 * success['value']:.1f} % "
+            f"[{100 * success['low']:.1f}, {100 * success['high']:.1f}]\n"
+        )
+    sys.stdout.write(f"wrote {out / 'report.md'}\n")
+    return 0
+
+
+def _campaign_replay(args: argparse.Namespace) -> int:
+    import json
+
+    import yaml
+
+    from companion.app.replay import replay
+    from sitl.campaign.metrics import mission_metrics
+    from sitl.campaign.runner import mission_spec, read_results
+    from sitl.campaign.spec import CampaignSpec
+    from sitl.mission import fly
+
+    folder = Path(args.spec_or_folder or "")
+    spec_path = folder / "spec.yaml"
+    if args.mission is None or not spec_path.is_file():
+        sys.stderr.write("slz campaign replay: usage: slz campaign replay CAMPAIGN_FOLDER MISSION_ID\n")
+        return 2
+    spec = CampaignSpec.model_validate(yaml.safe_load(spec_path.read_text()))
+    plan = next((p for p in spec.missions() if p.mission_id == args.mission), None)
+    if plan is None:
+        sys.stderr.write(f"slz campaign replay: no mission {args.mission!r} in {folder}\n")
+        return 2
+    out = Path(args.out) if args.out else folder / "replays" / args.mission
+    fly(mission_spec(spec, plan, out, args.instance, record_frames=True))
+    report = replay(out / "flight", video_path=out / "camera.mp4")
+    again = mission_metrics(out, plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
+    logged = next((r for r in read_results(folder / "results.jsonl") if r["mission_id"] == args.mission), None)
+    same = logged is not None and all(logged.get(k) == v for k, v in again.to_json().items())
+    sys.stdout.write(json.dumps(again.to_json(), indent=2) + "\n")
+    sys.stdout.write(f"wrote {out / 'camera.mp4'} (replay {'identical' if report.identical else 'DIFFERENT'})\n")
+    if logged is not None:
+        sys.stdout.write(f"metrics {'identical to' if same else 'DIFFERENT from'} the campaign's result\n")
+    return 0 if report.identical and (logged is None or same) else 1
+
+
 def _cmd_sitl(args: argparse.Namespace) -> int:
     if args.action == "snapshot":
         from sitl.snapshot import contact_sheet
@@ -204,6 +271,21 @@ def build_parser() -> argparse.ArgumentParser:
     fly.add_argument("--out", type=Path, help="flight log folder (default: recorder.directory/<UTC time>)")
     fly.add_argument("--timeout", type=float, default=600.0, help="wall seconds before the mission gives up")
     fly.set_defaults(func=_cmd_fly)
+
+    campaign = sub.add_parser("campaign", help="fly a campaign of seeded missions and report (or replay one mission)")
+    campaign.add_argument("action", nargs="?", choices=["run", "replay"], default="run")
+    campaign.add_argument("spec_or_folder", nargs="?", help="replay: the campaign folder")
+    campaign.add_argument("mission", nargs="?", help="replay: the mission id (condition/strategy/run)")
+    campaign.add_argument("--spec", type=Path, help="campaign spec (mission_configs/campaigns/*.yaml)")
+    campaign.add_argument("--out", type=Path, help="campaign folder (default runs/campaigns/<name>)")
+    campaign.add_argument("--workers", type=int, help="parallel missions (default: the spec's)")
+    campaign.add_argument("--keep-runs", action="store_true", help="keep every mission's logs")
+    campaign.add_argument("--report-only", action="store_true", help="rebuild the report from the results")
+    campaign.add_argument("--instance", type=int, default=69, help="replay: SITL instance")
+    campaign.add_argument(
+        "--instance-base", type=int, default=70, help="worker k flies SITL instance BASE + k (parallel campaigns)"
+    )
+    campaign.set_defaults(func=_cmd_campaign)
 
     replay = sub.add_parser("replay", help="re-run a recorded flight and check it decides the same")
     replay.add_argument("flight", type=Path, help="flight folder (flight.jsonl and frames/, recorded with png frames)")

@@ -98,6 +98,12 @@ class SitlProcess:
             except TimeoutError:
                 continue
             if reply.get("event") == "pong":
+                if reply.get("pid") not in (None, self._proc.pid):  # another SITL holds this instance's ports
+                    self.stop()
+                    raise SitlProcessError(
+                        f"instance {self.instance}: its control port is answered by another SITL (pid "
+                        f"{reply.get('pid')}); stop it or choose another instance"
+                    )
                 return self
         self.stop()
         raise SitlProcessError(f"SITL not ready within {ready_timeout_s} s:\n{self.log_tail()}")

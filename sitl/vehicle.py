@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import select
 import signal
 import time
@@ -138,6 +139,8 @@ class SitlVehicle:
         self._tick_sent_wall = math.nan
         self._lockstep_ack: dict[str, Any] | None = None
         self._lockstep_released = False
+        self._latched_setpoint: tuple[float, float, float, float] | None = None
+        self.setpoints_between_ticks = 0  # ignored: arrived between ticks and not the acknowledged setpoint
         self._faults = sorted(config.faults, key=lambda f: f.at_s)
         self.camera_failed = False  # injected: the camera delivers nothing (ticks go on without frames)
         # Ground truth and trajectory logs
@@ -268,6 +271,7 @@ class SitlVehicle:
             self._tick_seq += 1
             self._next_tick_s += self.config.lockstep_period_s
             self._tick_sent_wall = math.nan
+            self._latched_setpoint = self._last_setpoint_ned  # until the next tick, this one or none
             self.clock.resync()
             return True
         if time.monotonic() - self._tick_sent_wall > self.config.lockstep_timeout_s:
@@ -317,19 +321,32 @@ class SitlVehicle:
         for name in ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION"):
             api.send(self.telemetry.build(name, api.mav, self.clock.now_s, state, self.commander, self.battery))
 
+    def _between_ticks(self) -> bool:
+        """In lockstep and stepping (an acknowledged tick behind, the next not yet reached)."""
+        stepping = math.isnan(self._tick_sent_wall) and self.clock.now_s < self._next_tick_s - 1e-9
+        return self.config.lockstep and not self._lockstep_released and self._tick_seq > 0 and stepping
+
     def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
         """The client's MAVLink messages sent before its ack have all been received (no overtaking).
 
         Either the ack counts them (``mavlink_sent`` from ``sysid/compid``), or it says what must have arrived:
         ``expect = {"setpoint": [north_m, east_m, down_m, yaw_rad]}`` (the latest position setpoint received equals
-        it, to float32 precision) and/or ``{"commands": {"<id>": count}}`` (that many COMMAND_LONG/INT of each id).
+        it: positions exactly as float32, the yaw within 1e-4 rad) and/or ``{"commands": {"<id>": count}}`` (that
+        many COMMAND_LONG/INT of each id).
         """
         expect = ack.get("expect")
         if expect is not None:
             setpoint = expect.get("setpoint")
             if setpoint is not None:
                 last = self._last_setpoint_ned
-                if last is None or any(abs(a - float(b)) > 1e-3 for a, b in zip(last, setpoint, strict=True)):
+                if last is None:
+                    return False
+                # Positions exactly as float32 (how they travel), so a late re-send of the previous setpoint, a
+                # millimetre away, is never taken for this one; the yaw within 1e-4 rad (the sender converts it
+                # from degrees in its own precision).
+                wanted = np.asarray(setpoint[:3], dtype=np.float64).astype(np.float32)
+                arrived = np.asarray(last[:3], dtype=np.float64).astype(np.float32)
+                if not np.array_equal(arrived, wanted) or abs(last[3] - float(setpoint[3])) > 1e-4:
                     return False
             for command, count in (expect.get("commands") or {}).items():
                 if self._commands_seen.get(int(command), 0) < int(count):
@@ -444,7 +461,13 @@ class SitlVehicle:
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             if self._targets_us(msg):
                 self.setpoints_by_sender[sender] = self.setpoints_by_sender.get(sender, 0) + 1
-                self._last_setpoint_ned = (float(msg.x), float(msg.y), float(msg.z), float(msg.yaw))
+                values = (float(msg.x), float(msg.y), float(msg.z), float(msg.yaw))
+                if self._between_ticks() and self._latched_setpoint is not None and values != self._latched_setpoint:
+                    # In lockstep, inputs change only at ticks: a late re-send of an older setpoint (MAVSDK re-sends
+                    # on its own thread) must not act at a wall-clock-dependent instant.
+                    self.setpoints_between_ticks += 1
+                    return
+                self._last_setpoint_ned = values
                 self._handle_setpoint(msg)
         elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
             if self._targets_us(msg):
@@ -619,7 +642,7 @@ class SitlVehicle:
         reply: dict[str, Any] = {"event": "ack", "cmd": cmd}
         try:
             if cmd == "ping":
-                reply = {"event": "pong", "t_s": self.clock.now_s}
+                reply = {"event": "pong", "t_s": self.clock.now_s, "pid": os.getpid()}
             elif cmd == "state":
                 reply = self._truth()
             elif cmd == "pilot_mode":
@@ -693,6 +716,7 @@ class SitlVehicle:
             "api_link_cut": self.links[0].cut,
             "lockstep_tick": self._tick_seq,
             "setpoints_rejected": self.setpoints_rejected,
+            "setpoints_between_ticks": self.setpoints_between_ticks,
             "frames": None
             if self.camera is None
             else {

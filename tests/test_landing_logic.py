@@ -274,3 +274,16 @@ def test_below_the_models_altitude_range_maps_do_not_decide() -> None:
     assert d.phase is LandingPhase.DESCENT  # ground texture at 4 m is not trusted to be a person
     at_two = VehicleState(2.0, 0.2, 0.0, -2.0, 0.0)
     assert g.on_frame(_frame(2.0, [], None, _map(person_at=(0.3, 0.0))), at_two).kind is CommandKind.LAND
+
+
+def test_the_blind_baseline_lands_on_its_point_whatever_the_map_says() -> None:
+    g = _guidance(blind_landing=True)  # the paper's "random landing", for campaigns only
+    point = Target(0.3, 0.0, 0.0, None)  # the random policy's committed point: no zone, no track
+    occupied = _map(person_at=(0.3, 0.0))
+    state = VehicleState(0.0, 0.0, 0.0, -14.0, 0.0)
+    g.start(state)
+    for k in range(8):
+        assert g.on_frame(_frame(0.1 * k, [], point, occupied), state).phase is LandingPhase.DESCENT
+    low = VehicleState(1.0, 0.3, 0.0, -2.0, 0.0)
+    assert g.on_frame(_frame(1.0, [], point, occupied), low).kind is CommandKind.LAND
+    assert _guidance().config.blind_landing is False  # never by default

@@ -14,7 +14,9 @@ vehicle's clock throughout.
 
 Tasks are created together, kept, and cancelled together when one ends or fails (structured concurrency that also
 runs on Python 3.10). A **stall watchdog** thread stops offboard from outside the event loop when the loop stops
-beating for ``decision_watchdog_s``, since MAVSDK keeps re-sending the last setpoint on its own thread.
+beating for ``decision_watchdog_s``, since MAVSDK keeps re-sending the last setpoint on its own thread. In lockstep it
+is off: simulated time waits for the loop, so a stall cannot move the vehicle, and a wall-clock watchdog would make
+the flight depend on the machine's load.
 
 In a dry run the same perception and decisions run and are recorded, but nothing is sent: no arming, no mode
 change, no setpoint. Every decision is recorded with what produced it (``source``) and its inputs, so ``slz replay``
@@ -51,7 +53,8 @@ TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAIL
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
 TICK_PERIOD_S = 0.1  # free running: the wall-clock tick of the supervision
 TAKEOFF_RETRY_S = 1.0  # vehicle time between arming attempts while the autopilot refuses
-START_TIMEOUT_S = 90.0  # vehicle time from the first tick to the start of the search
+START_TIMEOUT_S = 120.0  # vehicle time from the first tick to the start of the search
+START_TOLERANCE_M = 1.0  # horizontal distance to the start pose at which the search begins
 
 
 class StartStage(str, enum.Enum):
@@ -61,6 +64,8 @@ class StartStage(str, enum.Enum):
     """For the autopilot to accept arming and takeoff (SITL), or for the first pose."""
     CLIMBING = "climbing"
     """Taking off to the start altitude."""
+    TRANSIT = "transit"
+    """Flying to the start pose (``start.start_north_m``, ``start_east_m``)."""
     STARTED = "started"
     """The landing logic runs."""
 
@@ -155,6 +160,7 @@ class FlightApp:
         self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
         self._tick_setpoint: tuple[float, float, float, float] | None = None  # sent during this lockstep tick
         self._early_frame: Frame | None = None
+        self._transit_yaw_deg: float | None = None
 
     # -- vehicle state ------------------------------------------------------------------------------------------
     def vehicle_state(self) -> VehicleState | None:
@@ -289,9 +295,6 @@ class FlightApp:
     async def on_tick(self, state: VehicleState) -> None:
         """The start sequence, then pilot takeover, touchdown and perception silence, at vehicle time ``state.t_s``."""
         self.outcome.ticks += 1
-        if self._start_stage is not StartStage.STARTED:
-            await self._start_step(state)
-            return
         if self.guidance.phase in TERMINAL:
             self._done.set()
             return
@@ -301,6 +304,9 @@ class FlightApp:
             self._commanding = False  # never take control back in this flight
             mode = status.mode.value
             await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
+            return
+        if self._start_stage is not StartStage.STARTED:
+            await self._start_step(state)
             return
         if self.guidance.phase is LandingPhase.LAND and not status.in_air:
             self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
@@ -336,6 +342,18 @@ class FlightApp:
             return
         if takeoff and state.altitude_m < start.takeoff_altitude_m - 0.5:
             return
+        if start.start_north_m is not None and start.start_east_m is not None and not self.dry_run:
+            # Fly to the start pose first (SITL campaigns): through the same safety filter as every setpoint.
+            self._start_stage = StartStage.TRANSIT
+            n, e, alt = start.start_north_m, start.start_east_m, start.takeoff_altitude_m
+            if math.hypot(state.north_m - n, state.east_m - e) > START_TOLERANCE_M:
+                if self._transit_yaw_deg is None:
+                    self._transit_yaw_deg = state.yaw_deg  # held: see LandingGuidance.safe_setpoint
+                setpoint = self.guidance.safe_setpoint(state, n, e, alt, self._transit_yaw_deg)
+                await self._send(
+                    Decision(state.t_s, LandingPhase.IDLE, CommandKind.SETPOINT, setpoint, None, "transit")
+                )
+                return
         self._start_stage = StartStage.STARTED
         self._last_frame_t_s = state.t_s  # perception silence counts from here
         await self.apply(self.guidance.start(state), "start", state)
@@ -479,7 +497,8 @@ class FlightApp:
         self.outcome.lockstep = self.lockstep is not None
         self.recorder.write("clock", None, lockstep=self.outcome.lockstep)
         watchdog = threading.Thread(target=self._stall_watchdog, name="stall-watchdog", daemon=True)
-        watchdog.start()
+        if self.lockstep is None:
+            watchdog.start()
         drivers = [self._lockstep_loop()] if self.lockstep is not None else [self._free_frames(), self._free_ticks()]
         tasks: list[asyncio.Task[Any]] = [
             *(asyncio.create_task(driver) for driver in drivers),
@@ -498,7 +517,8 @@ class FlightApp:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
             self._stop.set()
-            watchdog.join(timeout=2.0)
+            if watchdog.is_alive():
+                watchdog.join(timeout=2.0)
             self._executor.shutdown(wait=True)
             if self.lockstep is not None:
                 self.lockstep.release()

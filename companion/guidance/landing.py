@@ -109,6 +109,11 @@ class GuidanceConfig(StrictModel):
     hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
     failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
     failsafe_action: FailsafeAction = FailsafeAction.LAND
+    blind_landing: bool = Field(
+        default=False,
+        description="Evaluation baseline only (the paper's 'random landing', with the random selection policy): "
+        "descend and land on the target without checking the map. Never on a vehicle near people.",
+    )
 
     @model_validator(mode="after")
     def _order(self) -> GuidanceConfig:
@@ -248,6 +253,7 @@ class LandingGuidance:
         self._search_started_s = 0.0
         self._search_altitude_m = config.search_altitude_m
         self._resume_phase = LandingPhase.SEARCH
+        self._heading_deg: float | None = None
 
     # -- helpers -------------------------------------------------------------------------------------------------
     def _enter(self, phase: LandingPhase, t_s: float) -> None:
@@ -255,8 +261,14 @@ class LandingGuidance:
             self.phase = phase
             self._phase_since_s = t_s
 
-    def safe_setpoint(self, state: VehicleState, north_m: float, east_m: float, altitude_m: float) -> Setpoint:
-        """The safety filter every setpoint goes through (geofence, step, descent rate)."""
+    def safe_setpoint(
+        self, state: VehicleState, north_m: float, east_m: float, altitude_m: float, yaw_deg: float | None = None
+    ) -> Setpoint:
+        """The safety filter every setpoint goes through (geofence, step, descent rate).
+
+        The heading is held: ``yaw_deg``, else the heading at :meth:`start`, else the vehicle's (a setpoint never
+        chases the vehicle's own slow yaw drift, so consecutive setpoints differ only where the logic moved them).
+        """
         c = self.config
         dn, de = north_m - state.north_m, east_m - state.east_m
         dist = math.hypot(dn, de)
@@ -265,7 +277,9 @@ class LandingGuidance:
         lowest = state.altitude_m - c.descent_rate_limit_mps * c.autopilot_z_time_constant_s
         altitude_m = max(altitude_m, lowest)
         north_m, east_m, altitude_m = self.geofence.clamp(north_m, east_m, altitude_m)
-        return Setpoint(north_m, east_m, -altitude_m, state.yaw_deg)
+        if yaw_deg is None:
+            yaw_deg = self._heading_deg if self._heading_deg is not None else state.yaw_deg
+        return Setpoint(north_m, east_m, -altitude_m, yaw_deg)
 
     def _setpoint(
         self,
@@ -319,6 +333,7 @@ class LandingGuidance:
         if self.phase is not LandingPhase.IDLE:
             raise RuntimeError(f"start() in phase {self.phase.value}")
         self._last_target_s = state.t_s
+        self._heading_deg = state.yaw_deg
         altitude = max(state.altitude_m, self.config.search_altitude_m)
         self._search_altitude_m = altitude
         return self._setpoint(state, LandingPhase.SEARCH, None, "mission start", state.north_m, state.east_m, altitude)
@@ -360,7 +375,7 @@ class LandingGuidance:
         self._last_target_s = state.t_s
         self._search_origin = None
         offset = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
-        if offset <= c.capture_radius_m and target.radius_m >= self.min_zone_radius_m:
+        if offset <= c.capture_radius_m and (target.radius_m >= self.min_zone_radius_m or c.blind_landing):
             self._locked = target
             self._unsafe_frames = 0
             self._enter(LandingPhase.DESCENT, state.t_s)
@@ -399,7 +414,7 @@ class LandingGuidance:
                 self._locked = locked = Target(track.north_m, track.east_m, track.radius_m, track.track_id)
         # The footprint is where the vehicle will touch down: around the landing point, not under the vehicle now.
         footprint = footprint_view(result.head_plane, locked.north_m, locked.east_m, self.footprint_radius_m)
-        unsafe = trusted and (footprint.occupied_seen or shrunk)
+        unsafe = trusted and (footprint.occupied_seen or shrunk) and not c.blind_landing
         self._unsafe_frames = self._unsafe_frames + 1 if unsafe else 0
         if self._unsafe_frames >= c.unsafe_frames_to_abort:
             self._unsafe_frames = 0
@@ -407,7 +422,7 @@ class LandingGuidance:
                 return self._abort_descent(state, "person seen inside the footprint")
             assert track is not None
             return self._abort_descent(state, f"zone {locked.track_id} shrank to {track.radius_m:.2f} m")
-        if trusted and footprint.known_fraction >= c.footprint_known_fraction and footprint.clear:
+        if c.blind_landing or (trusted and footprint.known_fraction >= c.footprint_known_fraction and footprint.clear):
             self._landing_map_s = state.t_s
         offset = math.hypot(locked.north_m - state.north_m, locked.east_m - state.east_m)
         if state.altitude_m <= c.land_altitude_m + c.land_tolerance_m and offset <= c.capture_radius_m:

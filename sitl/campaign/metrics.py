@@ -1,0 +1,179 @@
+"""Per-mission metrics, from the SITL's ground truth and the companion's flight log (definitions in docs/campaigns.md).
+
+Distances are horizontal, metres, to the edge of a person's body (centre distance minus body radius). The *final
+descent* runs from the companion's last entry into the descent phase before its landing command (or, without one,
+from its last command) to the touchdown (or the end of the ground truth).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from companion.app.recorder import read_log
+from sitl.mission import people_at, read_truth, touchdown
+
+
+@dataclass
+class MissionMetrics:
+    """One mission's outcome. NaN (None in JSON) where a metric does not apply (no descent, no touchdown)."""
+
+    mission_id: str
+    condition: str
+    strategy: str
+    run: int
+    seed: int
+    phase: str
+    reason: str
+    landed: bool
+    success: bool
+    warning_1m: bool
+    warning_1_5m: bool
+    people_within_1m: int
+    people_within_1_5m: int
+    touchdown_nearest_m: float
+    zone_area_m2: float
+    nearest_person_mean_m: float
+    nearest_person_min_m: float
+    zone_iou: float
+    time_to_land_s: float
+    path_length_m: float
+    reselections: int
+    aborts: int
+    failsafes: int
+    touchdown_north_m: float
+    touchdown_east_m: float
+    people_cells: list[list[int]]
+    """People at touchdown (or the end) on a 1 m grid over [-20, 20) m: ``[row, col, count]`` of the occupied cells
+    (row from north -20 m, col from east -20 m), for the report's touchdown-over-density plots."""
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-able, NaN as None, floats rounded to 6 decimals (results compare exactly across runs)."""
+        out: dict[str, Any] = {}
+        for key, value in asdict(self).items():
+            if isinstance(value, float):
+                out[key] = round(value, 6) if math.isfinite(value) else None
+            else:
+                out[key] = value
+        return out
+
+
+def _edges(header: dict[str, Any], record: dict[str, Any], north_m: float, east_m: float) -> np.ndarray:
+    positions, radii = people_at(header, record)
+    if not len(radii):
+        return np.array([math.inf])
+    return np.asarray(np.hypot(positions[:, 0] - north_m, positions[:, 1] - east_m) - radii)
+
+
+def _final_descent(flight: list[dict[str, Any]]) -> tuple[float | None, dict[str, Any] | None]:
+    """Start time of the final descent and the target at that moment."""
+    start: float | None = None
+    target: dict[str, Any] | None = None
+    previous = ""
+    last_command_t: float | None = None
+    for record in flight:
+        if record["kind"] == "command":
+            last_command_t = float(record["t_s"])
+        if record["kind"] != "decision":
+            continue
+        decision = record["decision"]
+        if decision["phase"] == "descent" and previous != "descent":
+            start, target = float(record["t_s"]), decision["target"]
+        previous = decision["phase"]
+        if decision["kind"] == "land":
+            return start, target
+    return last_command_t, None
+
+
+def mission_metrics(
+    run_dir: Path, mission_id: str, condition: str, strategy: str, run: int, seed: int
+) -> MissionMetrics:
+    """The metrics of the mission flown in ``run_dir`` (``truth.jsonl`` and ``flight/flight.jsonl``)."""
+    header, truth = read_truth(run_dir / "truth.jsonl")
+    flight = read_log(run_dir / "flight" / "flight.jsonl")
+    config = next(r for r in flight if r["kind"] == "header")["config"]
+    vehicle_radius_m = float(config["perception"]["zones"]["vehicle_radius_m"])
+    end: dict[str, Any] = next((r["outcome"] for r in reversed(flight) if r["kind"] == "end"), {})
+    decisions = [r for r in flight if r["kind"] == "decision"]
+    started = next((float(r["t_s"]) for r in decisions if r.get("source") == "start"), math.nan)
+    down = touchdown(truth)
+    t_end = float(down["t_s"]) if down is not None else (float(truth[-1]["t_s"]) if truth else math.nan)
+
+    descent_t, target = _final_descent(flight)
+    window = [r for r in truth if descent_t is not None and descent_t - 1e-9 <= r["t_s"] <= t_end + 1e-9]
+    nearest = np.array([float(_edges(header, r, r["position_ned_m"][0], r["position_ned_m"][1]).min()) for r in window])
+    nan = math.nan
+    within_1 = within_15 = 0
+    touchdown_nearest = nan
+    if down is not None:
+        edges = _edges(header, down, down["position_ned_m"][0], down["position_ned_m"][1])
+        touchdown_nearest = float(edges.min())
+        within_1, within_15 = int((edges < 1.0).sum()), int((edges < 1.5).sum())
+    intrusion = bool(len(nearest)) and float(nearest.min()) < vehicle_radius_m
+    success = (
+        down is not None
+        and not intrusion
+        and not (math.isfinite(touchdown_nearest) and touchdown_nearest < vehicle_radius_m)
+    )
+
+    area = iou = nan
+    if target is not None and descent_t is not None:
+        r_zone = float(target["radius_m"])
+        area = math.pi * r_zone**2
+        at = min(truth, key=lambda r: abs(r["t_s"] - descent_t)) if truth else None
+        if at is not None:
+            free = max(0.0, float(_edges(header, at, target["north_m"], target["east_m"]).min()))
+            big, small = max(r_zone, free), min(r_zone, free)
+            iou = (small / big) ** 2 if big > 0 else nan
+
+    path = np.array([r["position_ned_m"] for r in truth if math.isfinite(started) and started <= r["t_s"] <= t_end])
+    path_length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
+    targets = [d["decision"]["target"]["track_id"] for d in decisions if d["decision"]["target"] is not None]
+    reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)
+    aborts = sum(1 for d in decisions if "climb back" in d["decision"]["reason"])
+    return MissionMetrics(
+        mission_id=mission_id,
+        condition=condition,
+        strategy=strategy,
+        run=run,
+        seed=seed,
+        phase=str(end.get("phase", "unknown")),
+        reason=str(end.get("reason", "")),
+        landed=down is not None,
+        success=success,
+        warning_1m=within_1 > 0,
+        warning_1_5m=within_15 > 0,
+        people_within_1m=within_1,
+        people_within_1_5m=within_15,
+        touchdown_nearest_m=touchdown_nearest,
+        zone_area_m2=area,
+        nearest_person_mean_m=float(nearest.mean()) if len(nearest) else nan,
+        nearest_person_min_m=float(nearest.min()) if len(nearest) else nan,
+        zone_iou=iou,
+        time_to_land_s=t_end - started if down is not None and math.isfinite(started) else nan,
+        path_length_m=path_length,
+        reselections=reselections,
+        aborts=aborts,
+        failsafes=len(end.get("failsafes", [])),
+        touchdown_north_m=float(down["position_ned_m"][0]) if down is not None else nan,
+        touchdown_east_m=float(down["position_ned_m"][1]) if down is not None else nan,
+        people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else {})),
+    )
+
+
+GRID_HALF_M = 20.0
+
+
+def _people_cells(header: dict[str, Any], record: dict[str, Any]) -> list[list[int]]:
+    positions, _ = people_at(header, record)
+    cells: dict[tuple[int, int], int] = {}
+    for north, east in positions:
+        row, col = math.floor(north + GRID_HALF_M), math.floor(east + GRID_HALF_M)
+        if 0 <= row < 2 * GRID_HALF_M and 0 <= col < 2 * GRID_HALF_M:
+            cells[(row, col)] = cells.get((row, col), 0) + 1
+    return [[row, col, count] for (row, col), count in sorted(cells.items())]

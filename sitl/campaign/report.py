@@ -1,0 +1,278 @@
+"""The campaign report: per condition x strategy, every metric with its 95 % interval, the paper's Table I beside
+ours, paired comparisons of strategies on the same scenes, as Markdown, CSV and JSON, plus plots.
+
+Rates carry Wilson intervals, means percentile-bootstrap intervals (seeded); success between two strategies of one
+condition is compared with the exact McNemar test on the paired missions, distances with a paired bootstrap of the
+per-mission differences. Missions that failed for infrastructure reasons (``error``) are counted and left out.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sitl.campaign.spec import CampaignSpec
+from sitl.campaign.stats import Estimate, bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
+
+# The paper's Table I (AirSim + Unreal, 100 runs per row): success %, warning 1 m %, warning 1.5 m %, SLZ area m^2,
+# average nearest person m, IoU. None where the paper gives '*'. Keyed by (condition, strategy) as named in
+# mission_configs/campaigns/paper_table1.yaml.
+PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float | None, float, float | None]] = {
+    ("static", "random"): (59.0, 2.7, 10.0, None, 1.1579, None),
+    ("static", "oldest"): (97.0, 0.0, 0.4, 6.153, 2.2197, 0.484),
+    ("static", "biggest"): (99.0, 0.0, 0.3, 9.621, 2.4508, 0.593),
+    ("moving_10", "oldest"): (87.0, 0.06, 0.16, 4.5996, 1.9706, 0.394),
+    ("moving_10", "biggest"): (80.0, 0.01, 0.1, 9.079, 1.7087, 0.607),
+    ("moving_20", "oldest"): (84.0, 0.06, 0.14, 4.374, 1.5848, 0.421),
+    ("moving_20", "biggest"): (76.0, 0.09, 0.2, 8.042, 1.5136, 0.549),
+    ("weather", "oldest"): (86.0, 0.08, 0.16, 4.495, 1.8451, 0.527),
+    ("weather", "biggest"): (80.0, 0.06, 0.1, 6.9582, 2.074, 0.540),
+}
+
+MEANS = (
+    "zone_area_m2",
+    "nearest_person_mean_m",
+    "nearest_person_min_m",
+    "touchdown_nearest_m",
+    "zone_iou",
+    "time_to_land_s",
+    "path_length_m",
+    "reselections",
+    "aborts",
+    "failsafes",
+    "people_within_1m",
+    "people_within_1_5m",
+)
+RATES = ("success", "landed", "warning_1m", "warning_1_5m")
+
+
+def _values(rows: list[dict[str, Any]], key: str) -> list[float]:
+    return [float(r[key]) for r in rows if r.get(key) is not None]
+
+
+def cell_summary(rows: list[dict[str, Any]], errors: int, seed: int) -> dict[str, Any]:
+    """Every metric of one cell with its interval."""
+    out: dict[str, Any] = {"missions": len(rows), "errors": errors}
+    for key in RATES:
+        out[key] = asdict(wilson(sum(1 for r in rows if r[key]), len(rows)))
+    for k, key in enumerate(MEANS):
+        out[key] = asdict(bootstrap_mean(_values(rows, key), seed + k))
+    return out
+
+
+def build_report(spec: CampaignSpec, results: list[dict[str, Any]], out_dir: Path) -> dict[str, Any]:
+    """Write ``report.md``, ``results.csv``, ``summary.json`` and the plots into ``out_dir``; returns the summary."""
+    good = [r for r in results if "error" not in r]
+    cells: dict[str, Any] = {}
+    for k, (condition, strategy) in enumerate(spec.cell_names()):
+        rows = [r for r in good if r["condition"] == condition and r["strategy"] == strategy]
+        errors = sum(1 for r in results if "error" in r and r["condition"] == condition and r["strategy"] == strategy)
+        cells[f"{condition}/{strategy}"] = cell_summary(rows, errors, seed=1000 * k)
+    paired = []
+    for condition in dict.fromkeys(c for c, _ in spec.cell_names()):
+        strategies = [s for c, s in spec.cell_names() if c == condition]
+        for a, b in itertools.combinations(strategies, 2):
+            by_run_a = {r["run"]: r for r in good if r["condition"] == condition and r["strategy"] == a}
+            by_run_b = {r["run"]: r for r in good if r["condition"] == condition and r["strategy"] == b}
+            runs = sorted(set(by_run_a) & set(by_run_b))
+            test = mcnemar_exact([by_run_a[i]["success"] for i in runs], [by_run_b[i]["success"] for i in runs])
+            nearest = [(by_run_a[i]["nearest_person_mean_m"], by_run_b[i]["nearest_person_mean_m"]) for i in runs]
+            diff = paired_mean_difference(
+                [x if x is not None else math.nan for x, _ in nearest],
+                [y if y is not None else math.nan for _, y in nearest],
+                seed=7,
+            )
+            paired.append(
+                {
+                    "condition": condition,
+                    "a": a,
+                    "b": b,
+                    "pairs": test.n_pairs,
+                    "success_only_a": test.only_a,
+                    "success_only_b": test.only_b,
+                    "mcnemar_p": test.p_value,
+                    "nearest_person_mean_difference_m": asdict(diff),
+                }
+            )
+    summary = {
+        "campaign": spec.name,
+        "missions": len(results),
+        "errors": len(results) - len(good),
+        "cells": cells,
+        "paired": paired,
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    _write_csv(results, out_dir / "results.csv")
+    plots = _plots(spec, good, cells, out_dir)
+    (out_dir / "report.md").write_text(_markdown(spec, summary, plots))
+    return summary
+
+
+def _write_csv(results: list[dict[str, Any]], path: Path) -> None:
+    keys = [k for k in results[0] if k != "people_cells"] if results else []
+    for r in results:
+        keys += [k for k in r if k not in keys and k != "people_cells"]
+    with path.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        writer.writeheader()
+        for r in results:
+            writer.writerow(r)
+
+
+def _est(d: dict[str, Any]) -> Estimate:
+    return Estimate(d["value"], d["low"], d["high"], d["n"])
+
+
+def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> str:
+    lines = [
+        f"# Campaign `{spec.name}`",
+        "",
+        f"{summary['missions']} missions ({spec.runs} per cell, master seed {spec.master_seed}), "
+        f"{summary['errors']} infrastructure errors left out. Intervals are 95 %: Wilson for rates, bootstrap for "
+        "means. Definitions: docs/campaigns.md.",
+        "",
+        "## Ours",
+        "",
+        "| condition / strategy | n | success | warning 1 m | warning 1.5 m | zone area m² | nearest person m (mean) "
+        "| nearest person m (min) | IoU | time to land s | aborts |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for name, cell in summary["cells"].items():
+        lines.append(
+            f"| {name} | {cell['missions']} | {_est(cell['success']).format(1, True)} "
+            f"| {_est(cell['warning_1m']).format(1, True)} | {_est(cell['warning_1_5m']).format(1, True)} "
+            f"| {_est(cell['zone_area_m2']).format(2)} | {_est(cell['nearest_person_mean_m']).format(2)} "
+            f"| {_est(cell['nearest_person_min_m']).format(2)} | {_est(cell['zone_iou']).format(3)} "
+            f"| {_est(cell['time_to_land_s']).format(1)} | {_est(cell['aborts']).format(2)} |"
+        )
+    lines += [
+        "",
+        "## The paper's Table I beside ours (success %, warnings %, area m², nearest person m, IoU)",
+        "",
+        "| condition / strategy | paper success | ours | paper warn 1 m | ours | paper warn 1.5 m | ours "
+        "| paper area | ours | paper nearest | ours | paper IoU | ours |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for name, cell in summary["cells"].items():
+        condition, strategy = name.split("/")
+        paper = PAPER_TABLE1.get((condition, strategy))
+        if paper is None:
+            continue
+
+        def p(v: float | None) -> str:
+            return "*" if v is None else f"{v:g}"
+
+        lines.append(
+            f"| {name} | {p(paper[0])} | {100 * cell['success']['value']:.1f} | {p(paper[1])} "
+            f"| {100 * cell['warning_1m']['value']:.1f} | {p(paper[2])} | {100 * cell['warning_1_5m']['value']:.1f} "
+            f"| {p(paper[3])} | {_fmt(cell['zone_area_m2']['value'])} | {p(paper[4])} "
+            f"| {_fmt(cell['nearest_person_mean_m']['value'])} | {p(paper[5])} | {_fmt(cell['zone_iou']['value'], 3)} |"
+        )
+    lines += [
+        "",
+        "## Paired comparisons (same scenes and start poses)",
+        "",
+        "| condition | a vs b | pairs | only a succeeded | only b succeeded | McNemar p | nearest person a - b (m) |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for pair in summary["paired"]:
+        diff = _est(pair["nearest_person_mean_difference_m"]).format(2)
+        lines.append(
+            f"| {pair['condition']} | {pair['a']} vs {pair['b']} | {pair['pairs']} | {pair['success_only_a']} "
+            f"| {pair['success_only_b']} | {pair['mcnemar_p']:.3g} | {diff} |"
+        )
+    lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({p})" for p in plots] + [""]
+    return "\n".join(lines)
+
+
+def _fmt(value: float | None, digits: int = 2) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _plots(spec: CampaignSpec, good: list[dict[str, Any]], cells: dict[str, Any], out_dir: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(cells)
+    files = []
+    fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(names)), 4))
+    values = [100 * cells[n]["success"]["value"] if cells[n]["missions"] else 0.0 for n in names]
+    lows = [
+        100 * (cells[n]["success"]["value"] - cells[n]["success"]["low"]) if cells[n]["missions"] else 0 for n in names
+    ]
+    highs = [
+        100 * (cells[n]["success"]["high"] - cells[n]["success"]["value"]) if cells[n]["missions"] else 0 for n in names
+    ]
+    ax.bar(range(len(names)), values, yerr=[lows, highs], capsize=4, color="#4a90c2")
+    for i, name in enumerate(names):
+        paper = PAPER_TABLE1.get(tuple(name.split("/")))  # type: ignore[arg-type]
+        if paper is not None:
+            ax.plot(i, paper[0], "k_", markersize=18, mew=2)
+    ax.set_xticks(range(len(names)), names, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("success % (95 % Wilson; black: paper)")
+    ax.set_ylim(0, 105)
+    fig.tight_layout()
+    fig.savefig(out_dir / "success.png", dpi=110)
+    plt.close(fig)
+    files.append("success.png")
+
+    fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(names)), 4))
+    data = [
+        [
+            r["nearest_person_mean_m"]
+            for r in good
+            if f"{r['condition']}/{r['strategy']}" == n and r["nearest_person_mean_m"] is not None
+        ]
+        or [math.nan]
+        for n in names
+    ]
+    ax.boxplot(data, showmeans=True)
+    ax.set_xticks(range(1, len(names) + 1), names, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("nearest person during the final descent, mean (m)")
+    fig.tight_layout()
+    fig.savefig(out_dir / "nearest_person.png", dpi=110)
+    plt.close(fig)
+    files.append("nearest_person.png")
+
+    for condition in dict.fromkeys(c for c, _ in spec.cell_names()):
+        rows = [r for r in good if r["condition"] == condition]
+        density = np.zeros((40, 40))
+        for r in rows:
+            for row, col, count in r.get("people_cells", []):
+                density[row, col] += count
+        fig, ax = plt.subplots(figsize=(5.5, 5))
+        ax.imshow(density / max(len(rows), 1), origin="lower", extent=(-20, 20, -20, 20), cmap="Greys")
+        for k, strategy in enumerate(dict.fromkeys(s for c, s in spec.cell_names() if c == condition)):
+            points = [
+                (r["touchdown_east_m"], r["touchdown_north_m"])
+                for r in rows
+                if r["strategy"] == strategy and r["touchdown_north_m"] is not None
+            ]
+            marks = [
+                "o" if r["success"] else "x"
+                for r in rows
+                if r["strategy"] == strategy and r["touchdown_north_m"] is not None
+            ]
+            for (x, y), mark in zip(points, marks, strict=True):
+                ax.plot(x, y, mark, color=f"C{k}", markersize=4)
+            ax.plot([], [], "o", color=f"C{k}", label=strategy)
+        ax.set_xlabel("east (m)")
+        ax.set_ylabel("north (m)")
+        ax.set_title(f"{condition}: touchdowns (x: not a success) over people per mission")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        name = f"touchdowns_{condition}.png"
+        fig.savefig(out_dir / name, dpi=110)
+        plt.close(fig)
+        files.append(name)
+    return files

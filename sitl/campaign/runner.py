@@ -1,0 +1,175 @@
+"""Run a campaign: its missions in parallel worker processes, each result appended (and fsync'd) as it finishes.
+
+A campaign folder holds ``spec.yaml`` (the spec it was started with), ``results.jsonl`` (one line per finished
+mission) and, while missions fly, ``missions/<condition>/<strategy>/<run>/``. Started again on the same folder, it
+resumes: finished missions are not flown again, a mission cut off mid-way is flown again from the start (its folder
+is cleared first), and the spec must be the one it started with. Each mission is in lockstep, so its result depends
+on its seed and config only, not on the number of workers or the machine's speed.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import logging
+import multiprocessing
+import os
+import shutil
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TextIO
+
+import yaml
+
+from companion.app.recorder import read_log
+from sitl.campaign.metrics import mission_metrics
+from sitl.campaign.spec import CampaignSpec, MissionPlan
+from sitl.mission import MissionError, MissionSpec, fly
+
+logger = logging.getLogger(__name__)
+
+INSTANCE_BASE = 70  # worker k flies SITL instance 70 + k (its own ports)
+
+
+class CampaignError(Exception):
+    """A campaign cannot start or resume (which folder, what is wrong)."""
+
+
+def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance: int, **extra: Any) -> MissionSpec:
+    """The :class:`MissionSpec` of one planned mission."""
+    sitl, mission = plan.overrides(spec)
+    return MissionSpec(
+        seed=plan.seed,
+        run_dir=run_dir,
+        instance=instance,
+        mission_config=spec.mission_config,
+        sitl_overrides=sitl,
+        mission_overrides=mission,
+        timeout_s=spec.timeout_s,
+        **extra,
+    )
+
+
+_worker_instance = INSTANCE_BASE
+
+
+def _init_worker(instances: Any) -> None:
+    global _worker_instance
+    _worker_instance = int(instances.get())
+    logging.basicConfig(level=logging.WARNING)
+
+
+def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
+    """In a worker: fly one mission and return its metrics (or its error) as JSON."""
+    spec = CampaignSpec.model_validate(spec_json)
+    plan = next(p for p in spec.missions() if p.mission_id == mission_id)
+    run_dir = Path(out_dir) / "missions" / mission_id
+    shutil.rmtree(run_dir, ignore_errors=True)  # a mission cut off by a kill starts again from nothing
+    started = time.monotonic()
+    try:
+        fly(mission_spec(spec, plan, run_dir, _worker_instance))
+        metrics = mission_metrics(run_dir, mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
+        result: dict[str, Any] = metrics.to_json()
+    except (MissionError, OSError, ValueError, KeyError) as exc:
+        result = {
+            "mission_id": mission_id,
+            "condition": plan.condition.name,
+            "strategy": plan.strategy.name,
+            "run": plan.run,
+            "seed": plan.seed,
+            "error": str(exc)[-2000:],
+        }
+    result["wall_s"] = round(time.monotonic() - started, 3)
+    if not keep:
+        shutil.rmtree(run_dir, ignore_errors=True)
+    return result
+
+
+def read_results(path: Path) -> list[dict[str, Any]]:
+    """The finished missions of a campaign folder's ``results.jsonl`` (a torn last line is skipped)."""
+    return read_log(path) if path.is_file() else []
+
+
+class Progress:
+    """A one-line progress bar on stderr: missions done, rate and ETA."""
+
+    def __init__(self, total: int, done: int, stream: TextIO = sys.stderr) -> None:
+        self.total, self.done, self.stream = total, done, stream
+        self._start_done = done
+        self._start = time.monotonic()
+
+    def update(self, done: int) -> None:
+        """Redraw with ``done`` missions finished."""
+        self.done = done
+        elapsed = time.monotonic() - self._start
+        flown = done - self._start_done
+        rate_per_h = 3600.0 * flown / elapsed if elapsed > 0 and flown else 0.0
+        eta = (self.total - done) / rate_per_h * 60.0 if rate_per_h else float("nan")
+        width = 30
+        filled = round(width * done / max(self.total, 1))
+        self.stream.write(
+            f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{self.total} missions, {rate_per_h:.0f}/h, "
+            f"ETA {eta:.0f} min "
+        )
+        self.stream.flush()
+
+    def close(self) -> None:
+        """End the line."""
+        self.stream.write("\n")
+        self.stream.flush()
+
+
+def run_campaign(
+    spec: CampaignSpec,
+    out_dir: Path,
+    workers: int | None = None,
+    keep_runs: bool = False,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
+    progress: bool = True,
+    instance_base: int = INSTANCE_BASE,
+) -> list[dict[str, Any]]:
+    """Fly every mission of ``spec`` not yet in ``out_dir/results.jsonl``; returns all results in plan order."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    spec_path = out_dir / "spec.yaml"
+    spec_json = spec.model_dump(mode="json")
+    if spec_path.is_file():
+        saved = yaml.safe_load(spec_path.read_text())
+        if saved != spec_json:
+            raise CampaignError(f"{out_dir} holds another campaign's results (its spec.yaml differs); use a new folder")
+    else:
+        spec_path.write_text(yaml.safe_dump(spec_json, sort_keys=False))
+    results_path = out_dir / "results.jsonl"
+    done = {r["mission_id"]: r for r in read_results(results_path)}
+    plans = spec.missions()
+    # Run by run across the cells, so a campaign stopped part-way has every cell about equally far.
+    todo = sorted((p for p in plans if p.mission_id not in done), key=lambda p: p.run)
+    workers = workers or spec.workers
+    bar = Progress(len(plans), len(done)) if progress else None
+    if todo:
+        context = multiprocessing.get_context("spawn")
+        instances = context.Queue()
+        for k in range(workers):
+            instances.put(instance_base + k)
+        with (
+            results_path.open("a", encoding="utf-8") as results,
+            concurrent.futures.ProcessPoolExecutor(
+                max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances,)
+            ) as pool,
+        ):
+            futures = [pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs) for p in todo]
+            for future in concurrent.futures.as_completed(futures):
+                result = future.result()
+                results.write(json.dumps(result, separators=(",", ":")) + "\n")
+                results.flush()
+                os.fsync(results.fileno())  # a kill loses at most the missions in flight
+                done[result["mission_id"]] = result
+                if on_result is not None:
+                    on_result(result)
+                if bar is not None:
+                    bar.update(len(done))
+    if bar is not None:
+        bar.update(len(done))
+        bar.close()
+    return [done[p.mission_id] for p in plans]

@@ -1,0 +1,93 @@
+"""Statistics for campaign reports: Wilson intervals for rates, bootstrap intervals for means, paired comparisons.
+
+All resampling is seeded, so a report is the same every time it is made from the same results.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats as scipy_stats
+
+Z95 = 1.959963984540054
+BOOTSTRAP_RESAMPLES = 2000
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A value with its 95 % confidence interval and the sample size it came from."""
+
+    value: float
+    low: float
+    high: float
+    n: int
+
+    def format(self, digits: int = 2, percent: bool = False) -> str:
+        """``value [low, high]``, as a percentage when asked; ``n/a`` without data."""
+        if self.n == 0 or not math.isfinite(self.value):
+            return "n/a"
+        scale, unit = (100.0, " %") if percent else (1.0, "")
+        v, lo, hi = (x * scale for x in (self.value, self.low, self.high))
+        return f"{v:.{digits}f}{unit} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
+def wilson(successes: int, n: int) -> Estimate:
+    """The rate ``successes / n`` with its Wilson score interval (95 %)."""
+    if n == 0:
+        return Estimate(math.nan, math.nan, math.nan, 0)
+    p = successes / n
+    denominator = 1.0 + Z95**2 / n
+    centre = (p + Z95**2 / (2 * n)) / denominator
+    half = Z95 * math.sqrt(p * (1 - p) / n + Z95**2 / (4 * n * n)) / denominator
+    low = 0.0 if successes == 0 else max(0.0, centre - half)
+    high = 1.0 if successes == n else min(1.0, centre + half)
+    return Estimate(p, low, high, n)
+
+
+def bootstrap_mean(values: Sequence[float], seed: int = 0) -> Estimate:
+    """The mean of the finite ``values`` with a percentile bootstrap interval (95 %, seeded)."""
+    x = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=np.float64)
+    if len(x) == 0:
+        return Estimate(math.nan, math.nan, math.nan, 0)
+    if len(x) == 1:
+        return Estimate(float(x[0]), float(x[0]), float(x[0]), 1)
+    rng = np.random.default_rng(seed)
+    means = x[rng.integers(0, len(x), size=(BOOTSTRAP_RESAMPLES, len(x)))].mean(axis=1)
+    low, high = np.percentile(means, [2.5, 97.5])
+    return Estimate(float(x.mean()), float(low), float(high), len(x))
+
+
+@dataclass(frozen=True)
+class PairedRates:
+    """Two strategies' binary outcomes on the same scenes: discordant pairs and the exact McNemar test."""
+
+    n_pairs: int
+    only_a: int
+    only_b: int
+    p_value: float
+
+
+def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> PairedRates:
+    """Exact (binomial) McNemar test of paired outcomes ``a[i]``, ``b[i]`` (two-sided)."""
+    if len(a) != len(b):
+        raise ValueError(f"paired outcomes need equal lengths, got {len(a)} and {len(b)}")
+    only_a = sum(1 for x, y in zip(a, b, strict=True) if x and not y)
+    only_b = sum(1 for x, y in zip(a, b, strict=True) if y and not x)
+    discordant = only_a + only_b
+    p = 1.0 if discordant == 0 else float(scipy_stats.binomtest(only_a, discordant, 0.5).pvalue)
+    return PairedRates(len(a), only_a, only_b, p)
+
+
+def paired_mean_difference(a: Sequence[float], b: Sequence[float], seed: int = 0) -> Estimate:
+    """Mean of ``a[i] - b[i]`` over pairs where both are finite, with a bootstrap interval (95 %)."""
+    if len(a) != len(b):
+        raise ValueError(f"paired values need equal lengths, got {len(a)} and {len(b)}")
+    diffs = [
+        x - y
+        for x, y in zip(a, b, strict=True)
+        if x is not None and y is not None and math.isfinite(x) and math.isfinite(y)
+    ]
+    return bootstrap_mean(diffs, seed)
