@@ -31,7 +31,7 @@ WALL_FIELDS = {"wall_s"}  # the only fields allowed to differ between two runs
 
 def campaign(out: Path, workers: int, **popen: Any) -> subprocess.Popen[str]:
     command = [sys.executable, "-m", "companion.cli", "campaign", "--spec", str(SPEC), "--out", str(out)]
-    command += ["--workers", str(workers)]
+    command += ["--workers", str(workers), "--instance-base", "44"]
     return subprocess.Popen(command, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 
@@ -114,3 +114,13 @@ def test_two_workers_killed_and_resumed_give_the_same_results(one_worker: Path, 
     assert summary_two["cells"] == summary_one["cells"]
     assert summary_two["paired"] == summary_one["paired"]
     assert not math.isnan(summary_two["cells"]["static/oldest"]["success"]["value"])
+
+
+def test_one_mission_is_re_flown_from_its_seed_with_its_video(one_worker: Path, tmp_path: Path) -> None:
+    command = [sys.executable, "-m", "companion.cli", "campaign", "replay", str(one_worker), "static/oldest/0000"]
+    command += ["--out", str(tmp_path / "replay"), "--instance", "68"]
+    done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "metrics identical to the campaign's result" in done.stdout
+    assert "(replay identical)" in done.stdout
+    assert (tmp_path / "replay" / "camera.mp4").stat().st_size > 100_000

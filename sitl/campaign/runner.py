@@ -2,8 +2,9 @@
 
 A campaign folder holds ``spec.yaml`` (the spec it was started with), ``results.jsonl`` (one line per finished
 mission) and, while missions fly, ``missions/<condition>/<strategy>/<run>/``. Started again on the same folder, it
-resumes: finished missions are not flown again, a mission cut off mid-way is flown again from the start (its folder
-is cleared first), and the spec must be the one it started with. Each mission is in lockstep, so its result depends
+resumes: finished missions are not flown again, a mission cut off mid-way, or one that failed for an infrastructure
+reason (a process that did not start), is flown again from the start (its folder is cleared first), and the spec must
+be the one it started with. Each mission is in lockstep, so its result depends
 on its seed and config only, not on the number of workers or the machine's speed.
 """
 
@@ -27,6 +28,7 @@ from companion.app.recorder import read_log
 from sitl.campaign.metrics import mission_metrics
 from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.mission import MissionError, MissionSpec, fly
+from sitl.process import SitlProcessError
 
 logger = logging.getLogger(__name__)
 
@@ -72,7 +74,7 @@ def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: boo
         fly(mission_spec(spec, plan, run_dir, _worker_instance))
         metrics = mission_metrics(run_dir, mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
         result: dict[str, Any] = metrics.to_json()
-    except (MissionError, OSError, ValueError, KeyError) as exc:
+    except (MissionError, SitlProcessError, OSError, ValueError, KeyError) as exc:
         result = {
             "mission_id": mission_id,
             "condition": plan.condition.name,
@@ -141,10 +143,11 @@ def run_campaign(
     else:
         spec_path.write_text(yaml.safe_dump(spec_json, sort_keys=False))
     results_path = out_dir / "results.jsonl"
-    done = {r["mission_id"]: r for r in read_results(results_path)}
+    done = {r["mission_id"]: r for r in read_results(results_path)}  # a later line for a mission supersedes
     plans = spec.missions()
     # Run by run across the cells, so a campaign stopped part-way has every cell about equally far.
-    todo = sorted((p for p in plans if p.mission_id not in done), key=lambda p: p.run)
+    # A mission that could not be flown (an infrastructure error, not a landing) is flown again.
+    todo = sorted((p for p in plans if p.mission_id not in done or "error" in done[p.mission_id]), key=lambda p: p.run)
     workers = workers or spec.workers
     bar = Progress(len(plans), len(done)) if progress else None
     if todo:
