@@ -104,7 +104,8 @@ def test_two_workers_killed_and_resumed_give_the_same_results(one_worker: Path, 
     _, stderr = resumed.communicate(timeout=900)
     assert resumed.returncode == 0, stderr[-3000:]
     final = read_results(results_path)
-    assert len(final) == 4  # nothing recomputed: the finished missions were kept, the rest flown
+    assert len(final) == 4
+    assert results_path.read_text().count("\n") == 4  # nothing flown twice: the finished kept, the rest flown
     assert comparable(final[: len(interrupted)]) == comparable(interrupted)
     by_id = {r["mission_id"]: r for r in comparable(final)}
     expected = {r["mission_id"]: r for r in comparable(read_results(one_worker / "results.jsonl"))}

@@ -135,8 +135,9 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
     lines = [
         f"# Campaign `{spec.name}`",
         "",
-        f"{summary['missions']} missions ({spec.runs} per cell, master seed {spec.master_seed}), "
-        f"{summary['errors']} infrastructure errors left out. Intervals are 95 %: Wilson for rates, bootstrap for "
+        f"{summary['missions']} missions of {len(spec.missions())} planned ({spec.runs} per cell, master seed "
+        f"{spec.master_seed}); {summary['errors']} that could not be flown (infrastructure) left out. "
+        "Intervals are 95 %: Wilson for rates, bootstrap for "
         "means. Definitions: docs/campaigns.md.",
         "",
         "## Ours",

@@ -63,6 +63,18 @@ def _init_worker(instances: Any) -> None:
     logging.basicConfig(level=logging.WARNING)
 
 
+def error_result(plan: MissionPlan, error: str) -> dict[str, Any]:
+    """The result line of a mission that could not be flown."""
+    return {
+        "mission_id": plan.mission_id,
+        "condition": plan.condition.name,
+        "strategy": plan.strategy.name,
+        "run": plan.run,
+        "seed": plan.seed,
+        "error": error[-2000:],
+    }
+
+
 def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
     """In a worker: fly one mission and return its metrics (or its error) as JSON."""
     spec = CampaignSpec.model_validate(spec_json)
@@ -75,14 +87,7 @@ def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: boo
         metrics = mission_metrics(run_dir, mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
         result: dict[str, Any] = metrics.to_json()
     except (MissionError, SitlProcessError, OSError, ValueError, KeyError) as exc:
-        result = {
-            "mission_id": mission_id,
-            "condition": plan.condition.name,
-            "strategy": plan.strategy.name,
-            "run": plan.run,
-            "seed": plan.seed,
-            "error": str(exc)[-2000:],
-        }
+        result = error_result(plan, str(exc))
     result["wall_s"] = round(time.monotonic() - started, 3)
     if not keep:
         shutil.rmtree(run_dir, ignore_errors=True)
@@ -90,8 +95,13 @@ def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: boo
 
 
 def read_results(path: Path) -> list[dict[str, Any]]:
-    """The finished missions of a campaign folder's ``results.jsonl`` (a torn last line is skipped)."""
-    return read_log(path) if path.is_file() else []
+    """The missions of a campaign folder's ``results.jsonl``, one per mission (a later line for the same mission, a
+    re-flown error, supersedes the earlier one), in file order; a torn last line is skipped."""
+    latest: dict[str, dict[str, Any]] = {}
+    for record in read_log(path) if path.is_file() else []:
+        latest.pop(record["mission_id"], None)
+        latest[record["mission_id"]] = record
+    return list(latest.values())
 
 
 class Progress:
@@ -143,7 +153,7 @@ def run_campaign(
     else:
         spec_path.write_text(yaml.safe_dump(spec_json, sort_keys=False))
     results_path = out_dir / "results.jsonl"
-    done = {r["mission_id"]: r for r in read_results(results_path)}  # a later line for a mission supersedes
+    done = {r["mission_id"]: r for r in read_results(results_path)}
     plans = spec.missions()
     # Run by run across the cells, so a campaign stopped part-way has every cell about equally far.
     # A mission that could not be flown (an infrastructure error, not a landing) is flown again.
@@ -161,9 +171,12 @@ def run_campaign(
                 max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances,)
             ) as pool,
         ):
-            futures = [pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs) for p in todo]
+            futures = {pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs): p for p in todo}
             for future in concurrent.futures.as_completed(futures):
-                result = future.result()
+                try:
+                    result = future.result()
+                except Exception as exc:  # a worker raised or died: recorded, flown again on resume, never fatal
+                    result = error_result(futures[future], f"{type(exc).__name__}: {exc}")
                 results.write(json.dumps(result, separators=(",", ":")) + "\n")
                 results.flush()
                 os.fsync(results.fileno())  # a kill loses at most the missions in flight
