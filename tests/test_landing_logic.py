@@ -287,3 +287,15 @@ def test_the_blind_baseline_lands_on_its_point_whatever_the_map_says() -> None:
     low = VehicleState(1.0, 0.3, 0.0, -2.0, 0.0)
     assert g.on_frame(_frame(1.0, [], point, occupied), low).kind is CommandKind.LAND
     assert _guidance().config.blind_landing is False  # never by default
+
+
+def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
+    g = _guidance(mission_time_limit_s=60.0)
+    assert g.time_used_up(VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)) is None  # not started
+    g.start(VehicleState(10.0, 0.0, 0.0, -20.0, 0.0))
+    assert g.time_used_up(VehicleState(69.9, 0.0, 0.0, -20.0, 0.0)) is None
+    d = g.time_used_up(VehicleState(70.0, 0.0, 0.0, -20.0, 0.0))  # vehicle clock, 60 s after the start
+    assert d is not None
+    assert d.phase is LandingPhase.FAILSAFE
+    assert d.kind is CommandKind.HOLD  # never a blind landing
+    assert not g.commanding

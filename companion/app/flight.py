@@ -313,6 +313,10 @@ class FlightApp:
             self.outcome.touchdown_t_s = state.t_s
             await self.apply(self.guidance.landed(state.t_s), "landed", state)
             return
+        used_up = self.guidance.time_used_up(state)
+        if used_up is not None:
+            await self.apply(used_up, "time", state)
+            return
         silent_s = state.t_s - self._last_frame_t_s
         decision = self.guidance.perception_silent(state, silent_s)
         if decision is not None:

@@ -171,6 +171,7 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
         "start": lambda: guidance.start(state),
         "silence": lambda: guidance.perception_silent(state, float(inputs["silent_s"])),
         "landed": lambda: guidance.landed(state.t_s),
+        "time": lambda: guidance.time_used_up(state),
         "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
     }
     if source == "frame":

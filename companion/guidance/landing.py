@@ -109,6 +109,13 @@ class GuidanceConfig(StrictModel):
     hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
     failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
     failsafe_action: FailsafeAction = FailsafeAction.LAND
+    mission_time_limit_s: float = Field(
+        default=600.0,
+        gt=0.0,
+        le=7200.0,
+        description="Vehicle time from the start of the search to a landing decision; used up: hold (the pilot or "
+        "the operator decides). On the vehicle clock, so a lockstep mission ends the same way on any machine.",
+    )
     blind_landing: bool = Field(
         default=False,
         description="Evaluation baseline only (the paper's 'random landing', with the random selection policy): "
@@ -254,6 +261,7 @@ class LandingGuidance:
         self._search_altitude_m = config.search_altitude_m
         self._resume_phase = LandingPhase.SEARCH
         self._heading_deg: float | None = None
+        self._started_s: float | None = None
 
     # -- helpers -------------------------------------------------------------------------------------------------
     def _enter(self, phase: LandingPhase, t_s: float) -> None:
@@ -333,6 +341,7 @@ class LandingGuidance:
         if self.phase is not LandingPhase.IDLE:
             raise RuntimeError(f"start() in phase {self.phase.value}")
         self._last_target_s = state.t_s
+        self._started_s = state.t_s
         self._heading_deg = state.yaw_deg
         altitude = max(state.altitude_m, self.config.search_altitude_m)
         self._search_altitude_m = altitude
@@ -468,6 +477,16 @@ class LandingGuidance:
             n, e = n + dn * length, e + de * length
         n, e, _ = self.geofence.clamp(n, e, self._search_altitude_m)
         return n, e
+
+    def time_used_up(self, state: VehicleState) -> Decision | None:
+        """The failsafe (hold) once ``mission_time_limit_s`` has passed since :meth:`start` without a landing."""
+        if self._started_s is None or self.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
+            return None
+        if state.t_s - self._started_s < self.config.mission_time_limit_s:
+            return None
+        return self._failsafe(
+            state, f"no landing within {self.config.mission_time_limit_s:g} s of the start", FailsafeAction.HOLD
+        )
 
     def perception_silent(self, state: VehicleState, silent_s: float) -> Decision | None:
         """No processed frame for ``silent_s`` (wall or vehicle time, the caller's watchdog): T1 hold, T2 failsafe."""
