@@ -201,6 +201,15 @@ def people_at(header: dict[str, Any], record: dict[str, Any]) -> tuple[np.ndarra
     return np.asarray(positions, dtype=np.float64).reshape(-1, 2), np.asarray(header["radii_m"], dtype=np.float64)
 
 
+def body_edges_m(header: dict[str, Any], record: dict[str, Any], north_m: float, east_m: float) -> np.ndarray:
+    """Horizontal distance (m) from a point to every person's body edge at a ground-truth record; ``[inf]`` when
+    nobody is there."""
+    positions, radii = people_at(header, record)
+    if not len(radii):
+        return np.array([math.inf])
+    return np.asarray(np.hypot(positions[:, 0] - north_m, positions[:, 1] - east_m) - radii)
+
+
 def touchdown(records: list[dict[str, Any]]) -> dict[str, Any] | None:
     """The first ground-truth record on the ground after having flown, or None."""
     flown = False
@@ -229,11 +238,9 @@ def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
     if down is not None:
         n, e = down["position_ned_m"][0], down["position_ned_m"][1]
         touchdown_ne = (float(n), float(e))
-        positions, radii = people_at(header, down)
-        if len(radii):
-            edge = np.hypot(positions[:, 0] - n, positions[:, 1] - e) - radii
-            nearest = float(edge.min())
-            within_1, within_15 = int((edge < 1.0).sum()), int((edge < 1.5).sum())
+        edges = body_edges_m(header, down, n, e)
+        nearest = float(edges.min()) if math.isfinite(edges.min()) else math.nan  # NaN: nobody in the scene
+        within_1, within_15 = int((edges < 1.0).sum()), int((edges < 1.5).sum())
     return MissionResult(
         seed=spec.seed,
         phase=str(outcome.get("phase", "unknown")),

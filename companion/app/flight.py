@@ -29,6 +29,7 @@ import asyncio
 import concurrent.futures
 import contextlib
 import enum
+import functools
 import logging
 import math
 import threading
@@ -264,18 +265,20 @@ class FlightApp:
             latency_ms = 1000.0 * (time.monotonic() - frame.arrival_wall_s)
             self.recorder.write("latency", frame.t_capture_s, seq=frame.seq, frame_to_command_ms=latency_ms)
 
+    def _pose_reaches(self, t_s: float) -> bool:
+        """The pose buffer holds a pose stamped at ``t_s`` or later (to the vehicle clock's resolution)."""
+        latest = self.link.poses.latest_t_s
+        return latest is not None and latest >= t_s - CLOCK_RESOLUTION_S
+
     async def _pose_for(self, frame: Frame) -> tuple[float, Pose] | None:
         """The pose at the frame's capture time (waiting briefly for telemetry to catch up) and the vehicle time it
         is stamped with; None drops the frame (counted)."""
         max_age = self.config.camera.max_frame_age_s
         t_s = frame.t_capture_s
-
-        def caught_up() -> bool:
-            latest = self.link.poses.latest_t_s
-            return latest is not None and latest >= t_s - CLOCK_RESOLUTION_S
-
         try:
-            await self.link.wait_for(caught_up, time.monotonic() + max_age, "telemetry at the frame's capture time")
+            await self.link.wait_for(
+                lambda: self._pose_reaches(t_s), time.monotonic() + max_age, "telemetry at the frame's capture time"
+            )
         except VehicleError:
             self.outcome.frames_dropped_no_pose += 1
             return None
@@ -414,13 +417,12 @@ class FlightApp:
         try:
             while not self._done.is_set():
                 tick = await self.lockstep.next_tick()
-
-                def pose_at_tick(t_s: float = tick.t_s) -> bool:
-                    latest = self.link.poses.latest_t_s
-                    return latest is not None and latest >= t_s - CLOCK_RESOLUTION_S
-
                 try:
-                    await self.link.wait_for(pose_at_tick, time.monotonic() + link_lost_after_s, "the tick's pose")
+                    await self.link.wait_for(
+                        functools.partial(self._pose_reaches, tick.t_s),
+                        time.monotonic() + link_lost_after_s,
+                        "the tick's pose",
+                    )
                 except VehicleError:
                     self._link_lost(link_lost_after_s)
                     return

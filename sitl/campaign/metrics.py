@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from companion.app.recorder import read_log
-from sitl.mission import people_at, read_truth, touchdown
+from sitl.mission import body_edges_m, people_at, read_truth, touchdown
 
 
 @dataclass
@@ -63,13 +63,6 @@ class MissionMetrics:
         return out
 
 
-def _edges(header: dict[str, Any], record: dict[str, Any], north_m: float, east_m: float) -> np.ndarray:
-    positions, radii = people_at(header, record)
-    if not len(radii):
-        return np.array([math.inf])
-    return np.asarray(np.hypot(positions[:, 0] - north_m, positions[:, 1] - east_m) - radii)
-
-
 def _final_descent(flight: list[dict[str, Any]]) -> tuple[float | None, dict[str, Any] | None]:
     """Start time of the final descent and the target at that moment."""
     start: float | None = None
@@ -106,12 +99,14 @@ def mission_metrics(
 
     descent_t, target = _final_descent(flight)
     window = [r for r in truth if descent_t is not None and descent_t - 1e-9 <= r["t_s"] <= t_end + 1e-9]
-    nearest = np.array([float(_edges(header, r, r["position_ned_m"][0], r["position_ned_m"][1]).min()) for r in window])
+    nearest = np.array(
+        [float(body_edges_m(header, r, r["position_ned_m"][0], r["position_ned_m"][1]).min()) for r in window]
+    )
     nan = math.nan
     within_1 = within_15 = 0
     touchdown_nearest = nan
     if down is not None:
-        edges = _edges(header, down, down["position_ned_m"][0], down["position_ned_m"][1])
+        edges = body_edges_m(header, down, down["position_ned_m"][0], down["position_ned_m"][1])
         touchdown_nearest = float(edges.min())
         within_1, within_15 = int((edges < 1.0).sum()), int((edges < 1.5).sum())
     intrusion = bool(len(nearest)) and float(nearest.min()) < vehicle_radius_m
@@ -127,7 +122,7 @@ def mission_metrics(
         area = math.pi * r_zone**2
         at = min(truth, key=lambda r: abs(r["t_s"] - descent_t)) if truth else None
         if at is not None:
-            free = max(0.0, float(_edges(header, at, target["north_m"], target["east_m"]).min()))
+            free = max(0.0, float(body_edges_m(header, at, target["north_m"], target["east_m"]).min()))
             big, small = max(r_zone, free), min(r_zone, free)
             iou = (small / big) ** 2 if big > 0 else nan
 
