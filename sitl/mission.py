@@ -33,6 +33,7 @@ logger = logging.getLogger(__name__)
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_MISSION_CONFIG = REPO_ROOT / "mission_configs" / "sitl.yaml"
 SETTLE_WALL_S = 60.0  # after the companion ends: how long the SITL may run to finish an autopilot landing
+TRUTH_AFTER_TOUCHDOWN_S = 1.0  # simulated: longer than any camera frame period the configs use
 
 
 class MissionError(Exception):
@@ -285,13 +286,20 @@ def fly(spec: MissionSpec) -> MissionResult:
         exit_code = companion.wait(spec.timeout_s + 30.0)
         # The companion has let go of the lockstep: an autopilot landing it asked for finishes at full speed.
         deadline = time.monotonic() + (SETTLE_WALL_S if _autopilot_lands(spec) else 0.0)
+        grounded_at_s: float | None = None
         while time.monotonic() < deadline and sitl.running:
             try:
                 state = sitl.state()
             except TimeoutError:
                 break  # it stopped (a lockstep timeout when the companion died without letting go)
-            if state["on_ground"] or not state["armed"]:
+            if not state["armed"]:
                 break
+            if state["on_ground"]:
+                # Run on for a second of simulated time, so the ground truth (sampled at frame instants) holds
+                # the touchdown.
+                grounded_at_s = state["t_s"] if grounded_at_s is None else grounded_at_s
+                if state["t_s"] >= grounded_at_s + TRUTH_AFTER_TOUCHDOWN_S:
+                    break
             with contextlib.suppress(subprocess.TimeoutExpired):
                 sitl.wait(0.1)  # paces the loop; returns early if the SITL exits
     finally:
