@@ -54,7 +54,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
 
     from companion.app.flight import FlightApp
     from companion.app.mission import FrameFormat, OperatingMode, load_mission_config
-    from companion.app.recorder import FlightRecorder
+    from companion.app.recorder import FlightRecorder, prune_flights
     from companion.camera.frames import CameraError, open_frame_source
     from companion.perception.pipeline import SlzPipeline
     from companion.vehicle.link import VehicleError
@@ -62,11 +62,18 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 
     config = load_mission_config(args.config)
+    if args.never_arm and config.start.arm_and_takeoff:
+        raise ConfigError(
+            str(args.config),
+            ["start.arm_and_takeoff: must be false with --never-arm (the systemd unit): the pilot takes off"],
+        )
     if args.dry_run:
         config = config.model_copy(update={"mode": OperatingMode.DRY_RUN})
     pipeline = SlzPipeline.from_config(config.perception)  # a model that does not load fails before any link
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     out = Path(args.out) if args.out else config.recorder.directory / stamp
+    if not args.out:
+        prune_flights(config.recorder.directory, config.recorder.keep_flights, config.recorder.max_total_mb)
     sim = config.simulator
     lockstep = LockstepClient(sim.lockstep_url, sim.tick_timeout_s) if sim.lockstep_url else None
     lossless = config.recorder.frame_format is FrameFormat.PNG
@@ -105,6 +112,47 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         recorder.close()
 
 
+def _cmd_doctor(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from companion.app.doctor import DoctorLimits, diagnose
+    from companion.app.mission import load_mission_config
+
+    config = load_mission_config(args.config)
+    limits = DoctorLimits(
+        min_model_rate_hz=args.min_model_rate, frames=args.frames, min_free_mb=args.min_free_mb, window_s=args.window
+    )
+    sys.stdout.write(f"slz doctor: {args.config} (slz-lander {__version__})\n")
+    results = asyncio.run(diagnose(config, limits))
+    for result in results:
+        sys.stdout.write(result.line() + "\n")
+        sys.stdout.flush()
+    failed = [r.name for r in results if not r.ok]
+    sys.stdout.write(f"NOT READY: {', '.join(failed)} failed\n" if failed else "ready to fly\n")
+    return 1 if failed else 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from companion.app.recorder import RecorderError
+    from companion.app.replay import ReplayError
+
+    try:
+        import matplotlib  # noqa: F401  (the plots)
+
+        from companion.app.report import ReportError, build_flight_report
+    except ImportError as exc:
+        sys.stderr.write(f"slz report: {exc}: install the plotting extra, pip install 'slz-lander[report]'\n")
+        return 1
+    try:
+        report = build_flight_report(Path(args.flight), args.out, video=not args.no_video)
+    except (ReportError, RecorderError, ReplayError, OSError) as exc:
+        sys.stderr.write(f"slz report: {exc}\n")
+        return 1
+    for path in report.files:
+        sys.stdout.write(f"wrote {path}\n")
+    return 0
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
     from companion.app.recorder import RecorderError
     from companion.app.replay import ReplayError, replay
@@ -127,6 +175,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
+    from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
     from sitl.campaign.report import build_report
     from sitl.campaign.runner import CampaignError, read_results, run_campaign
     from sitl.campaign.spec import load_campaign_spec
@@ -156,7 +205,34 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
             f"[{100 * success['low']:.1f}, {100 * success['high']:.1f}]\n"
         )
     sys.stdout.write(f"wrote {out / 'report.md'}\n")
+    if args.write_baseline:
+        baseline = make_baseline(spec, results, _git_commit())
+        args.write_baseline.parent.mkdir(parents=True, exist_ok=True)
+        args.write_baseline.write_text(json.dumps(baseline, indent=1) + "\n")
+        sys.stdout.write(f"wrote baseline {args.write_baseline} ({len(baseline['missions'])} missions)\n")
+    if args.check_against:
+        try:
+            gate = check_against(
+                spec, results, read_baseline(args.check_against), args.alpha, name=str(args.check_against)
+            )
+        except GateError as exc:
+            sys.stderr.write(f"slz campaign: {exc}\n")
+            return 2
+        (out / "gate.md").write_text(gate.to_markdown())
+        (out / "gate.json").write_text(json.dumps(gate.to_json(), indent=1) + "\n")
+        sys.stdout.write(gate.to_markdown())
+        return 1 if gate.failed else 0
     return 0
+
+
+def _git_commit() -> str | None:
+    import subprocess
+
+    try:
+        done = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10, check=False)
+    except OSError:
+        return None
+    return done.stdout.strip() or None if done.returncode == 0 else None
 
 
 def _campaign_replay(args: argparse.Namespace) -> int:
@@ -270,7 +346,20 @@ def build_parser() -> argparse.ArgumentParser:
     fly.add_argument("--dry-run", action="store_true", help="perceive and decide, never command the vehicle")
     fly.add_argument("--out", type=Path, help="flight log folder (default: recorder.directory/<UTC time>)")
     fly.add_argument("--timeout", type=float, default=600.0, help="wall seconds before the mission gives up")
+    fly.add_argument(
+        "--never-arm",
+        action="store_true",
+        help="refuse a config that arms and takes off (services: a restarted companion must never take off)",
+    )
     fly.set_defaults(func=_cmd_fly)
+
+    doctor = sub.add_parser("doctor", help="check a board before flight: model, camera, autopilot link, clock, disk")
+    doctor.add_argument("--config", type=Path, required=True, help="the mission config the flight will use")
+    doctor.add_argument("--min-model-rate", type=float, default=10.0, help="inferences per second needed (Hz)")
+    doctor.add_argument("--frames", type=int, default=10, help="camera frames to read")
+    doctor.add_argument("--min-free-mb", type=float, default=1024.0, help="free space needed for flight logs (MiB)")
+    doctor.add_argument("--window", type=float, default=2.0, help="seconds over which telemetry rates are measured")
+    doctor.set_defaults(func=_cmd_doctor)
 
     campaign = sub.add_parser("campaign", help="fly a campaign of seeded missions and report (or replay one mission)")
     campaign.add_argument("action", nargs="?", choices=["run", "replay"], default="run")
@@ -281,6 +370,14 @@ def build_parser() -> argparse.ArgumentParser:
     campaign.add_argument("--workers", type=int, help="parallel missions (default: the spec's)")
     campaign.add_argument("--keep-runs", action="store_true", help="keep every mission's logs")
     campaign.add_argument("--report-only", action="store_true", help="rebuild the report from the results")
+    campaign.add_argument(
+        "--check-against",
+        type=Path,
+        metavar="BASELINE",
+        help="regression gate: exit 1 when a strategy is significantly worse than this baseline on the same scenes",
+    )
+    campaign.add_argument("--alpha", type=float, default=0.05, help="gate: family false-alarm rate (default 0.05)")
+    campaign.add_argument("--write-baseline", type=Path, metavar="PATH", help="write this campaign as a baseline")
     campaign.add_argument("--instance", type=int, default=69, help="replay: SITL instance")
     campaign.add_argument(
         "--instance-base", type=int, default=70, help="worker k flies SITL instance BASE + k (parallel campaigns)"
@@ -291,6 +388,12 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument("flight", type=Path, help="flight folder (flight.jsonl and frames/, recorded with png frames)")
     replay.add_argument("--video", type=Path, help="also write the annotated camera view here (MP4)")
     replay.set_defaults(func=_cmd_replay)
+
+    report = sub.add_parser("report", help="turn a flight log (real, dry run or SITL) into plots, video and a page")
+    report.add_argument("flight", type=Path, help="flight folder (flight.jsonl, frames/)")
+    report.add_argument("--out", type=Path, help="output folder (default FLIGHT/report)")
+    report.add_argument("--no-video", action="store_true", help="skip camera.mp4 (the contact sheet is kept)")
+    report.set_defaults(func=_cmd_report)
 
     demo = sub.add_parser("demo", help="fly one seeded landing mission in the SITL (lockstep) and draw it")
     demo.add_argument("--config", type=Path, default=DEFAULT_MISSION_CONFIG, help="the companion's mission config")

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Debian packages the project needs: Mesa's EGL and software rasterizer for offscreen rendering (the SITL camera),
-# and python3-venv. Idempotent: installs only what is missing; needs root (or sudo) only when something is.
+# python3-venv, and for the deployment checks in `make test`: shellcheck (deploy/jetson/install.sh) and systemd's
+# systemd-analyze (deploy/systemd/slz-lander.service). Idempotent: installs only what is missing; needs root (or sudo) only when something is.
 set -euo pipefail
 
-packages=(libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libgles2 python3-venv)
+packages=(libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libgles2 python3-venv shellcheck systemd)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -29,9 +29,12 @@ SPEC = REPO_ROOT / "mission_configs" / "campaigns" / "smoke.yaml"
 WALL_FIELDS = {"wall_s"}  # the only fields allowed to differ between two runs
 
 
-def campaign(out: Path, workers: int, **popen: Any) -> subprocess.Popen[str]:
+BASELINE = REPO_ROOT / "mission_configs" / "campaigns" / "baselines" / "smoke.json"
+
+
+def campaign(out: Path, workers: int, *extra: str, **popen: Any) -> subprocess.Popen[str]:
     command = [sys.executable, "-m", "companion.cli", "campaign", "--spec", str(SPEC), "--out", str(out)]
-    command += ["--workers", str(workers), "--instance-base", "44"]
+    command += ["--workers", str(workers), "--instance-base", "44", *extra]
     return subprocess.Popen(command, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 
@@ -42,11 +45,22 @@ def comparable(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
 @pytest.fixture(scope="module")
 def one_worker(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("campaign") / "one"
-    run = campaign(out, workers=1)
+    run = campaign(out, 1, "--check-against", str(BASELINE))
     stdout, stderr = run.communicate(timeout=900)
-    assert run.returncode == 0, stderr[-3000:]
+    assert run.returncode == 0, stdout[-3000:] + stderr[-3000:]
     assert "wrote" in stdout
     return out
+
+
+def test_the_regression_gate_passes_against_the_shipped_baseline(one_worker: Path) -> None:
+    gate = json.loads((one_worker / "gate.json").read_text())
+    assert not gate["failed"]
+    assert gate["unpaired"] == 0
+    assert {(c["strategy"], c["metric"]) for c in gate["checks"]} == {
+        (s, m) for s in ("biggest", "oldest") for m in ("success", "warning_1m", "warning_1_5m")
+    }
+    assert all(c["pairs"] == 2 for c in gate["checks"])
+    assert "# Regression gate: passed" in (one_worker / "gate.md").read_text()
 
 
 def test_the_report_is_written_and_every_metric_is_in_its_range(one_worker: Path) -> None:

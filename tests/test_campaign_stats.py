@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from companion.config import ConfigError
-from sitl.campaign.metrics import mission_metrics
-from sitl.campaign.spec import load_campaign_spec
+from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
+from sitl.campaign.metrics import MissionMetrics, mission_metrics
+from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
 
 pytestmark = pytest.mark.unit
@@ -148,3 +152,94 @@ def test_a_person_under_the_descending_vehicle_is_not_a_success(tmp_path: Path) 
     assert not m.warning_1m
     assert m.people_within_1_5m == 1
     assert 0.0 <= m.zone_iou <= 1.0
+
+
+# -- the regression gate (sitl/campaign/gate.py) ------------------------------------------------------------------
+
+
+def _gate_spec(tmp_path: Path, runs: int) -> Path:
+    path = tmp_path / "gate.yaml"
+    path.write_text(
+        f"campaign:\n  name: gate_check\n  master_seed: 3\n  runs: {runs}\n"
+        "  mission_config: mission_configs/sitl.yaml\n"
+        "  conditions:\n    - name: static\n  strategies:\n    - {name: oldest, policy: oldest}\n"
+        "    - {name: nearest, policy: nearest}\n"
+    )
+    return path
+
+
+def _results(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[dict[str, Any]]:
+    """Hand-made results: every mission lands safely except runs ``failed[strategy]`` (over a person)."""
+    rows = []
+    for plan in spec.missions():
+        bad = plan.run in failed.get(plan.strategy.name, set())
+        rows.append(
+            MissionMetrics(
+                plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed, "done", "landed",
+                landed=True, success=not bad, warning_1m=bad, warning_1_5m=bad, people_within_1m=int(bad),
+                people_within_1_5m=int(bad), touchdown_nearest_m=0.3 if bad else 4.0, zone_area_m2=20.0,
+                nearest_person_mean_m=0.5 if bad else 4.0, nearest_person_min_m=0.3 if bad else 4.0, zone_iou=0.8,
+                time_to_land_s=40.0, path_length_m=30.0, reselections=0, aborts=0, failsafes=0,
+                touchdown_north_m=1.0, touchdown_east_m=2.0, people_cells=[],
+            ).to_json()
+        )  # fmt: skip
+    return rows
+
+
+def test_the_gate_fails_a_strategy_significantly_worse_on_the_same_scenes(tmp_path: Path) -> None:
+    spec = load_campaign_spec(_gate_spec(tmp_path, runs=12))
+    baseline = make_baseline(spec, _results(spec, {}), commit="abc")
+    # 7 of 12 paired scenes got worse for `nearest`, none better: p = 0.5 ** 7 = 0.0078 one-sided, Holm over 6 checks
+    # 0.047 < 0.05. One worse scene for `oldest` is chance.
+    report = check_against(spec, _results(spec, {"nearest": set(range(7)), "oldest": {0}}), baseline, 0.05)
+    by_check = {(c.strategy, c.metric): c for c in report.checks}
+    worse = by_check["nearest", "success"]
+    assert (worse.pairs, worse.worse, worse.better) == (12, 7, 0)
+    assert worse.p_value == pytest.approx(0.5**7)
+    assert worse.p_adjusted == pytest.approx(6 * 0.5**7)
+    assert worse.failed
+    assert by_check["nearest", "warning_1m"].failed
+    assert not by_check["oldest", "success"].failed
+    assert by_check["oldest", "success"].worse == 1
+    assert report.failed
+    text = report.to_markdown()
+    assert "# Regression gate: FAILED" in text
+    assert "| nearest | success | 12 | 100.0 % | 41.7 % | 7 | 0 |" in text
+    assert "- static/nearest/0000: success True -> False, warning_1m False -> True, warning_1_5m False -> True" in text
+    # Six worse scenes are not enough after the adjustment (6 * 0.5 ** 6 = 0.094): no false alarm on weak evidence.
+    assert not check_against(spec, _results(spec, {"nearest": set(range(6))}), baseline, 0.05).failed
+    # Improvements never fail the gate.
+    improved = check_against(spec, _results(spec, {}), make_baseline(spec, _results(spec, {"oldest": {1, 2}})))
+    assert not improved.failed
+    assert improved.checks[0].better + improved.checks[3].better == 2
+
+
+def test_the_gate_refuses_a_baseline_of_other_scenes(tmp_path: Path) -> None:
+    spec = load_campaign_spec(_gate_spec(tmp_path, runs=2))
+    other = make_baseline(spec, _results(spec, {})) | {"master_seed": 4}
+    with pytest.raises(GateError, match="not the same scenes"):
+        check_against(spec, _results(spec, {}), other)
+    (tmp_path / "junk.json").write_text("{}")
+    with pytest.raises(GateError, match="is not a campaign baseline"):
+        read_baseline(tmp_path / "junk.json")
+
+
+def test_slz_campaign_check_against_exits_1_with_a_readable_diff(tmp_path: Path) -> None:
+    spec_path = _gate_spec(tmp_path, runs=12)
+    spec = load_campaign_spec(spec_path)
+    out = tmp_path / "campaign"
+    out.mkdir()
+    (out / "results.jsonl").write_text(
+        "".join(json.dumps(r) + "\n" for r in _results(spec, {"nearest": set(range(8))}))
+    )
+    baseline = tmp_path / "baseline.json"
+    baseline.write_text(json.dumps(make_baseline(spec, _results(spec, {}))))
+    command = ["campaign", "--spec", str(spec_path), "--out", str(out), "--report-only", "--check-against"]
+    done = subprocess.run(
+        [sys.executable, "-m", "companion.cli", *command, str(baseline)],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stdout + done.stderr[-2000:]
+    assert "# Regression gate: FAILED" in done.stdout
+    assert "| nearest | success | 12 | 100.0 % | 33.3 % | 8 | 0 |" in done.stdout
+    assert json.loads((out / "gate.json").read_text())["failed"] is True

@@ -124,3 +124,26 @@ def test_fly_with_no_autopilot_says_so_within_the_connect_timeout(tmp_path: Path
     assert "udpin://0.0.0.0:14999" in result.stderr
     assert "no autopilot answered within 2 s" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_fly_never_arm_refuses_a_config_that_takes_off(tmp_path: Path) -> None:
+    result = slz("fly", "--config", "mission_configs/sitl.yaml", "--never-arm", "--out", str(tmp_path / "flight"))
+    assert result.returncode == 2
+    assert "start.arm_and_takeoff: must be false with --never-arm" in result.stderr
+    assert not (tmp_path / "flight").exists()
+
+
+def test_a_handover_mode_of_offboard_is_refused_by_name(tmp_path: Path) -> None:
+    config = tmp_path / "mission.yaml"
+    config.write_text("start:\n  handover_modes: [OFFBOARD]\n")
+    result = slz("fly", "--config", str(config), "--out", str(tmp_path / "flight"))
+    assert result.returncode == 2
+    assert "start.handover_modes" in result.stderr
+    assert "must not list OFFBOARD" in result.stderr
+
+
+def test_report_of_a_missing_flight_says_so(tmp_path: Path) -> None:
+    result = slz("report", str(tmp_path / "nothing"))
+    assert result.returncode == 1
+    assert f"no flight log at {tmp_path / 'nothing' / 'flight.jsonl'}" in result.stderr
+    assert "Traceback" not in result.stderr

@@ -33,27 +33,32 @@ def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int) -> SitlProc
     return SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
 
 
+def pilot_takes_off(sitl: SitlProcess, gcs: GroundStation, instance: int, altitude_m: float) -> None:
+    """The pilot (a ground station) arms and takes off; returns once the vehicle holds at ``altitude_m``."""
+    wait_until(lambda: gcs.poll() is not None and gcs.vehicle_addr, 10, "the vehicle on the GCS link")
+    sysid = SitlConfig(instance=instance).system_id  # PX4 style: instance + 1
+
+    def armed() -> bool:  # the pre-arm checks pass a moment after start: the pilot retries, as pilots do
+        gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+        return bool(sitl.state()["armed"])
+
+    wait_until(armed, 15, f"the pilot arming vehicle {sysid}")
+    takeoff_amsl_m = SitlConfig().origin_alt_m + altitude_m
+    gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, takeoff_amsl_m))
+    state_when(
+        sitl,
+        lambda st: st["mode"] == "AUTO.LOITER" and st["position_ned_m"][2] < -(altitude_m - 1.0),
+        30,
+        f"hover at {altitude_m:g} m",
+    )
+
+
 def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> None:
     instance = 32
     sitl = start_sitl_with_camera(tmp_path, instance, seed=3)
     gcs = GroundStation(SitlConfig().gcs_port_remote)  # PX4 style: every instance talks to the GCS on 14550
     try:
-        # The pilot (a ground station) takes off to 10 m: the camera needs to see the head plane.
-        wait_until(lambda: gcs.poll() is not None and gcs.vehicle_addr, 10, "the vehicle on the GCS link")
-        sysid = SitlConfig(instance=instance).system_id  # PX4 style: instance + 1
-
-        def armed() -> bool:  # the pre-arm checks pass a moment after start: the pilot retries, as pilots do
-            gcs.send(
-                gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            )
-            return bool(sitl.state()["armed"])
-
-        wait_until(armed, 15, f"the pilot arming vehicle {sysid}")
-        takeoff_amsl_m = SitlConfig().origin_alt_m + 10.0
-        gcs.send(
-            gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, takeoff_amsl_m)
-        )
-        state_when(sitl, lambda st: st["mode"] == "AUTO.LOITER" and st["position_ned_m"][2] < -9.0, 30, "hover at 10 m")
+        pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)
         before = sitl.state()
         command = ["fly", "--config", str(tmp_path / "mission.yaml"), "--dry-run"]
         command += ["--out", str(tmp_path / "flight"), "--timeout", "8"]
@@ -88,33 +93,71 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> N
     report = replay(tmp_path / "flight")
     assert report.decisions == kinds.count("decision")
     assert report.identical, report.differences
+    # The team reviews the dry run without the SITL: `slz report` turns the log into plots, video and a page.
+    reported = subprocess.run(
+        [sys.executable, "-m", "companion.cli", "report", str(tmp_path / "flight")],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert reported.returncode == 0, reported.stderr[-3000:]
+    out = tmp_path / "flight" / "report"
+    for name in ("top_view.png", "timeline.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (out / "camera_sheet.jpg").read_bytes()[:2] == b"\xff\xd8"
+    assert (out / "camera.mp4").stat().st_size > 10_000
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mode"] == "dry_run"
+    assert summary["commands_sent"] == 0
+    assert summary["decisions"] == kinds.count("decision")
+    assert summary["camera_frames"] == kinds.count("frame")
+    page = (out / "report.md").read_text()
+    assert "mode: **dry_run** (decided, never commanded)" in page
+    assert "![top_view](top_view.png)" in page
 
 
-def test_the_companion_yields_at_once_when_the_pilot_takes_over(tmp_path: Path) -> None:
+def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_to_the_pilot(tmp_path: Path) -> None:
     instance = 33
     sitl = start_sitl_with_camera(tmp_path, instance, seed=4)
-    command = ["fly", "--config", str(tmp_path / "mission.yaml"), "--out", str(tmp_path / "flight"), "--timeout", "90"]
+    field = (tmp_path / "mission.yaml").read_text().replace("arm_and_takeoff: true", "arm_and_takeoff: false")
+    (tmp_path / "field.yaml").write_text(field)
+    log = tmp_path / "flight" / "flight.jsonl"
+    command = ["fly", "--config", str(tmp_path / "field.yaml"), "--never-arm", "--out", str(tmp_path / "flight")]
     fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", *command],
+        [sys.executable, "-m", "companion.cli", *command, "--timeout", "120"],
         cwd=REPO_ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+    gcs = GroundStation(SitlConfig().gcs_port_remote)
     try:
-        # The companion takes off and starts its search in OFFBOARD; then the pilot switches to position control.
-        state_when(sitl, lambda st: st["mode"] == "OFFBOARD", 60, "the companion in OFFBOARD")
+        # On the ground the companion only waits: it never arms, never takes off, sends nothing.
+        wait_until(lambda: log.is_file() and '"kind":"waiting_for_handover"' in log.read_text(), 60, "the wait")
+        on_ground = sitl.state()
+        # The pilot takes off and hands over by switching to HOLD (the end of a takeoff is HOLD): the companion
+        # takes OFFBOARD from there. Then the pilot takes over in position control: it must yield at once.
+        pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)
+        state_when(sitl, lambda st: st["mode"] == "OFFBOARD", 30, "the companion in OFFBOARD after the handover")
         assert sitl.request({"cmd": "pilot_mode", "mode": "POSCTL"})["result"] == 0
         out, err = fly.communicate(timeout=20)  # it must yield and end, not fight the pilot
         after = sitl.state()
     finally:
         if fly.poll() is None:
             fly.kill()
+        gcs.close()
         sitl.stop()
+    assert not on_ground["armed"]
+    assert on_ground["setpoints_by_sender"] == {}
     assert fly.returncode == 0, err[-3000:]
     assert "ended in yielded" in out
     assert after["mode"] == "POSCTL"
-    records = [json.loads(line) for line in (tmp_path / "flight" / "flight.jsonl").read_text().splitlines()]
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    handover = next(r for r in records if r["kind"] == "handover")
+    assert handover["mode"] == "HOLD"
+    assert handover["altitude_m"] > 9.0
+    assert not [r for r in records if r["kind"] == "command" and r["t_s"] < handover["t_s"]]  # nothing before it
     phases = [r["phase"] for r in records if r["kind"] == "phase"]
     assert phases[-1] == "yielded"
     yielded_at = next(r["t_s"] for r in records if r["kind"] == "phase" and r["phase"] == "yielded")

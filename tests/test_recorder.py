@@ -63,3 +63,24 @@ def test_an_unwritable_directory_is_named(tmp_path: Path) -> None:
     blocker.write_text("x")
     with pytest.raises(RecorderError, match="cannot open flight log"):
         FlightRecorder(blocker / "run")
+
+
+def test_rotation_deletes_the_oldest_flights_beyond_the_count_and_the_size(tmp_path: Path) -> None:
+    import os
+
+    from companion.app.recorder import prune_flights
+
+    for i in range(5):
+        flight = tmp_path / f"2026112{i}T000000Z"
+        flight.mkdir()
+        (flight / "flight.jsonl").write_text("{}\n")
+        (flight / "frames.bin").write_bytes(b"\0" * 300_000)
+        os.utime(flight / "flight.jsonl", (1_000_000 + i, 1_000_000 + i))  # flight i is the i-th oldest
+    (tmp_path / "notes.txt").write_text("not a flight")
+    (tmp_path / "empty").mkdir()
+    assert prune_flights(tmp_path) == []  # no limit: nothing deleted
+    assert prune_flights(tmp_path, keep_flights=4) == [tmp_path / "20261120T000000Z"]
+    # 4 flights of 0.29 MiB: at most 0.7 MiB keeps the newest 2.
+    deleted = prune_flights(tmp_path, max_total_mb=0.7)
+    assert deleted == [tmp_path / "20261121T000000Z", tmp_path / "20261122T000000Z"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["20261123T000000Z", "20261124T000000Z", "empty", "notes.txt"]

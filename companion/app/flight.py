@@ -62,7 +62,7 @@ class StartStage(str, enum.Enum):
     """Before the landing logic starts."""
 
     WAITING = "waiting"
-    """For the autopilot to accept arming and takeoff (SITL), or for the first pose."""
+    """For the autopilot to accept arming and takeoff (SITL), or for the pilot's handover (the field)."""
     CLIMBING = "climbing"
     """Taking off to the start altitude."""
     TRANSIT = "transit"
@@ -162,6 +162,7 @@ class FlightApp:
         self._tick_setpoint: tuple[float, float, float, float] | None = None  # sent during this lockstep tick
         self._early_frame: Frame | None = None
         self._transit_yaw_deg: float | None = None
+        self._waiting_logged = False
 
     # -- vehicle state ------------------------------------------------------------------------------------------
     def vehicle_state(self) -> VehicleState | None:
@@ -334,6 +335,20 @@ class FlightApp:
             stage = self._start_stage.value
             raise VehicleError(self.link.name, f"not ready to search {START_TIMEOUT_S:g} s after the start ({stage})")
         takeoff = start.arm_and_takeoff and not self.dry_run
+        if not takeoff and not self.dry_run and self._start_stage is StartStage.WAITING:
+            # The field: the pilot flies to the area and hands over by switching to a handover mode. No timeout:
+            # the companion waits as long as the pilot flies, and never starts a vehicle that is on the ground.
+            self._first_tick_t_s = state.t_s
+            status = self.link.status
+            if not (status.armed and status.in_air and status.mode in start.handover_modes):
+                if not self._waiting_logged:
+                    self._waiting_logged = True
+                    modes = ", ".join(m.value for m in start.handover_modes)
+                    logger.info("waiting for the pilot's handover: armed, in the air and in %s", modes)
+                    self.recorder.write("waiting_for_handover", state.t_s, modes=modes)
+                return
+            self.recorder.write("handover", state.t_s, mode=status.mode.value, altitude_m=state.altitude_m)
+            self._start_stage = StartStage.CLIMBING  # past the wait; nothing to climb
         if takeoff and self._start_stage is StartStage.WAITING:
             if state.t_s - self._last_takeoff_try_t_s < TAKEOFF_RETRY_S:
                 return

@@ -15,6 +15,7 @@ from companion.config import StrictModel, load_yaml_config
 from companion.guidance.geofence import GeofenceConfig
 from companion.guidance.landing import GuidanceConfig
 from companion.perception.config import PerceptionConfig
+from companion.vehicle.link import FlightMode
 
 
 class OperatingMode(str, enum.Enum):
@@ -35,8 +36,22 @@ class StartConfig(StrictModel):
         "flies to the area and the companion starts from the air.",
     )
     takeoff_altitude_m: float = Field(default=20.0, gt=1.0, le=120.0)
+    handover_modes: list[FlightMode] = Field(
+        default_factory=lambda: [FlightMode.HOLD],
+        min_length=1,
+        description="Without arm_and_takeoff: the companion starts only once the vehicle is armed, in the air and "
+        "in one of these modes (the pilot hands over by switching to it). It never starts from the ground, so a "
+        "restarted companion cannot take off.",
+    )
     start_north_m: float | None = Field(default=None, description="Fly here before the search (SITL campaigns).")
     start_east_m: float | None = None
+
+    @field_validator("handover_modes")
+    @classmethod
+    def _no_offboard(cls, modes: list[FlightMode]) -> list[FlightMode]:
+        if FlightMode.OFFBOARD in modes or FlightMode.UNKNOWN in modes:
+            raise ValueError("must not list OFFBOARD or UNKNOWN: the pilot hands over from a mode of their own")
+        return modes
 
 
 class VehicleConfig(StrictModel):
@@ -120,13 +135,24 @@ class FrameFormat(str, enum.Enum):
 
 
 class RecorderConfig(StrictModel):
-    """The flight recorder."""
+    """The flight recorder, and the rotation of old flights in its directory."""
 
     directory: Path = Field(default=Path("runs/flights"), description="Each flight gets a sub-folder here.")
     frame_every: int = Field(
         default=10, ge=0, le=10000, description="Save every n-th frame (0: none; 1 with png makes a replayable log)."
     )
     frame_format: FrameFormat = FrameFormat.JPEG
+    keep_flights: int = Field(
+        default=0,
+        ge=0,
+        le=100000,
+        description="Before a flight, delete the oldest flights beyond this many (0: keep all).",
+    )
+    max_total_mb: float = Field(
+        default=0.0,
+        ge=0.0,
+        description="Before a flight, delete the oldest flights until the directory holds at most this (0: no limit).",
+    )
 
 
 class MissionConfig(StrictModel):

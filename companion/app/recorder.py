@@ -138,3 +138,50 @@ def read_log(path: Path) -> list[dict[str, Any]]:
             else:
                 raise RecorderError(f"{path}:{number}: not a JSON record") from None
     return records
+
+
+def _size_bytes(folder: Path) -> int:
+    return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
+
+
+def prune_flights(directory: Path, keep_flights: int = 0, max_total_mb: float = 0.0) -> list[Path]:
+    """Rotate the flight logs in ``directory`` before a new flight: delete the oldest flight folders.
+
+    A flight folder is a sub-folder holding a ``flight.jsonl``; anything else in ``directory`` is left alone. Age is
+    the log's modification time (the newest record).
+
+    Parameters
+    ----------
+    directory : Path
+        ``recorder.directory``; a missing directory holds no flight.
+    keep_flights : int
+        Keep at most this many flights (0: no limit on the count).
+    max_total_mb : float
+        Delete the oldest until the flights take at most this many MiB (0: no limit on the size).
+
+    Returns
+    -------
+    list of Path
+        The deleted folders, oldest first.
+    """
+    import shutil
+
+    if not directory.is_dir() or (keep_flights <= 0 and max_total_mb <= 0.0):
+        return []
+    flights = sorted(
+        (p for p in directory.iterdir() if p.is_dir() and (p / "flight.jsonl").is_file()),
+        key=lambda p: ((p / "flight.jsonl").stat().st_mtime, p.name),
+    )
+    sizes = {p: _size_bytes(p) for p in flights}
+    total = sum(sizes.values())
+    deleted: list[Path] = []
+    for flight in flights:
+        too_many = keep_flights > 0 and len(flights) - len(deleted) > keep_flights
+        too_big = max_total_mb > 0.0 and total > max_total_mb * 1024 * 1024
+        if not (too_many or too_big):
+            break
+        shutil.rmtree(flight)
+        total -= sizes[flight]
+        deleted.append(flight)
+        logger.info("flight log rotation: deleted %s (%.1f MiB)", flight, sizes[flight] / 1024 / 1024)
+    return deleted

@@ -158,6 +158,25 @@ def _dims_match(declared: list[Any], expected: tuple[int, ...]) -> bool:
     return all(not isinstance(d, int) or d in (e, -1) for d, e in zip(declared, expected, strict=True))
 
 
+def execution_provider_options(provider: str, engine_cache_dir: Path | None, fp16: bool) -> dict[str, str]:
+    """onnxruntime options for one execution provider.
+
+    TensorRT gets FP16 when allowed and, with ``engine_cache_dir``, a persistent engine and timing cache (the key is
+    the model and the board, so a changed model builds a new engine). Other providers get none.
+    """
+    if provider != "TensorrtExecutionProvider":
+        return {}
+    options = {"trt_fp16_enable": "True" if fp16 else "False"}
+    if engine_cache_dir is not None:
+        options |= {
+            "trt_engine_cache_enable": "True",
+            "trt_engine_cache_path": str(engine_cache_dir),
+            "trt_timing_cache_enable": "True",
+            "trt_timing_cache_path": str(engine_cache_dir),
+        }
+    return options
+
+
 class OnnxDensityModel:
     """Runs an ONNX density model with onnxruntime.
 
@@ -170,6 +189,10 @@ class OnnxDensityModel:
         (and logged); if none is left, loading fails.
     intra_op_threads : int
         Threads for one inference (0: onnxruntime's default).
+    engine_cache_dir : Path, optional
+        TensorRT engine and timing cache (see :func:`execution_provider_options`).
+    fp16 : bool
+        TensorRT: allow FP16.
 
     Raises
     ------
@@ -178,7 +201,14 @@ class OnnxDensityModel:
         fit the contract.
     """
 
-    def __init__(self, path: str | Path, providers: list[str] | None = None, intra_op_threads: int = 1) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        providers: list[str] | None = None,
+        intra_op_threads: int = 1,
+        engine_cache_dir: Path | None = None,
+        fp16: bool = True,
+    ) -> None:
         import onnxruntime as ort
 
         self.path = Path(path)
@@ -194,17 +224,33 @@ class OnnxDensityModel:
             raise PerceptionError(
                 "density.load", f"none of the providers {wanted} is available (available: {available})"
             )
+        if engine_cache_dir is not None and "TensorrtExecutionProvider" in chosen:
+            try:
+                engine_cache_dir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise PerceptionError(
+                    "density.load", f"cannot create the TensorRT engine cache {engine_cache_dir}: {exc}"
+                ) from None
+        provider_options = [execution_provider_options(p, engine_cache_dir, fp16) for p in chosen]
         options = ort.SessionOptions()
         options.intra_op_num_threads = intra_op_threads
         options.inter_op_num_threads = 1
         options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         options.log_severity_level = 3
         try:
-            self._session = ort.InferenceSession(str(self.path), sess_options=options, providers=chosen)
+            self._session = ort.InferenceSession(
+                str(self.path), sess_options=options, providers=chosen, provider_options=provider_options
+            )
         except Exception as exc:  # onnxruntime raises several unrelated types for a bad file
             raise PerceptionError("density.load", f"cannot load ONNX model {self.path}: {exc}") from None
         self.providers: list[str] = list(self._session.get_providers())
         logger.info("density model %s on %s", self.path, ", ".join(self.providers))
+        if self.providers[0] != wanted[0]:
+            logger.warning(
+                "density model falls back to %s: %s is the first choice (see deploy/jetson/README.md)",
+                self.providers[0],
+                wanted[0],
+            )
         metadata = dict(self._session.get_modelmeta().custom_metadata_map)
         self.contract = _read_contract(self.path, metadata)
         self._check_graph()

@@ -40,6 +40,13 @@ class VehicleClock:
         return bool(self._offsets)
 
     @property
+    def offset_spread_s(self) -> float | None:
+        """Largest minus smallest offset in the window: the spread of the transport delay plus the drift over the
+        window (None before any stamp). The estimate is as good as the smallest delay; a large spread means a link
+        that delays telemetry unevenly."""
+        return max(self._offsets) - min(self._offsets) if self._offsets else None
+
+    @property
     def latest_stamp_s(self) -> float | None:
         """The newest vehicle time received."""
         return self._latest_stamp_s

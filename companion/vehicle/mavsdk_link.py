@@ -58,6 +58,8 @@ class MavsdkVehicleLink:
         self.clock = VehicleClock()
         self.status = VehicleStatus()
         self.dropped_samples = 0
+        self.received: dict[str, int] = {}
+        """Samples accepted per stream (``LOCAL_POSITION_NED``, ``ATTITUDE_QUATERNION``, ``flight_mode``, ...)."""
         self._mavsdk: Any = None
         self._system: Any = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -131,7 +133,11 @@ class MavsdkVehicleLink:
             self.dropped_samples += 1
             logger.debug("%s sample dropped: %s", message.message_name, exc)
             return
+        self._count(str(message.message_name))
         self.status.last_telemetry_wall_s = time.monotonic()
+
+    def _count(self, stream: str) -> None:
+        self.received[stream] = self.received.get(stream, 0) + 1
 
     def _on_position(self, message: Any) -> None:
         self._on_stamped(
@@ -148,12 +154,15 @@ class MavsdkVehicleLink:
 
     def _on_mode(self, mode: Any) -> None:
         self.status.mode = _MODES.get(getattr(mode, "name", str(mode)), FlightMode.OTHER)
+        self._count("flight_mode")
 
     def _on_armed(self, armed: bool) -> None:
         self.status.armed = bool(armed)
+        self._count("armed")
 
     def _on_in_air(self, in_air: bool) -> None:
         self.status.in_air = bool(in_air)
+        self._count("in_air")
 
     def _on_landed_state(self, state: Any) -> None:
         self.status.landed_state = str(getattr(state, "name", state))

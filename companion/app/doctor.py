@@ -1,0 +1,257 @@
+"""``slz doctor``: is this board ready to fly? One line per check, pass or fail, before any flight.
+
+The checks use the mission config the flight will use, and the same classes ``slz fly`` uses:
+
+- **disk**: the flight-log directory can be created and written (fsync'd), with enough free space;
+- **model**: the density model loads with the configured execution providers (the one chosen is named, a fallback
+  is flagged) and runs at least at the camera's rate;
+- **link**: an autopilot answers on ``vehicle.url``, and position, attitude, flight mode (heartbeat), armed and
+  in-air state all stream, position and attitude at a usable rate;
+- **clock**: the vehicle clock is synchronised from the telemetry stamps, and evenly (the spread of the offsets);
+- **camera**: the source opens and delivers frames with increasing capture times that are fresh on the vehicle
+  clock.
+
+Nothing is commanded: the doctor never arms, never changes mode and never sends a setpoint.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import itertools
+import logging
+import os
+import shutil
+import statistics
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from companion.app.mission import MissionConfig
+from companion.camera.frames import CameraError, Frame, open_frame_source
+from companion.perception.density import OnnxDensityModel
+from companion.perception.errors import PerceptionError
+from companion.vehicle.link import FlightMode, VehicleError
+from companion.vehicle.mavsdk_link import MavsdkVehicleLink
+
+logger = logging.getLogger(__name__)
+
+POSE_STREAMS = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION")
+STATE_STREAMS = ("flight_mode", "armed", "in_air")
+
+
+class Status(str, enum.Enum):
+    """A check's verdict."""
+
+    PASS = "PASS"
+    WARN = "WARN"
+    """Usable, but not as configured (a provider fallback): the flight may still go."""
+    FAIL = "FAIL"
+    SKIP = "SKIP"
+    """Not checked because another check failed first (counts as a failure)."""
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """One line of the doctor's report."""
+
+    name: str
+    status: Status
+    detail: str
+
+    @property
+    def ok(self) -> bool:
+        """Pass or warn."""
+        return self.status in (Status.PASS, Status.WARN)
+
+    def line(self) -> str:
+        """``PASS model: ...``."""
+        return f"{self.status.value} {self.name}: {self.detail}"
+
+
+@dataclass(frozen=True)
+class DoctorLimits:
+    """What a board must reach to pass.
+
+    Parameters
+    ----------
+    min_model_rate_hz : float
+        Inferences per second the model must sustain (the camera's frame rate, 10 Hz in the paper's setup).
+    min_pose_rate_hz : float
+        Position and attitude samples per second each (the pose at a frame's capture time is interpolated).
+    max_clock_spread_s : float
+        Largest spread of the clock offsets over the window.
+    frames : int
+        Camera frames to read.
+    min_free_mb : float
+        Free space for flight logs.
+    window_s : float
+        Wall time over which telemetry rates are measured.
+    """
+
+    min_model_rate_hz: float = 10.0
+    min_pose_rate_hz: float = 10.0
+    max_clock_spread_s: float = 0.1
+    frames: int = 10
+    min_free_mb: float = 1024.0
+    window_s: float = 2.0
+
+
+def check_disk(directory: Path, min_free_mb: float) -> CheckResult:
+    """The flight-log directory is writable (a probe file written, fsync'd, removed) with ``min_free_mb`` free."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        probe = directory / f".doctor-{os.getpid()}"
+        with probe.open("wb") as f:
+            f.write(b"slz doctor\n")
+            f.flush()
+            os.fsync(f.fileno())
+        probe.unlink()
+    except OSError as exc:
+        return CheckResult("disk", Status.FAIL, f"cannot write flight logs in {directory}: {exc.strerror or exc}")
+    free_mb = shutil.disk_usage(directory).free / 1024 / 1024
+    status = Status.PASS if free_mb >= min_free_mb else Status.FAIL
+    return CheckResult("disk", status, f"{directory} writable, {free_mb:,.0f} MiB free (need {min_free_mb:,.0f})")
+
+
+def check_model(config: MissionConfig, min_rate_hz: float, runs: int = 20) -> CheckResult:
+    """Load the model as ``slz fly`` does and time ``runs`` inferences on a frame of the camera's size."""
+    m = config.perception.model
+    try:
+        model = OnnxDensityModel(m.path, m.providers, m.intra_op_threads, m.engine_cache_dir, m.fp16)
+    except PerceptionError as exc:
+        return CheckResult("model", Status.FAIL, f"{exc.what}: {exc}")
+    cam = config.perception.camera
+    rng = np.random.default_rng(0)
+    frame = rng.integers(0, 256, size=(cam.height_px, cam.width_px, 3), dtype=np.uint8)
+    model.predict(frame)  # warm-up (a TensorRT engine is built or loaded here)
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        model.predict(frame)
+        times.append(time.perf_counter() - t0)
+    rate_hz = 1.0 / statistics.median(times)
+    provider = model.providers[0]
+    detail = f"{m.path.name} on {provider}: {rate_hz:.1f} Hz median over {runs} runs (need {min_rate_hz:g})"
+    if rate_hz < min_rate_hz:
+        return CheckResult("model", Status.FAIL, detail)
+    if provider != m.providers[0]:
+        return CheckResult("model", Status.WARN, f"{detail}; fell back from {m.providers[0]}")
+    return CheckResult("model", Status.PASS, detail)
+
+
+async def check_link(link: MavsdkVehicleLink, config: MissionConfig, limits: DoctorLimits) -> list[CheckResult]:
+    """Connect, then count the telemetry streams over ``limits.window_s``; the clock check follows from them."""
+    timeout_s = config.vehicle.connect_timeout_s
+    try:
+        await link.connect(timeout_s)
+    except VehicleError as exc:
+        return [
+            CheckResult("link", Status.FAIL, str(exc)),
+            CheckResult("clock", Status.SKIP, "no link: no vehicle clock"),
+        ]
+    # The streams start a moment after the connection: count from the first sample of each.
+    with contextlib.suppress(VehicleError):
+        await link.wait_for(
+            lambda: all(link.received.get(s) for s in (*POSE_STREAMS, *STATE_STREAMS)),
+            time.monotonic() + max(5.0, limits.window_s),
+            "the telemetry streams",
+        )
+    before = dict(link.received)
+    t0 = time.monotonic()
+    await asyncio.sleep(limits.window_s)  # a rate is measured over a window of wall time, not waited for
+    elapsed = time.monotonic() - t0
+    rates = {s: (link.received.get(s, 0) - before.get(s, 0)) / elapsed for s in POSE_STREAMS}
+    missing_state = [s for s in STATE_STREAMS if not link.received.get(s)]
+    slow = [s for s, r in rates.items() if r < limits.min_pose_rate_hz]
+    rate_text = ", ".join(f"{s} {r:.0f} Hz" for s, r in rates.items())
+    status = link.status
+    detail = f"{link.url}: {rate_text}; mode {status.mode.value}, armed {status.armed}, in air {status.in_air}"
+    if slow or missing_state or status.mode is FlightMode.UNKNOWN:
+        problems = [f"{s} below {limits.min_pose_rate_hz:g} Hz" for s in slow]
+        problems += [f"no {s} (heartbeat / extended state)" for s in missing_state]
+        results = [CheckResult("link", Status.FAIL, f"{detail}; " + "; ".join(problems))]
+    else:
+        results = [CheckResult("link", Status.PASS, detail)]
+    spread = link.clock.offset_spread_s
+    if spread is None:
+        results.append(CheckResult("clock", Status.FAIL, "no stamped telemetry: the vehicle clock is not synchronised"))
+    else:
+        text = f"vehicle clock from time_boot_ms stamps, offset spread {1000 * spread:.1f} ms"
+        text += f" (limit {1000 * limits.max_clock_spread_s:g} ms)"
+        results.append(CheckResult("clock", Status.PASS if spread <= limits.max_clock_spread_s else Status.FAIL, text))
+    return results
+
+
+async def check_camera(config: MissionConfig, link: MavsdkVehicleLink | None, limits: DoctorLimits) -> CheckResult:
+    """Open the camera, read ``limits.frames`` frames within a deadline, check their stamps and their age."""
+    cam = config.camera
+    clock = link.clock if link is not None and link.clock.synced else None
+    try:
+        source = open_frame_source(
+            cam.url, vehicle_time_s=clock.now_s if clock else time.monotonic, latency_s=cam.latency_s
+        )
+        await source.open()
+    except CameraError as exc:
+        return CheckResult("camera", Status.FAIL, str(exc))
+    frames: list[Frame] = []
+    ages_s: list[float] = []
+    deadline_s = max(5.0, 3.0 * limits.frames * cam.max_frame_age_s)
+    stream = source.frames()
+
+    async def read() -> None:
+        async for frame in stream:
+            frames.append(frame)
+            if clock is not None:
+                ages_s.append(clock.now_s() - frame.t_capture_s)
+            if len(frames) >= limits.frames:
+                return
+
+    try:
+        await asyncio.wait_for(read(), deadline_s)
+    except (TimeoutError, asyncio.TimeoutError):
+        pass
+    except CameraError as exc:
+        return CheckResult("camera", Status.FAIL, str(exc))
+    finally:
+        with contextlib.suppress(Exception):
+            await stream.aclose()  # type: ignore[attr-defined]
+    if len(frames) < limits.frames:
+        return CheckResult(
+            "camera", Status.FAIL, f"{cam.url}: {len(frames)} of {limits.frames} frames within {deadline_s:g} s"
+        )
+    stamps = [f.t_capture_s for f in frames]
+    h, w = frames[0].image_bgr.shape[:2]
+    span_s = stamps[-1] - stamps[0]
+    rate = (len(stamps) - 1) / span_s if span_s > 0 else float("inf")
+    detail = f"{cam.url}: {len(frames)} frames {w}x{h}, {rate:.1f} Hz by capture time"
+    if any(b <= a for a, b in itertools.pairwise(stamps)):
+        return CheckResult("camera", Status.FAIL, f"{detail}; capture times do not increase")
+    if clock is None:
+        return CheckResult("camera", Status.FAIL, f"{detail}; frame age not checked: no vehicle clock")
+    worst = max(ages_s)
+    detail += f", age on the vehicle clock {1000 * min(ages_s):.0f}-{1000 * worst:.0f} ms"
+    if worst > cam.max_frame_age_s or min(ages_s) < -0.05:
+        return CheckResult("camera", Status.FAIL, f"{detail} (allowed 0-{1000 * cam.max_frame_age_s:.0f} ms)")
+    return CheckResult("camera", Status.PASS, detail)
+
+
+async def diagnose(config: MissionConfig, limits: DoctorLimits | None = None) -> list[CheckResult]:
+    """Run every check in order: disk, model, link, clock, camera."""
+    limits = limits or DoctorLimits()
+    results = [check_disk(config.recorder.directory, limits.min_free_mb)]
+    results.append(
+        await asyncio.get_running_loop().run_in_executor(None, check_model, config, limits.min_model_rate_hz)
+    )
+    link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz)
+    try:
+        link_results = await check_link(link, config, limits)
+        results += link_results
+        linked = link_results[0].ok or link.clock.synced
+        results.append(await check_camera(config, link if linked else None, limits))
+    finally:
+        await link.close()
+    return results

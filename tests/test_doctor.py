@@ -1,0 +1,97 @@
+"""`slz doctor` against the SITL: every check passes on a good board, and each missing part fails with its own line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sitl.process import SitlProcess
+
+pytestmark = pytest.mark.sitl
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+INSTANCE = 36
+
+
+def doctor(config: Path) -> subprocess.CompletedProcess[str]:
+    command = [sys.executable, "-m", "companion.cli", "doctor", "--config", str(config), "--frames", "5"]
+    return subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
+
+
+def lines_of(run: subprocess.CompletedProcess[str]) -> dict[str, str]:
+    """The report's lines by check name: {"model": "PASS model: ...", ...}."""
+    checks = {}
+    for line in run.stdout.splitlines():
+        status, _, rest = line.partition(" ")
+        if status in ("PASS", "WARN", "FAIL", "SKIP"):
+            checks[rest.split(":", 1)[0]] = line
+    return checks
+
+
+def mission_config(tmp_path: Path, name: str, **replace: str) -> Path:
+    """mission_configs/sitl.yaml on this test's SITL instance, free running, with ``replace`` applied."""
+    text = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
+    text = text.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + INSTANCE}")
+    text = text.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + INSTANCE}")
+    text = text.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + INSTANCE}")
+    text = text.replace("connect_timeout_s: 20.0", "connect_timeout_s: 3.0")
+    text = text.replace("directory: runs/flights", f"directory: {tmp_path / 'flights'}")
+    for old, new in replace.items():
+        assert old in text, old
+        text = text.replace(old, new)
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path) -> None:
+    sitl_config = tmp_path / "sitl.yaml"
+    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n")
+    good = mission_config(tmp_path, "good")
+    no_model_no_camera = mission_config(
+        tmp_path,
+        "broken",
+        **{
+            f"sitl://127.0.0.1:{5600 + INSTANCE}": "sitl://127.0.0.1:9",  # nothing listens on the discard port
+            "recorder:": "perception:\n  model:\n    path: models/density/missing.onnx\nrecorder:",
+        },
+    )
+    no_link = mission_config(tmp_path, "no_link", **{f"udpin://0.0.0.0:{14540 + INSTANCE}": "udpin://0.0.0.0:14539"})
+    sitl = SitlProcess(["--config", str(sitl_config)], INSTANCE, tmp_path).start()
+    try:
+        ok = doctor(good)
+        broken = doctor(no_model_no_camera)
+        unlinked = doctor(no_link)
+    finally:
+        sitl.stop()
+
+    # A good board: every check passes, exit 0.
+    checks = lines_of(ok)
+    assert ok.returncode == 0, ok.stdout + ok.stderr[-2000:]
+    assert set(checks) == {"disk", "model", "link", "clock", "camera"}
+    assert all(line.startswith("PASS") for line in checks.values()), checks
+    assert "CPUExecutionProvider" in checks["model"]
+    assert "LOCAL_POSITION_NED" in checks["link"]
+    assert "ATTITUDE_QUATERNION" in checks["link"]
+    assert "5 frames 640x480" in checks["camera"]
+    assert ok.stdout.rstrip().endswith("ready to fly")
+
+    # No model and no camera: each named, the link still checked and passing, exit 1.
+    checks = lines_of(broken)
+    assert broken.returncode == 1
+    assert checks["model"].startswith("FAIL model:")
+    assert "missing.onnx" in checks["model"]
+    assert checks["camera"].startswith("FAIL camera:")
+    assert "127.0.0.1:9" in checks["camera"]
+    assert checks["link"].startswith("PASS")
+    assert "NOT READY: model, camera failed" in broken.stdout
+
+    # No autopilot on the configured port: the link fails within its timeout, the clock cannot be checked.
+    checks = lines_of(unlinked)
+    assert unlinked.returncode == 1
+    assert checks["link"] == "FAIL link: udpin://0.0.0.0:14539: no autopilot answered within 3 s"
+    assert checks["clock"].startswith("SKIP clock:")
+    assert checks["model"].startswith("PASS")
