@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: setup demo test lint typecheck pytest bench paper-table training models clean
+.PHONY: setup demo test test-slow lint typecheck pytest bench paper-table training models clean
 
 setup: $(STAMP)
 
@@ -32,6 +32,11 @@ pytest: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow"
 
 test: lint typecheck pytest
+
+# The slow tier: the tests too long for every run (the MAVSDK square at real speed, `slz campaign replay`).
+# The nightly workflow runs them.
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -m slow
 
 bench: $(STAMP)
 	$(BIN)/python bench/perception.py

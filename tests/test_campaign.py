@@ -131,6 +131,7 @@ def test_two_workers_killed_and_resumed_give_the_same_results(one_worker: Path, 
     assert not math.isnan(summary_two["cells"]["static/oldest"]["success"]["value"])
 
 
+@pytest.mark.slow  # 30 s: one more mission flown; in `make test-slow`
 def test_one_mission_is_re_flown_from_its_seed_with_its_video(one_worker: Path, tmp_path: Path) -> None:
     command = [sys.executable, "-m", "companion.cli", "campaign", "replay", str(one_worker), "static/oldest/0000"]
     command += ["--out", str(tmp_path / "replay"), "--instance", "68"]

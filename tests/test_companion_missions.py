@@ -27,7 +27,7 @@ pytestmark = pytest.mark.sitl
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CLEARANCE_M = 1.5  # the bar: no person's body within 1.5 m of the touchdown point
-STATIC_SEED = 5
+STATIC_SEED = 1  # the README's `make demo`
 WALKING_SEED = 6
 FAULT_AT_S = 18.0  # simulated: the companion is searching or approaching by then (takeoff ends near 13 s)
 

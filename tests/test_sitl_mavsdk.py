@@ -91,6 +91,7 @@ def sitl_factory(tmp_path: Path) -> Iterator[Callable[..., SitlProcess]]:
         sitl.stop()
 
 
+@pytest.mark.slow  # 40 s at real speed; the companion's own MAVSDK flight is tests/test_vehicle_link.py
 def test_mavsdk_flies_an_offboard_square_while_a_ground_station_watches(
     sitl_factory: Callable[..., SitlProcess], tmp_path: Path
 ) -> None:
