@@ -85,7 +85,7 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
     end = next((r for r in records if r["kind"] == "end"), None)
     decisions = [r for r in records if r["kind"] == "decision"]
     latencies = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == "latency"]
-    land = next((r for r in decisions if r["decision"]["kind"] == "land"), None)
+    land = next((r for r in decisions if r["decision"]["kind"] == "land" and r["state"]), None)
     events = []
     for r in records:
         if r["kind"] == "phase":
@@ -185,7 +185,7 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
             Circle((t["east_m"], t["north_m"]), max(t["radius_m"], 0.3), fill=False, edgecolor="gold", lw=1.5,
                    label="targets acted on (last estimate)" if i == 0 else None)
         )  # fmt: skip
-    land = next((r for r in decisions if r["decision"]["kind"] == "land"), None)
+    land = next((r for r in decisions if r["decision"]["kind"] == "land" and r["state"]), None)
     if land is not None:
         ax.plot(land["state"]["east_m"], land["state"]["north_m"], "x", color="green", ms=14, mew=3, label="land")
     extent = float(np.abs(fence).max()) + 3.0
