@@ -44,7 +44,9 @@ def state_when(
 class MavlinkPeer:
     """A raw-UDP MAVLink peer bound to ``port`` (the side MAVSDK or a ground station would be)."""
 
-    def __init__(self, port: int, system_id: int = 255, component_id: int = 190) -> None:
+    def __init__(self, port: int, system_id: int = 255, component_id: int = 190, only_sysid: int | None = None) -> None:
+        self.only_sysid = only_sysid
+        """Listen to this vehicle only (other SITL instances send to the same GCS port, as PX4's do)."""
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
         self.sock.bind(("127.0.0.1", port))
@@ -65,8 +67,11 @@ class MavlinkPeer:
                 data, addr = self.sock.recvfrom(65535)
             except BlockingIOError:
                 break
+            msgs = self.mav.parse_buffer(data) or []
+            if self.only_sysid is not None and any(m.get_srcSystem() != self.only_sysid for m in msgs):
+                continue
             self.vehicle_addr = addr
-            for msg in self.mav.parse_buffer(data) or []:
+            for msg in msgs:
                 if msg.get_type() == "HEARTBEAT":
                     self.heartbeat_wall_times.append(time.monotonic())
                     self.vehicle_sysid = msg.get_srcSystem()
@@ -117,8 +122,8 @@ class MavlinkPeer:
 class GroundStation(MavlinkPeer):
     """A pymavlink ground station on the GCS link (UDP 14550)."""
 
-    def __init__(self, port: int = GCS_PORT_REMOTE) -> None:
-        super().__init__(port, system_id=255, component_id=190)
+    def __init__(self, port: int = GCS_PORT_REMOTE, only_sysid: int | None = None) -> None:
+        super().__init__(port, system_id=255, component_id=190, only_sysid=only_sysid)
 
 
 def api_port(instance: int) -> int:

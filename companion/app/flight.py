@@ -56,6 +56,7 @@ TICK_PERIOD_S = 0.1  # free running: the wall-clock tick of the supervision
 TAKEOFF_RETRY_S = 1.0  # vehicle time between arming attempts while the autopilot refuses
 START_TIMEOUT_S = 120.0  # vehicle time from the first tick to the start of the search
 START_TOLERANCE_M = 1.0  # horizontal distance to the start pose at which the search begins
+CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
 
 
 class StartStage(str, enum.Enum):
@@ -458,6 +459,8 @@ class FlightApp:
         frames = self.source.frames()
         try:
             async for frame in frames:
+                if self._done.is_set():
+                    break
                 await self.on_frame(frame)
         except CameraError as exc:
             self._camera_lost(exc)
@@ -534,9 +537,15 @@ class FlightApp:
                 if not task.cancelled() and task.exception() is not None:
                     raise task.exception()  # type: ignore[misc]
         finally:
+            # The flight is over for every loop. Each one also ends by itself on `_done`, because on Python 3.10
+            # and 3.11 `asyncio.wait_for` can lose a cancellation that arrives as its timeout fires (gh-86296, seen
+            # here under load: a dry run went on deciding after its mission timeout). Then cancel, within a bound.
+            self._done.set()
             for task in tasks:
                 task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
+            _, pending = await asyncio.wait(tasks, timeout=CANCEL_GRACE_S)
+            for task in pending:
+                logger.error("task %s did not stop within %g s of its cancellation", task.get_name(), CANCEL_GRACE_S)
             self._stop.set()
             if watchdog.is_alive():
                 watchdog.join(timeout=2.0)
