@@ -18,6 +18,9 @@ from companion.config import ConfigError
 logger = logging.getLogger("slz")
 
 DEFAULT_MISSION_CONFIG = Path("mission_configs/sitl.yaml")
+EXIT_FAILSAFE = 3
+"""``slz fly`` ended in a failsafe: the vehicle is the autopilot's (land, hold, return). The systemd unit does not
+restart on it (``RestartPreventExitStatus``), so a companion never takes back a vehicle it handed over."""
 
 
 def _cmd_check_config(args: argparse.Namespace) -> int:
@@ -90,7 +93,9 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         finally:
             await link.close()
         sys.stdout.write(f"{config.mode.value}: ended in {outcome.phase} ({outcome.reason}); log {recorder.path}\n")
-        return 0 if outcome.phase in ("done", "yielded") or config.mode is OperatingMode.DRY_RUN else 1
+        if outcome.phase in ("done", "yielded") or config.mode is OperatingMode.DRY_RUN:
+            return 0
+        return EXIT_FAILSAFE if outcome.phase == "failsafe" else 1
 
     try:
         model_path = config.perception.model.path

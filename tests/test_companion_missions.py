@@ -161,6 +161,7 @@ def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Pat
     commands = [x for x in records if x["kind"] == "command"]
     assert commands[-1]["command"] == "land"  # the configured T2 action
     assert r.phase == "failsafe"
+    assert r.companion_exit_code == 3  # the failsafe's exit status: the systemd unit does not restart on it
     assert r.landed  # the autopilot landed where it was
     assert not [x for x in records if x["kind"] == "frame_result" and float(x["t_s"]) > FAULT_AT_S]
 

@@ -91,6 +91,7 @@ def test_the_systemd_unit_verifies_and_cannot_loop_a_vehicle_into_takeoffs(tmp_p
     assert "--never-arm" in exec_start  # a restart can never take off
     assert "--dry-run" not in exec_start
     assert settings["Restart"] == ["on-failure"]  # a finished flight (exit 0) is not restarted
+    assert settings["RestartPreventExitStatus"] == ["3"]  # nor one that handed the vehicle over in a failsafe
     assert int(settings["StartLimitBurst"][0]) <= 3
     assert settings["StandardOutput"] == ["journal"]
     assert settings["NoNewPrivileges"] == ["yes"]
