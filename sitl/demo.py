@@ -16,13 +16,13 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
 
 from companion.app.recorder import read_log
 from companion.app.replay import replay
+from companion.app.report import tracks_at_landing
 from sitl.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly, people_at, read_truth, touchdown
 
 logger = logging.getLogger(__name__)
@@ -101,7 +101,7 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
     path = [to_px(r["position_ned_m"][0], r["position_ned_m"][1]) for r in records]
     if len(path) > 1:
         cv2.polylines(view, [np.array(path, np.int32)], False, PATH_BGR, 2, cv2.LINE_AA)
-    tracks, target = _tracks_at_landing(flight)
+    tracks, target = tracks_at_landing(flight)
     for track in tracks:
         centre = to_px(track["north_m"], track["east_m"])
         cv2.circle(view, centre, round(track["radius_m"] * px_per_m), ZONE_BGR, 1, cv2.LINE_AA)
@@ -126,28 +126,6 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
         cv2.LINE_AA,
     )
     return view
-
-
-def _tracks_at_landing(flight: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
-    """The tracked zones when the final descent began (the last entry into descent before the landing, or the last
-    frame) and the target landed on (or the last one)."""
-    tracks: list[dict[str, Any]] = []
-    at_descent: list[dict[str, Any]] | None = None
-    target = None
-    previous_phase = ""
-    for record in flight:
-        if record["kind"] == "frame_result":
-            tracks = record["tracks"] or []
-        elif record["kind"] == "decision":
-            decision = record["decision"]
-            if decision["target"] is not None:
-                target = decision["target"]
-            if decision["phase"] == "descent" and previous_phase != "descent":
-                at_descent = tracks
-            previous_phase = decision["phase"]
-            if decision["kind"] == "land":
-                break
-    return (at_descent if at_descent is not None else tracks), target
 
 
 def describe(outcome: DemoOutcome) -> str:

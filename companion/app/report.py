@@ -3,9 +3,9 @@
 Works on any log ``slz fly`` writes: a real flight, a field dry run or a SITL mission. Only the log is used (no
 ground truth, no re-run of the model), so what is drawn is what the companion knew and decided at the time:
 
-- ``top_view.png``: north-up, the vehicle's path (from the decision states), the geofence, every target chosen,
-  the zones tracked when the final descent began (or at the last frame), the setpoints sent (or, in a dry run, the
-  ones it would have sent) and the land command's point;
+- ``top_view.png``: north-up, the vehicle's path (from the decision states), the geofence, the targets acted on
+  (approached, descended over, landed on), the zones tracked when the final descent began (or at the land command,
+  or the last frame), the setpoints sent (or, in a dry run, the ones it would have sent) and the land point;
 - ``timeline.png``: altitude over time with the phases, the failsafes, and the tracked zones and the target radius;
 - ``camera.mp4`` and ``camera_sheet.jpg``: the saved camera frames with the tracked zones (cyan, with ids) and the
   target (yellow) projected back into the view, captioned with the time, the altitude and the decision in force;
@@ -123,20 +123,26 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def _tracks_at_descent(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The tracked zones when the last final descent began, else at the last processed frame."""
+def tracks_at_landing(records: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+    """The tracked zones when the final descent began (the last entry into descent before the land command, else
+    the tracks at the land command or the last frame) and the target landed on (or the last one)."""
     tracks: list[dict[str, Any]] = []
     at_descent: list[dict[str, Any]] | None = None
-    previous = ""
-    for r in records:
-        if r["kind"] == "frame_result":
-            tracks = r["tracks"] or []
-        elif r["kind"] == "decision":
-            phase = r["decision"]["phase"]
-            if phase == "descent" and previous != "descent":
+    target = None
+    previous_phase = ""
+    for record in records:
+        if record["kind"] == "frame_result":
+            tracks = record["tracks"] or []
+        elif record["kind"] == "decision":
+            decision = record["decision"]
+            if decision["target"] is not None:
+                target = decision["target"]
+            if decision["phase"] == "descent" and previous_phase != "descent":
                 at_descent = tracks
-            previous = phase
-    return at_descent if at_descent is not None else tracks
+            previous_phase = decision["phase"]
+            if decision["kind"] == "land":
+                break
+    return (at_descent if at_descent is not None else tracks), target
 
 
 def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: Path) -> None:
@@ -165,7 +171,7 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
     if len(setpoints):
         label = "setpoints " + ("sent" if any(r["kind"] == "command" for r in records) else "decided (not sent)")
         ax.plot(setpoints[:, 1], setpoints[:, 0], ".", color="tab:blue", ms=3, alpha=0.5, label=label)
-    for i, track in enumerate(_tracks_at_descent(records)):
+    for i, track in enumerate(tracks_at_landing(records)[0]):
         ax.add_patch(
             Circle(
                 (track["east_m"], track["north_m"]),
