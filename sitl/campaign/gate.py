@@ -16,9 +16,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from scipy import stats as scipy_stats
-
 from sitl.campaign.spec import CampaignSpec
+from sitl.campaign.stats import mcnemar_exact
 
 BASELINE_FORMAT = "slz-campaign-baseline/1"
 GATED: dict[str, bool] = {"success": True, "warning_1m": False, "warning_1_5m": False}
@@ -138,14 +137,6 @@ def holm(p_values: list[float]) -> list[float]:
     return adjusted
 
 
-def one_sided_worse(worse: int, better: int) -> float:
-    """P(at least ``worse`` of the discordant pairs are worse | each is worse with probability 1/2)."""
-    n = worse + better
-    if n == 0:
-        return 1.0
-    return float(scipy_stats.binomtest(worse, n, 0.5, alternative="greater").pvalue)
-
-
 def check_against(
     spec: CampaignSpec, results: list[dict[str, Any]], baseline: dict[str, Any], alpha: float = 0.05, name: str = ""
 ) -> GateReport:
@@ -184,11 +175,11 @@ def check_against(
         for metric, good in GATED.items():
             old = [before[r["mission_id"]][metric] for r in rows]
             new = [bool(r[metric]) for r in rows]
-            worse = sum(1 for o, n in zip(old, new, strict=True) if o == good and n != good)
-            better = sum(1 for o, n in zip(old, new, strict=True) if o != good and n == good)
+            # One-sided: pairs where only the baseline was good (worse now) outnumber those where only this run is.
+            test = mcnemar_exact([o == good for o in old], [n == good for n in new], alternative="greater")
             raw.append(
-                (strategy, metric, len(rows), sum(old) / len(rows), sum(new) / len(rows), worse, better,
-                 one_sided_worse(worse, better))
+                (strategy, metric, len(rows), sum(old) / len(rows), sum(new) / len(rows), test.only_a, test.only_b,
+                 test.p_value)
             )  # fmt: skip
     adjusted = holm([item[-1] for item in raw])
     checks = [

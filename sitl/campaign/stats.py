@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy import stats as scipy_stats
@@ -70,14 +71,20 @@ class PairedRates:
     p_value: float
 
 
-def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> PairedRates:
-    """Exact (binomial) McNemar test of paired outcomes ``a[i]``, ``b[i]`` (two-sided)."""
+def mcnemar_exact(
+    a: Sequence[bool], b: Sequence[bool], alternative: Literal["two-sided", "greater", "less"] = "two-sided"
+) -> PairedRates:
+    """Exact (binomial) McNemar test of paired outcomes ``a[i]``, ``b[i]``.
+
+    ``alternative="greater"``: one-sided, "pairs where only ``a`` holds are more frequent than chance" (the
+    regression gate's question, with ``a`` the baseline being good).
+    """
     if len(a) != len(b):
         raise ValueError(f"paired outcomes need equal lengths, got {len(a)} and {len(b)}")
     only_a = sum(1 for x, y in zip(a, b, strict=True) if x and not y)
     only_b = sum(1 for x, y in zip(a, b, strict=True) if y and not x)
     discordant = only_a + only_b
-    p = 1.0 if discordant == 0 else float(scipy_stats.binomtest(only_a, discordant, 0.5).pvalue)
+    p = 1.0 if discordant == 0 else float(scipy_stats.binomtest(only_a, discordant, 0.5, alternative).pvalue)
     return PairedRates(len(a), only_a, only_b, p)
 
 
