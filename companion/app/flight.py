@@ -279,7 +279,9 @@ class FlightApp:
         t_s = frame.t_capture_s
         try:
             await self.link.wait_for(
-                lambda: self._pose_reaches(t_s), time.monotonic() + max_age, "telemetry at the frame's capture time"
+                functools.partial(self._pose_reaches, t_s),
+                time.monotonic() + max_age,
+                "telemetry at the frame's capture time",
             )
         except VehicleError:
             self.outcome.frames_dropped_no_pose += 1

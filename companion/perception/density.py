@@ -247,7 +247,7 @@ class OnnxDensityModel:
         logger.info("density model %s on %s", self.path, ", ".join(self.providers))
         if self.providers[0] != wanted[0]:
             logger.warning(
-                "density model falls back to %s: %s is the first choice (see deploy/jetson/README.md)",
+                "density model falls back to %s: %s is the first choice (see deploy/README.md)",
                 self.providers[0],
                 wanted[0],
             )
