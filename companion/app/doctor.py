@@ -121,7 +121,7 @@ def check_model(config: MissionConfig, min_rate_hz: float, runs: int = 20) -> Ch
     """Load the model as ``slz fly`` does and time ``runs`` inferences on a frame of the camera's size."""
     m = config.perception.model
     try:
-        model = OnnxDensityModel(m.path, m.providers, m.intra_op_threads, m.engine_cache_dir, m.fp16)
+        model = OnnxDensityModel.from_config(m)
     except PerceptionError as exc:
         return CheckResult("model", Status.FAIL, f"{exc.what}: {exc}")
     cam = config.perception.camera

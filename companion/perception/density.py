@@ -21,6 +21,7 @@ import numpy.typing as npt
 from pydantic import Field, ValidationError, model_validator
 
 from companion.config import StrictModel, format_validation_error
+from companion.perception.config import ModelConfig
 from companion.perception.errors import PerceptionError
 
 logger = logging.getLogger(__name__)
@@ -254,6 +255,11 @@ class OnnxDensityModel:
         metadata = dict(self._session.get_modelmeta().custom_metadata_map)
         self.contract = _read_contract(self.path, metadata)
         self._check_graph()
+
+    @classmethod
+    def from_config(cls, config: ModelConfig) -> OnnxDensityModel:
+        """The model as ``perception.model`` configures it (``slz fly``, ``slz doctor``)."""
+        return cls(config.path, config.providers, config.intra_op_threads, config.engine_cache_dir, config.fp16)
 
     def _check_graph(self) -> None:
         c = self.contract

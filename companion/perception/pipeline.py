@@ -103,8 +103,7 @@ class SlzPipeline:
     def from_config(cls, config: PerceptionConfig, density_model: DensityModel | None = None) -> SlzPipeline:
         """Build every stage from one config; the ONNX model is loaded unless ``density_model`` is given."""
         camera, T_body_camera = camera_from_config(config.camera)
-        m = config.model
-        model = density_model or OnnxDensityModel(m.path, m.providers, m.intra_op_threads, m.engine_cache_dir, m.fp16)
+        model = density_model or OnnxDensityModel.from_config(config.model)
         return cls(
             density_model=model,
             occupancy=OccupancyMapper(config.occupancy),
