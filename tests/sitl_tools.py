@@ -6,6 +6,7 @@ import math
 import socket
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -15,6 +16,17 @@ from sitl.lockstep import LockstepControl
 from sitl.process import SitlProcess
 
 T = TypeVar("T")
+
+SITL_MISSION_CONFIG = Path(__file__).resolve().parent.parent / "mission_configs" / "sitl.yaml"
+
+
+def sitl_mission_yaml(instance: int) -> str:
+    """mission_configs/sitl.yaml on SITL instance ``instance``'s ports (MAVSDK, camera, control channel). A SITL
+    started without ``--lockstep`` answers the control channel with "running free": the companion runs free too."""
+    text = SITL_MISSION_CONFIG.read_text()
+    text = text.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
+    text = text.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
+    return text.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + instance}")
 
 
 def wait_until(condition: Callable[[], T | None], timeout_s: float, what: str, poll_s: float = 0.05) -> T:

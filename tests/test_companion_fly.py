@@ -13,7 +13,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.app.replay import replay
 from sitl.config import SitlConfig
 from sitl.process import SitlProcess
-from tests.sitl_tools import GroundStation, state_when, wait_until
+from tests.sitl_tools import GroundStation, sitl_mission_yaml, state_when, wait_until
 
 pytestmark = pytest.mark.sitl
 
@@ -24,10 +24,7 @@ def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int) -> SitlProc
     """A SITL instance with its camera, and ``tmp_path/mission.yaml``: mission_configs/sitl.yaml on its ports."""
     sitl_config = tmp_path / "sitl.yaml"
     sitl_config.write_text(f"sitl:\n  camera:\n    enabled: true\n  seed: {seed}\n")
-    mission = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
-    mission = mission.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
-    mission = mission.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
-    mission = mission.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + instance}")  # runs free: no lockstep
+    mission = sitl_mission_yaml(instance)  # the SITL runs free: no lockstep
     mission = mission.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
     (tmp_path / "mission.yaml").write_text(mission)
     return SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from sitl.process import SitlProcess
+from tests.sitl_tools import sitl_mission_yaml
 
 pytestmark = pytest.mark.sitl
 
@@ -33,10 +34,7 @@ def lines_of(run: subprocess.CompletedProcess[str]) -> dict[str, str]:
 
 def mission_config(tmp_path: Path, name: str, **replace: str) -> Path:
     """mission_configs/sitl.yaml on this test's SITL instance, free running, with ``replace`` applied."""
-    text = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
-    text = text.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + INSTANCE}")
-    text = text.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + INSTANCE}")
-    text = text.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + INSTANCE}")
+    text = sitl_mission_yaml(INSTANCE)
     text = text.replace("connect_timeout_s: 20.0", "connect_timeout_s: 3.0")
     text = text.replace("directory: runs/flights", f"directory: {tmp_path / 'flights'}")
     for old, new in replace.items():
