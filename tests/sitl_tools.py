@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.config import API_PORT_REMOTE, GCS_PORT_REMOTE
+from sitl.config import API_PORT_REMOTE, GCS_PORT_REMOTE, SitlConfig
 from sitl.lockstep import LockstepControl
 from sitl.process import SitlProcess
 
@@ -132,10 +132,14 @@ class MavlinkPeer:
 
 
 class GroundStation(MavlinkPeer):
-    """A pymavlink ground station on the GCS link (UDP 14550)."""
+    """A pymavlink ground station on the GCS link (UDP 14550) that listens to one SITL instance's vehicle.
 
-    def __init__(self, port: int = GCS_PORT_REMOTE, only_sysid: int | None = None) -> None:
-        super().__init__(port, system_id=255, component_id=190, only_sysid=only_sysid)
+    Every instance sends to the same GCS port, as PX4's do, so a campaign or another test's SITL may be heard too;
+    their messages are dropped.
+    """
+
+    def __init__(self, instance: int, port: int = GCS_PORT_REMOTE) -> None:
+        super().__init__(port, system_id=255, component_id=190, only_sysid=SitlConfig(instance=instance).system_id)
 
 
 def api_port(instance: int) -> int:

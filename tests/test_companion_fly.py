@@ -54,7 +54,7 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> N
     instance = 32
     sitl = start_sitl_with_camera(tmp_path, instance, seed=3)
     # PX4 style: every instance talks to the GCS on 14550; this pilot listens to its own vehicle only.
-    gcs = GroundStation(SitlConfig().gcs_port_remote, only_sysid=SitlConfig(instance=instance).system_id)
+    gcs = GroundStation(instance)
     try:
         pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)
         before = sitl.state()
@@ -129,7 +129,7 @@ def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_t
         stderr=subprocess.PIPE,
         text=True,
     )
-    gcs = GroundStation(SitlConfig().gcs_port_remote, only_sysid=SitlConfig(instance=instance).system_id)
+    gcs = GroundStation(instance)
     try:
         # On the ground the companion only waits: it never arms, never takes off, sends nothing.
         wait_until(lambda: log.is_file() and '"kind":"waiting_for_handover"' in log.read_text(), 60, "the wait")

@@ -53,7 +53,7 @@ def test_the_companion_dependencies_resolve_for_aarch64_python_3_10(tmp_path: Pa
         wheel = item["download_info"]["url"].rsplit("/", 1)[-1]
         assert wheel.endswith("-any.whl") or "aarch64" in wheel, (name, wheel)
     # Nothing of the SITL, the training or the developer tools reaches the drone.
-    for forbidden in ("pymavlink", "pyrender", "jsbsim", "torch", "pytest", "trimesh"):
+    for forbidden in ("pymavlink", "pyrender", "jsbsim", "torch", "pytest", "trimesh", "matplotlib"):
         assert forbidden not in installed
 
 

@@ -97,7 +97,7 @@ def test_mavsdk_flies_an_offboard_square_while_a_ground_station_watches(
 ) -> None:
     log = tmp_path / "square.csv"
     sitl = sitl_factory(1, "--speed", "1", "--log", str(log))
-    gcs = GroundStation()
+    gcs = GroundStation(1)
     modes_seen: set[str] = set()
 
     def watch() -> None:
@@ -205,7 +205,7 @@ def test_heartbeats_follow_the_wall_clock_at_any_speed(
     sitl_factory: Callable[..., SitlProcess], speed: str, max_sim_s: float | None
 ) -> None:
     sitl = sitl_factory(4, "--speed", speed)
-    gcs = GroundStation()
+    gcs = GroundStation(4)
     try:
         t0_sim = sitl.state()["t_s"]
         start = time.monotonic()

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from companion.perception.config import TrackingConfig
 from companion.perception.errors import PerceptionError
+from companion.perception.kalman import KalmanFilter
 from companion.perception.tracking import ZoneTracker
 from companion.perception.zones import Zone
 
@@ -113,3 +115,34 @@ def test_reset_forgets_tracks_but_ids_stay_unique() -> None:
     tracker.reset()
     tracks = tracker.update(0.0, [Zone(0, 0, 2)])
     assert [t.track_id for t in tracks] == [2]
+
+
+def test_the_kalman_filter_matches_filterpy_bit_for_bit() -> None:
+    filterpy_kalman = pytest.importorskip("filterpy.kalman")  # the dev extra: the reference, never on the drone
+    rng = np.random.default_rng(7)
+    x0 = np.array([3.0, -2.0, 4.0, 0.0, 0.0, 0.0])
+    P0 = np.diag([0.25, 0.25, 0.09, 1.0, 1.0, 1.0])
+    H = np.hstack([np.eye(3), np.zeros((3, 3))])
+    R = np.diag([0.25, 0.25, 0.09])
+    ours = KalmanFilter(x=x0, P=P0, H=H, R=R)
+    reference = filterpy_kalman.KalmanFilter(dim_x=6, dim_z=3)
+    reference.x, reference.P, reference.H, reference.R = x0.copy(), P0.copy(), H, R
+    for _ in range(200):
+        dt_s = float(rng.uniform(0.05, 0.3))
+        F = np.block([[np.eye(3), dt_s * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
+        I3 = np.eye(3)
+        Q = 0.3 * np.block([[dt_s**4 / 4 * I3, dt_s**3 / 2 * I3], [dt_s**3 / 2 * I3, dt_s**2 * I3]])
+        ours.predict(F, Q)
+        reference.predict(F=F, Q=Q)
+        if rng.random() < 0.8:  # a missed frame now and then: predict only
+            z = rng.normal(size=3) * 3.0
+            ours.update(z)
+            reference.update(z)
+        assert np.array_equal(ours.x, reference.x)
+        assert np.array_equal(ours.P, reference.P)
+    assert not np.allclose(ours.P, P0)  # it did filter
+
+
+def test_the_kalman_filter_names_shapes_that_do_not_fit() -> None:
+    with pytest.raises(ValueError, match="shapes do not fit"):
+        KalmanFilter(x=np.zeros(6), P=np.eye(5), H=np.zeros((3, 6)), R=np.eye(3))

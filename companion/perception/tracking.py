@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from filterpy.kalman import KalmanFilter
 from scipy.optimize import linear_sum_assignment
 
 from companion.perception.config import TrackingConfig
 from companion.perception.errors import PerceptionError
+from companion.perception.kalman import KalmanFilter
 from companion.perception.zones import Zone, circle_iou
 
 
@@ -75,17 +75,17 @@ class _Track:
         self.last_seen_s = t_s
         self.hits = 1
         self.misses = 0
-        kf = KalmanFilter(dim_x=6, dim_z=3)
-        kf.x = np.array([zone.north_m, zone.east_m, zone.radius_m, 0.0, 0.0, 0.0])
         sp, sr, sv = (
             config.measurement_std_position_m,
             config.measurement_std_radius_m,
             config.initial_std_velocity_mps,
         )
-        kf.P = np.diag([sp**2, sp**2, sr**2, sv**2, sv**2, sv**2])
-        kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
-        kf.R = np.diag([sp**2, sp**2, sr**2])
-        self.kf = kf
+        self.kf = KalmanFilter(
+            x=np.array([zone.north_m, zone.east_m, zone.radius_m, 0.0, 0.0, 0.0]),
+            P=np.diag([sp**2, sp**2, sr**2, sv**2, sv**2, sv**2]),
+            H=np.hstack([np.eye(3), np.zeros((3, 3))]),
+            R=np.diag([sp**2, sp**2, sr**2]),
+        )
 
     def predict(self, F: npt.NDArray[np.float64], Q: npt.NDArray[np.float64]) -> None:
         self.kf.predict(F=F, Q=Q)

@@ -159,7 +159,11 @@ def run_campaign(
     # A mission that could not be flown (an infrastructure error, not a landing) is flown again.
     todo = sorted((p for p in plans if p.mission_id not in done or "error" in done[p.mission_id]), key=lambda p: p.run)
     workers = workers or spec.workers
-    bar = Progress(len(plans), len(done)) if progress else None
+
+    def flown() -> int:  # an error row is not a mission done: it is flown again
+        return sum("error" not in r for r in done.values())
+
+    bar = Progress(len(plans), flown()) if progress else None
     if todo:
         context = multiprocessing.get_context("spawn")
         instances = context.Queue()
@@ -184,8 +188,8 @@ def run_campaign(
                 if on_result is not None:
                     on_result(result)
                 if bar is not None:
-                    bar.update(len(done))
+                    bar.update(flown())
     if bar is not None:
-        bar.update(len(done))
+        bar.update(flown())
         bar.close()
     return [done[p.mission_id] for p in plans]
