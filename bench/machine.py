@@ -9,17 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-
-def cpu_model() -> str:
-    """The CPU's model name from /proc/cpuinfo, or the platform's processor string."""
-    try:
-        lines = Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines()
-    except OSError:  # not Linux
-        lines = []
-    for line in lines:
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor() or "unknown"
+from sitl.campaign.provenance import cpu_model
 
 
 def machine_context() -> dict[str, object]:

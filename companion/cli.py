@@ -181,6 +181,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
     from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
+    from sitl.campaign.provenance import source_commit
     from sitl.campaign.report import build_report
     from sitl.campaign.runner import CampaignError, read_results, run_campaign
     from sitl.campaign.spec import load_campaign_spec
@@ -202,6 +203,9 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         except CampaignError as exc:
             sys.stderr.write(f"slz campaign: {exc}\n")
             return 1
+        except KeyboardInterrupt:
+            sys.stderr.write("\nslz campaign: interrupted; the same command resumes it\n")
+            return 130
     summary = build_report(spec, results, out)
     for name, cell in summary["cells"].items():
         success = cell["success"]
@@ -211,7 +215,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         )
     sys.stdout.write(f"wrote {out / 'report.md'}\n")
     if args.write_baseline:
-        baseline = make_baseline(spec, results, _git_commit())
+        baseline = make_baseline(spec, results, source_commit())
         args.write_baseline.parent.mkdir(parents=True, exist_ok=True)
         args.write_baseline.write_text(json.dumps(baseline, indent=1) + "\n")
         sys.stdout.write(f"wrote baseline {args.write_baseline} ({len(baseline['missions'])} missions)\n")
@@ -228,16 +232,6 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         sys.stdout.write(gate.to_markdown())
         return 1 if gate.failed else 0
     return 0
-
-
-def _git_commit() -> str | None:
-    import subprocess
-
-    try:
-        done = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10, check=False)
-    except OSError:
-        return None
-    return done.stdout.strip() or None if done.returncode == 0 else None
 
 
 def _campaign_replay(args: argparse.Namespace) -> int:

@@ -21,12 +21,14 @@ from typing import Any
 import pytest
 
 from sitl.campaign.runner import read_results
+from tests.sitl_tools import wait_until
 
 pytestmark = pytest.mark.sitl
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SPEC = REPO_ROOT / "mission_configs" / "campaigns" / "smoke.yaml"
-WALL_FIELDS = {"wall_s"}  # the only fields allowed to differ between two runs
+# The only fields allowed to differ between two runs: when and in which segment a mission was flown, how long it took.
+WALL_FIELDS = {"wall_s", "segment", "finished_utc"}
 
 
 BASELINE = REPO_ROOT / "mission_configs" / "campaigns" / "baselines" / "smoke.json"
@@ -129,6 +131,66 @@ def test_two_workers_killed_and_resumed_give_the_same_results(one_worker: Path, 
     assert summary_two["cells"] == summary_one["cells"]
     assert summary_two["paired"] == summary_one["paired"]
     assert not math.isnan(summary_two["cells"]["static/oldest"]["success"]["value"])
+    # Two segments: the killed one (no end record: its last mission ends it) and the one that finished.
+    segments = [json.loads(line) for line in (out / "segments.jsonl").read_text().splitlines()]
+    assert [(s["kind"], s["segment"]) for s in segments] == [("start", 1), ("start", 2), ("end", 2)]
+    assert segments[0]["workers"] == segments[1]["workers"] == 2
+    assert segments[2] | {"utc": None} == {
+        "kind": "end",
+        "segment": 2,
+        "utc": None,
+        "flown": 4 - len(interrupted),
+        "interrupted": False,
+    }
+    flown = summary_two["flown"]
+    missions_by_segment = [(s["number"], s["missions"]) for s in flown["segments"]]
+    assert missions_by_segment == [(1, len(interrupted)), (2, 4 - len(interrupted))]
+    assert flown["wall_s"] > 0
+    assert flown["missions_per_hour"] > 0
+    assert "## How it was flown" in (out / "report.md").read_text()
+
+
+def processes() -> list[tuple[int, int, str]]:
+    """(pid, process group, state) of every process, from /proc."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            out.append((int(stat.parent.name), int(fields[2]), fields[0]))
+    return out
+
+
+def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_flight(tmp_path: Path) -> None:
+    out = tmp_path / "interrupted"
+    run = campaign(out, 2, "--instance-base", "46", start_new_session=True)
+    try:
+        # Both workers have a mission in flight: each has started its companion.
+        wait_for = out / "missions"
+        deadline = time.monotonic() + 300
+        while len(list(wait_for.glob("*/*/*/companion.log"))) < 2:
+            assert run.poll() is None, run.communicate()[1][-3000:]
+            assert time.monotonic() < deadline, "the missions did not start in 300 s"
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                run.wait(timeout=0.2)  # paces the poll
+        run.send_signal(signal.SIGINT)  # the runner only, as `kill -INT` does
+        _, stderr = run.communicate(timeout=60)
+        assert run.returncode == 130, stderr[-3000:]
+        assert "interrupted" in stderr
+
+        # Nothing of the campaign is left: no worker, SITL or companion in its process group.
+        def group_gone() -> bool:  # no live process (zombies aside) in the campaign's process group
+            return not [pid for pid, pgid, state in processes() if pgid == run.pid and state != "Z"]
+
+        wait_until(group_gone, 30, "every process of the campaign to exit", poll_s=0.2)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(run.pid, signal.SIGKILL)
+    # The missions in flight left no line: they are flown when the campaign resumes.
+    lines = (out / "results.jsonl").read_text().splitlines() if (out / "results.jsonl").is_file() else []
+    assert not [line for line in lines if '"error"' in line]
+    segments = [json.loads(line) for line in (out / "segments.jsonl").read_text().splitlines()]
+    assert [(s["kind"], s["segment"]) for s in segments] == [("start", 1), ("end", 1)]
+    assert segments[1]["interrupted"] is True
 
 
 @pytest.mark.slow  # 30 s: one more mission flown; in `make test-slow`

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.app.recorder import FlightRecorder, RecorderError, read_log
+from companion.app.recorder import FlightRecorder, RecorderError, open_append, read_log
 from companion.guidance.landing import LandingPhase, Setpoint
 
 pytestmark = pytest.mark.unit
@@ -56,6 +56,17 @@ def test_the_log_survives_a_killed_writer(tmp_path: Path) -> None:
     assert len(records) == 50
     assert records[-1]["t_s"] == 49.0
     assert json.loads((tmp_path / "flight.jsonl").read_text().splitlines()[0])["kind"] == "phase"
+
+
+def test_appending_after_a_torn_last_line_starts_a_line_of_its_own(tmp_path: Path) -> None:
+    log = tmp_path / "results.jsonl"
+    log.write_text('{"mission_id": "a"}\n{"mission_id": "b", "succ')  # killed mid-write
+    with open_append(log) as f:
+        f.write('{"mission_id": "b"}\n')
+    assert [r["mission_id"] for r in read_log(log)] == ["a", "b"]  # the torn record cut off, nothing glued to it
+    with open_append(log) as f:  # a whole log is left as it is
+        f.write('{"mission_id": "c"}\n')
+    assert [r["mission_id"] for r in read_log(log)] == ["a", "b", "c"]
 
 
 def test_an_unwritable_directory_is_named(tmp_path: Path) -> None:

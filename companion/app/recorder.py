@@ -122,6 +122,19 @@ class FlightRecorder:
             self._file = None
 
 
+def open_append(path: Path) -> IO[str]:
+    """Open a JSON-lines log to append to, first cutting off a torn last line (a kill mid-write) so that the next
+    record starts on a line of its own; the torn record is lost, as it was already."""
+    if path.is_file():
+        with path.open("rb+") as f:
+            data = f.read()
+            if data and not data.endswith(b"\n"):
+                keep = data.rfind(b"\n") + 1
+                logger.warning("%s: torn last line (%d bytes) cut off before appending", path, len(data) - keep)
+                f.truncate(keep)
+    return path.open("a", encoding="utf-8")
+
+
 def read_log(path: Path) -> list[dict[str, Any]]:
     """All complete records of a flight log; a torn last line (crash mid-write) is skipped and logged."""
     records: list[dict[str, Any]] = []

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from sitl.campaign.provenance import Segment, SegmentLog, segments
 from sitl.campaign.spec import CampaignSpec
 from sitl.campaign.stats import Estimate, bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
 
@@ -101,12 +102,20 @@ def build_report(spec: CampaignSpec, results: list[dict[str, Any]], out_dir: Pat
                     "nearest_person_mean_difference_m": asdict(diff),
                 }
             )
+    flown = segments(results, SegmentLog(out_dir / "segments.jsonl"), spec.workers)
+    wall_s = sum(seg.wall_s for seg in flown)
     summary = {
         "campaign": spec.name,
         "missions": len(results),
         "errors": len(results) - len(good),
         "cells": cells,
         "paired": paired,
+        "flown": {
+            "wall_s": wall_s,
+            "missions_per_hour": 3600.0 * len(good) / wall_s if wall_s > 0 else None,
+            "commits": sorted({c for seg in flown for c in seg.commits}),
+            "segments": [asdict(seg) for seg in flown],
+        },
     }
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -190,8 +199,37 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
             f"| {pair['condition']} | {pair['a']} vs {pair['b']} | {pair['pairs']} | {pair['success_only_a']} "
             f"| {pair['success_only_b']} | {pair['mcnemar_p']:.3g} | {diff} |"
         )
+    lines += _flown_markdown(summary["flown"])
     lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({p})" for p in plots] + [""]
     return "\n".join(lines)
+
+
+def _flown_markdown(flown: dict[str, Any]) -> list[str]:
+    """How the campaign was flown: its segments, their commits and workers, the wall time and the rate."""
+    rows = [Segment(**seg) for seg in flown["segments"]]
+    rate = flown["missions_per_hour"]
+    lines = [
+        "",
+        "## How it was flown",
+        "",
+        f"{sum(seg.missions for seg in rows)} missions in {flown['wall_s'] / 3600:.2f} h of wall time (the sum of "
+        f"the segments below), {'n/a' if rate is None else f'{rate:.0f}'} missions per hour. Commits: "
+        + (", ".join(f"`{c[:12]}`" for c in flown["commits"]) or "unknown")
+        + ".",
+        "",
+        "| segment | started (UTC) | ended (UTC) | commit | workers | missions | wall h | missions/h | machine |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for seg in rows:
+        name = "before segments were recorded" if seg.number is None else str(seg.number)
+        wall = f"{seg.wall_s / 3600:.2f}" + (" (estimated: missions' wall_s / workers)" if seg.estimated else "")
+        commits = ", ".join(f"`{c[:12]}`" for c in seg.commits) or "unknown"
+        lines.append(
+            f"| {name} | {seg.started_utc or 'n/a'} | {seg.ended_utc or 'n/a'} | {commits} | {seg.workers} "
+            f"| {seg.missions} | {wall} | {_fmt(seg.missions_per_hour, 0)} | {seg.cpu or 'n/a'} |"
+        )
+    notes = [f"- Segment {seg.number}: {seg.note}" for seg in rows if seg.note]
+    return lines + (["", *notes] if notes else [])
 
 
 def _fmt(value: float | None, digits: int = 2) -> str:

@@ -1,31 +1,36 @@
 """Run a campaign: its missions in parallel worker processes, each result appended (and fsync'd) as it finishes.
 
 A campaign folder holds ``spec.yaml`` (the spec it was started with), ``results.jsonl`` (one line per finished
-mission) and, while missions fly, ``missions/<condition>/<strategy>/<run>/``. Started again on the same folder, it
-resumes: finished missions are not flown again, a mission cut off mid-way, or one that failed for an infrastructure
-reason (a process that did not start), is flown again from the start (its folder is cleared first), and the spec must
-be the one it started with. Each mission is in lockstep, so its result depends
-on its seed and config only, not on the number of workers or the machine's speed.
+mission), ``segments.jsonl`` (when each run of the campaign flew, at which commit, with how many workers: see
+:mod:`sitl.campaign.provenance`) and, while missions fly, ``missions/<condition>/<strategy>/<run>/``. Started again
+on the same folder, it resumes: finished missions are not flown again, a mission cut off mid-way, or one that failed
+for an infrastructure reason (a process that did not start), is flown again from the start (its folder is cleared
+first), and the spec must be the one it started with. Each mission is in lockstep, so its result depends on its seed
+and config only, not on the number of workers or the machine's speed.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import json
 import logging
 import multiprocessing
 import os
 import shutil
+import signal
 import sys
 import time
 from collections.abc import Callable
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, TextIO
 
 import yaml
 
-from companion.app.recorder import read_log
+from companion.app.recorder import open_append, read_log
 from sitl.campaign.metrics import mission_metrics
+from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.mission import MissionError, MissionSpec, fly
 from sitl.process import SitlProcessError
@@ -57,10 +62,15 @@ def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance:
 _worker_instance = INSTANCE_BASE
 
 
+def _exit_on_sigterm(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)  # unwinds the mission's finally: its SITL and companion are stopped
+
+
 def _init_worker(instances: Any) -> None:
     global _worker_instance
     _worker_instance = int(instances.get())
     logging.basicConfig(level=logging.WARNING)
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
 
 
 def error_result(plan: MissionPlan, error: str) -> dict[str, Any]:
@@ -92,6 +102,15 @@ def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: boo
     if not keep:
         shutil.rmtree(run_dir, ignore_errors=True)
     return result
+
+
+def _stop_workers(pool: concurrent.futures.ProcessPoolExecutor) -> None:
+    """Cancel the missions not started and terminate the workers (each stops its SITL and companion on SIGTERM)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # public only from Python 3.14
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        with contextlib.suppress(OSError, ValueError):
+            process.terminate()
 
 
 def read_results(path: Path) -> list[dict[str, Any]]:
@@ -165,30 +184,50 @@ def run_campaign(
 
     bar = Progress(len(plans), flown()) if progress else None
     if todo:
+        segment_log = SegmentLog(out_dir / "segments.jsonl")
+        commit = source_commit()
+        segment = segment_log.start(commit, workers, flown())
+        stamp = {"segment": segment, "commit": commit}
+        flown_here, interrupted = 0, True
         context = multiprocessing.get_context("spawn")
         instances = context.Queue()
         for k in range(workers):
             instances.put(instance_base + k)
-        with (
-            results_path.open("a", encoding="utf-8") as results,
-            concurrent.futures.ProcessPoolExecutor(
-                max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances,)
-            ) as pool,
-        ):
-            futures = {pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs): p for p in todo}
-            for future in concurrent.futures.as_completed(futures):
+        try:
+            with (
+                open_append(results_path) as results,
+                concurrent.futures.ProcessPoolExecutor(
+                    max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances,)
+                ) as pool,
+            ):
+                futures = {pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs): p for p in todo}
                 try:
-                    result = future.result()
-                except Exception as exc:  # a worker raised or died: recorded, flown again on resume, never fatal
-                    result = error_result(futures[future], f"{type(exc).__name__}: {exc}")
-                results.write(json.dumps(result, separators=(",", ":")) + "\n")
-                results.flush()
-                os.fsync(results.fileno())  # a kill loses at most the missions in flight
-                done[result["mission_id"]] = result
-                if on_result is not None:
-                    on_result(result)
-                if bar is not None:
-                    bar.update(flown())
+                    for future in concurrent.futures.as_completed(futures):
+                        try:
+                            result = future.result()
+                        except BrokenProcessPool as exc:  # a worker died: the missions not finished stay unflown
+                            raise CampaignError(
+                                f"a worker process died ({exc}); the missions not finished are flown when the "
+                                "campaign is started again"
+                            ) from None
+                        except Exception as exc:  # a mission's own failure: recorded, flown again on resume
+                            result = error_result(futures[future], f"{type(exc).__name__}: {exc}")
+                        result |= stamp | {"finished_utc": utc_now()}
+                        results.write(json.dumps(result, separators=(",", ":")) + "\n")
+                        results.flush()
+                        os.fsync(results.fileno())  # a kill loses at most the missions in flight
+                        done[result["mission_id"]] = result
+                        flown_here += "error" not in result
+                        if on_result is not None:
+                            on_result(result)
+                        if bar is not None:
+                            bar.update(flown())
+                except BaseException:  # Ctrl-C or a dead worker: no more missions, those in flight stopped
+                    _stop_workers(pool)
+                    raise
+            interrupted = False
+        finally:
+            segment_log.end(segment, flown_here, interrupted)
     if bar is not None:
         bar.update(flown())
         bar.close()
