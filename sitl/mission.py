@@ -32,6 +32,7 @@ logger = logging.getLogger(__name__)
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_MISSION_CONFIG = REPO_ROOT / "mission_configs" / "sitl.yaml"
+SITL_READY_WALL_S = 60.0  # a SITL starts in about 5 s; a machine busy with parallel missions may take several times it
 SETTLE_WALL_S = 60.0  # after the companion ends: how long the SITL may run to finish an autopilot landing
 TRUTH_AFTER_TOUCHDOWN_S = 1.0  # simulated: longer than any camera frame period the configs use
 
@@ -281,7 +282,7 @@ def fly(spec: MissionSpec) -> MissionResult:
     sitl = SitlProcess(["--config", str(sitl_path)], spec.instance, spec.run_dir)
     companion = CompanionProcess(mission_path, spec.run_dir / "flight", spec.timeout_s, spec.run_dir / "companion.log")
     try:
-        sitl.start()
+        sitl.start(ready_timeout_s=SITL_READY_WALL_S)
         companion.start()
         exit_code = companion.wait(spec.timeout_s + 30.0)
         # The companion has let go of the lockstep: an autopilot landing it asked for finishes at full speed.
