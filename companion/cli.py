@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -196,6 +197,10 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     if args.report_only:
         results = read_results(out / "results.jsonl")
     else:
+        # SIGINT and SIGTERM stop the campaign cleanly, also when a shell started it in the background (which
+        # leaves SIGINT ignored) or a service manager stops it.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, _interrupt)
         try:
             results = run_campaign(
                 spec, out, workers=args.workers, keep_runs=args.keep_runs, instance_base=args.instance_base
@@ -232,6 +237,10 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         sys.stdout.write(gate.to_markdown())
         return 1 if gate.failed else 0
     return 0
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
 
 
 def _campaign_replay(args: argparse.Namespace) -> int:

@@ -26,7 +26,7 @@ import yaml
 
 from companion.app.recorder import read_log
 from sitl.config import SitlConfig
-from sitl.process import SitlProcess, log_tail, terminate_then_kill
+from sitl.process import SitlProcess, die_with_parent, log_tail, terminate_then_kill
 
 logger = logging.getLogger(__name__)
 
@@ -133,7 +133,9 @@ class CompanionProcess:
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         with self.log_path.open("wb") as log:
             env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-            self._proc = subprocess.Popen(self.command, cwd=REPO_ROOT, stdout=log, stderr=subprocess.STDOUT, env=env)
+            self._proc = subprocess.Popen(
+                self.command, cwd=REPO_ROOT, stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=die_with_parent
+            )
         return self
 
     def wait(self, timeout_s: float) -> int:

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import ctypes
 import json
 import logging
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -21,6 +23,26 @@ from typing import Any
 from sitl.config import CONTROL_PORT
 
 logger = logging.getLogger(__name__)
+
+
+def _load_prctl() -> Any:
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _load_prctl()  # resolved here, so that a forked child only calls it
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent() -> None:
+    """In a child between fork and exec (``preexec_fn``): receive SIGTERM when the parent dies, however it dies
+    (Linux; elsewhere nothing). A SITL or companion is then never left running without the process that owns it."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 def terminate_then_kill(proc: subprocess.Popen[bytes], timeout_s: float) -> None:
@@ -81,6 +103,7 @@ class SitlProcess:
         cpu = self.cpu
 
         def pin() -> None:
+            die_with_parent()
             if cpu is not None:
                 os.sched_setaffinity(0, {cpu})
 

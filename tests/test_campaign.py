@@ -162,7 +162,15 @@ def processes() -> list[tuple[int, int, str]]:
 
 def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_flight(tmp_path: Path) -> None:
     out = tmp_path / "interrupted"
-    run = campaign(out, 2, "--instance-base", "46", start_new_session=True)
+    # Started as a shell starts a background job: SIGINT ignored. The campaign must still stop on it.
+    run = campaign(
+        out,
+        2,
+        "--instance-base",
+        "46",
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+    )
     try:
         # Both workers have a mission in flight: each has started its companion.
         wait_for = out / "missions"

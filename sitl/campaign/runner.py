@@ -62,15 +62,13 @@ def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance:
 _worker_instance = INSTANCE_BASE
 
 
-def _exit_on_sigterm(signum: int, frame: Any) -> None:
-    raise SystemExit(128 + signum)  # unwinds the mission's finally: its SITL and companion are stopped
-
-
 def _init_worker(instances: Any) -> None:
     global _worker_instance
     _worker_instance = int(instances.get())
     logging.basicConfig(level=logging.WARNING)
-    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    # SIGTERM ends a worker at once (the default action: the pool would catch an exception and fly the next
+    # mission); its SITL and companion get SIGTERM from the kernel as it dies (sitl.process.die_with_parent).
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def error_result(plan: MissionPlan, error: str) -> dict[str, Any]:
@@ -105,7 +103,7 @@ def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: boo
 
 
 def _stop_workers(pool: concurrent.futures.ProcessPoolExecutor) -> None:
-    """Cancel the missions not started and terminate the workers (each stops its SITL and companion on SIGTERM)."""
+    """Cancel the missions not started and terminate the workers (their SITLs and companions die with them)."""
     processes = list((getattr(pool, "_processes", None) or {}).values())  # public only from Python 3.14
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
