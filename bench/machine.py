@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-import os
-import platform
 import sys
 from pathlib import Path
 from typing import Any
 
-from sitl.campaign.provenance import cpu_model
+from sitl.campaign.provenance import machine
 
 
 def machine_context() -> dict[str, object]:
@@ -19,10 +17,7 @@ def machine_context() -> dict[str, object]:
     import onnxruntime
 
     return {
-        "cpu_model": cpu_model(),
-        "logical_cpus": os.cpu_count(),
-        "machine": platform.machine(),
-        "python": platform.python_version(),
+        **machine(),
         "numpy": np.__version__,
         "opencv": cv2.__version__,
         "onnxruntime": onnxruntime.__version__,

@@ -5,8 +5,9 @@ different worker counts. Each invocation that flies missions is a *segment*, wri
 campaign folder: a ``start`` record (UTC time, commit, workers, machine) when it begins and an ``end`` record when
 it stops, killed or not (a segment cut off by ``kill -9`` has no end; its last mission's finish time stands in).
 Every result line names its segment, its commit and its finish time. The campaign's wall time is the sum of its
-segments' durations; results flown before segments were recorded have their wall time estimated from their own
-``wall_s`` divided by the spec's workers, and are said to be.
+segments' durations. A segment flown before segments were recorded may be added afterwards as a ``start`` record
+with a ``note`` saying how it was reconstructed and the ``mission_ids`` it flew; results that belong to no segment
+have their wall time estimated from their own ``wall_s`` divided by the spec's workers, and are said to be.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from companion.app.recorder import open_append
+from companion.app.recorder import open_append, read_log
 
 REPO_ROOT = Path(__file__).resolve().parent.parent.parent
 
@@ -80,15 +81,7 @@ class SegmentLog:
 
     def records(self) -> list[dict[str, Any]]:
         """Every record so far (a torn last line is skipped)."""
-        if not self.path.is_file():
-            return []
-        out = []
-        for line in self.path.read_text(encoding="utf-8").splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue
-        return out
+        return read_log(self.path) if self.path.is_file() else []
 
     def _append(self, record: dict[str, Any]) -> None:
         with open_append(self.path) as f:
@@ -163,8 +156,8 @@ def segments(results: list[dict[str, Any]], log: SegmentLog, default_workers: in
         )
     for number in sorted(starts):
         start, rows = starts[number], by_segment.get(number, [])
-        finished = sorted(str(r["finished_utc"]) for r in rows if r.get("finished_utc"))
-        end_utc = ends[number]["utc"] if number in ends else (finished[-1] if finished else None)
+        last_finished = max((str(r["finished_utc"]) for r in rows if r.get("finished_utc")), default=None)
+        end_utc = ends[number]["utc"] if number in ends else last_finished
         wall_s = (_parse_utc(end_utc) - _parse_utc(start["utc"])).total_seconds() if end_utc else 0.0
         out.append(
             Segment(
