@@ -30,7 +30,7 @@ from sitl.mission import MissionSpec, fly  # noqa: E402
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="1,2", help="comma-separated mission seeds")
-    parser.add_argument("--instance", type=int, default=60)
+    parser.add_argument("--instance", type=int, default=29)
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "companion_latency.json")
     args = parser.parse_args()
 

@@ -140,7 +140,7 @@ def main() -> int:
     results: dict[str, dict[str, float] | str] = {}
     for i, backend in enumerate(DynamicsBackend):
         try:
-            results[backend.value] = measure(backend, args.sim_seconds, instance=30 + i)
+            results[backend.value] = measure(backend, args.sim_seconds, instance=22 + i)
         except Exception as exc:  # a missing optional backend is reported, not fatal
             results[backend.value] = f"not measured: {exc}"
     import tempfile

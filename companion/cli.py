@@ -184,7 +184,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
     from sitl.campaign.provenance import source_commit
     from sitl.campaign.report import build_report
-    from sitl.campaign.runner import CampaignError, read_results, run_campaign
+    from sitl.campaign.runner import INSTANCE_BASE, CampaignError, read_results, run_campaign
     from sitl.campaign.spec import load_campaign_spec
 
     if args.action == "replay":
@@ -202,9 +202,8 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         signal.signal(signal.SIGTERM, _interrupt)
         try:
-            results = run_campaign(
-                spec, out, workers=args.workers, keep_runs=args.keep_runs, instance_base=args.instance_base
-            )
+            base = INSTANCE_BASE if args.instance_base is None else args.instance_base
+            results = run_campaign(spec, out, workers=args.workers, keep_runs=args.keep_runs, instance_base=base)
         except CampaignError as exc:
             sys.stderr.write(f"slz campaign: {exc}\n")
             return 1
@@ -386,9 +385,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     campaign.add_argument("--alpha", type=float, default=0.05, help="gate: family false-alarm rate (default 0.05)")
     campaign.add_argument("--write-baseline", type=Path, metavar="PATH", help="write this campaign as a baseline")
-    campaign.add_argument("--instance", type=int, default=69, help="replay: SITL instance")
+    campaign.add_argument("--instance", type=int, default=29, help="replay: SITL instance, 0 to 39 (default 29)")
     campaign.add_argument(
-        "--instance-base", type=int, default=70, help="worker k flies SITL instance BASE + k (parallel campaigns)"
+        "--instance-base",
+        type=int,
+        help="worker k flies SITL instance BASE + k, at most 39 (default 30: beside the tests' 1 to 29)",
     )
     campaign.set_defaults(func=_cmd_campaign)
 

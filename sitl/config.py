@@ -18,6 +18,9 @@ GCS_PORT_REMOTE = 14550
 GCS_PORT_LOCAL = 18570
 CONTROL_PORT = 4560
 FRAME_PORT = 5600
+# PX4's layout puts instance N's API link on local port 14580 + N and MAVSDK on 14540 + N, so instance N + 40 would
+# listen where instance N's vehicle sends from: instances 0..39 are the ones whose ports never meet.
+MAX_INSTANCE = 39
 
 
 class SitlCameraConfig(StrictModel):
@@ -50,7 +53,12 @@ class FaultConfig(StrictModel):
 class SitlConfig(StrictModel):
     """One simulated vehicle. Ports follow PX4 SITL and shift with ``instance``."""
 
-    instance: int = Field(default=0, ge=0, le=99, description="Shifts every port by this much, as PX4 does.")
+    instance: int = Field(
+        default=0,
+        ge=0,
+        le=MAX_INSTANCE,
+        description="Shifts every port by this much, as PX4 does; from 40 up, ports meet another instance's.",
+    )
     bind_address: str = Field(default="127.0.0.1", description="Local address of every socket (loopback).")
     gcs_port_remote: int = Field(default=GCS_PORT_REMOTE, ge=1, le=65535, description="Ground station port.")
     origin_lat_deg: float = Field(default=47.397742, ge=-90.0, le=90.0)

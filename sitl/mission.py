@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from companion.app.recorder import read_log
+from companion.config import validate_config
 from sitl.config import SitlConfig
 from sitl.process import SitlProcess, die_with_parent, log_tail, terminate_then_kill
 
@@ -160,7 +161,7 @@ class CompanionProcess:
 def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
     """The SITL and mission configs of ``spec`` in its run folder; returns their paths."""
     spec.run_dir.mkdir(parents=True, exist_ok=True)
-    ports = SitlConfig(instance=spec.instance)
+    ports = validate_config(SitlConfig, {"instance": spec.instance}, source="mission spec", prefix="sitl")
     sitl_section = deep_merge(
         {
             "seed": spec.seed,

@@ -36,7 +36,7 @@ BASELINE = REPO_ROOT / "mission_configs" / "campaigns" / "baselines" / "smoke.js
 
 def campaign(out: Path, workers: int, *extra: str, **popen: Any) -> subprocess.Popen[str]:
     command = [sys.executable, "-m", "companion.cli", "campaign", "--spec", str(SPEC), "--out", str(out)]
-    command += ["--workers", str(workers), "--instance-base", "44", *extra]
+    command += ["--workers", str(workers), "--instance-base", "18", *extra]
     return subprocess.Popen(command, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 
@@ -167,7 +167,7 @@ def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_fli
         out,
         2,
         "--instance-base",
-        "46",
+        "3",
         start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
     )
@@ -204,7 +204,7 @@ def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_fli
 @pytest.mark.slow  # 30 s: one more mission flown; in `make test-slow`
 def test_one_mission_is_re_flown_from_its_seed_with_its_video(one_worker: Path, tmp_path: Path) -> None:
     command = [sys.executable, "-m", "companion.cli", "campaign", "replay", str(one_worker), "static/oldest/0000"]
-    command += ["--out", str(tmp_path / "replay"), "--instance", "68"]
+    command += ["--out", str(tmp_path / "replay"), "--instance", "15"]
     done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert "metrics identical to the campaign's result" in done.stdout

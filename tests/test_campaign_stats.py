@@ -14,8 +14,10 @@ import pytest
 from companion.config import ConfigError
 from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
 from sitl.campaign.metrics import MissionMetrics, mission_metrics
+from sitl.campaign.runner import CampaignError, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
+from sitl.config import SitlConfig
 
 pytestmark = pytest.mark.unit
 
@@ -132,6 +134,25 @@ def _write_mission(run_dir: Path, walker_ne: list[tuple[float, float]]) -> None:
             }
         )
     (run_dir / "truth.jsonl").write_text("\n".join(json.dumps(r) for r in truth) + "\n")
+
+
+def test_no_two_workers_or_instances_share_a_port() -> None:
+    # Every port of every instance 0..39, the ground station's 14550 included, is distinct: a campaign's workers,
+    # the tests and a replay can fly side by side. Instance 10 is refused (its API link is the ground-station port).
+    ports: list[int] = [14550]
+    for instance in (*range(10), *range(11, 40)):
+        c = SitlConfig(instance=instance)
+        ports += [c.api_port_local, c.api_port_remote, c.gcs_port_local, c.control_port, c.frame_port]
+    assert len(ports) == len(set(ports))
+
+    assert worker_instances(30, 2) == [30, 31]
+    assert worker_instances(11, 29) == list(range(11, 40))
+    with pytest.raises(CampaignError, match="lower --instance-base to at most 28"):
+        worker_instances(30, 12)
+    with pytest.raises(CampaignError, match="ground-station port 14550"):
+        worker_instances(5, 8)
+    with pytest.raises(CampaignError, match="at least 1"):
+        worker_instances(30, 0)
 
 
 def test_a_person_under_the_descending_vehicle_is_not_a_success(tmp_path: Path) -> None:

@@ -51,7 +51,7 @@ def pilot_takes_off(sitl: SitlProcess, gcs: GroundStation, instance: int, altitu
 
 
 def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> None:
-    instance = 32
+    instance = 23
     sitl = start_sitl_with_camera(tmp_path, instance, seed=3)
     # PX4 style: every instance talks to the GCS on 14550; this pilot listens to its own vehicle only.
     gcs = GroundStation(instance)
@@ -116,7 +116,7 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> N
 
 
 def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_to_the_pilot(tmp_path: Path) -> None:
-    instance = 33
+    instance = 24
     sitl = start_sitl_with_camera(tmp_path, instance, seed=4)
     field = (tmp_path / "mission.yaml").read_text().replace("arm_and_takeoff: true", "arm_and_takeoff: false")
     (tmp_path / "field.yaml").write_text(field)

@@ -59,7 +59,7 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Demo:
     out = tmp_path_factory.mktemp("demo")
     command = [sys.executable, "-m", "companion.cli", "demo", "--seed", str(STATIC_SEED), "--out", str(out)]
     done = subprocess.run(
-        [*command, "--instance", "34"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False
+        [*command, "--instance", "25"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False
     )
     runs = [p for p in out.iterdir() if p.is_dir()]
     assert len(runs) == 1, done.stderr[-3000:]
@@ -130,7 +130,7 @@ def test_slz_replay_reproduces_every_logged_decision(demo: Demo) -> None:
 
 def test_a_mission_with_walking_people_lands_safely(tmp_path: Path) -> None:
     walkers = {"scenario": {"moving_fraction": 0.2}}  # the paper's hardest condition: 20 % of people walk
-    r = _fly(tmp_path, "walking", WALKING_SEED, instance=35, sitl_overrides=walkers)
+    r = _fly(tmp_path, "walking", WALKING_SEED, instance=26, sitl_overrides=walkers)
     assert r.companion_exit_code == 0, Path(r.run_dir, "companion.log").read_text()[-3000:]
     assert r.phase == "done"
     assert r.landed
@@ -142,7 +142,7 @@ def test_a_mission_with_walking_people_lands_safely(tmp_path: Path) -> None:
 def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path, demo: Demo) -> None:
     # The demo's scene and seed, paced at 4x real time instead of full speed, the camera lost at 18 s.
     fault = {"faults": [{"kind": "camera_fail", "at_s": FAULT_AT_S}], "speed_factor": 4.0}
-    r = _fly(tmp_path, "camera", STATIC_SEED, instance=36, sitl_overrides=fault)
+    r = _fly(tmp_path, "camera", STATIC_SEED, instance=27, sitl_overrides=fault)
     records = _records(r.run_dir)
     # Lockstep: the same seed decides the same at another speed, until the fault makes the flights differ.
     before = [x["decision"] for x in records if x["kind"] == "decision" and x["t_s"] < FAULT_AT_S]
@@ -168,7 +168,7 @@ def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Pat
 
 def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path: Path) -> None:
     fault = {"faults": [{"kind": "link_loss", "at_s": FAULT_AT_S}]}
-    r = _fly(tmp_path, "link", STATIC_SEED, instance=37, sitl_overrides=fault)
+    r = _fly(tmp_path, "link", STATIC_SEED, instance=28, sitl_overrides=fault)
     records = _records(r.run_dir)
     failsafes = [x for x in records if x["kind"] == "failsafe"]
     assert failsafes

@@ -14,7 +14,7 @@ from tests.sitl_tools import sitl_mission_yaml
 pytestmark = pytest.mark.sitl
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-INSTANCE = 36
+INSTANCE = 2
 
 
 def doctor(config: Path) -> subprocess.CompletedProcess[str]:

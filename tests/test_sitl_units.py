@@ -278,6 +278,8 @@ def test_sitl_config_validation() -> None:
         validate_config(SitlConfig, {"lockstep_period_s": 0.0033})
     with pytest.raises(ConfigError, match="ground-station port"):
         validate_config(SitlConfig, {"instance": 10})
+    with pytest.raises(ConfigError, match=r"instance.*less than or equal to 39"):
+        validate_config(SitlConfig, {"instance": 40})  # its MAVSDK port would be instance 0's local API port
     with pytest.raises(ConfigError, match=r"sitl\.speed_factor"):
         validate_config(SitlConfig, {"speed_factor": -1}, prefix="sitl")
     config = SitlConfig(instance=3)

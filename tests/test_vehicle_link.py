@@ -18,7 +18,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_the_link_takes_off_flies_offboard_and_lands(tmp_path: Path) -> None:
-    instance = 31
+    instance = 22
     sitl = SitlProcess(["--speed", "2"], instance, tmp_path).start()
     try:
         client = subprocess.run(

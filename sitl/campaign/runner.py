@@ -32,16 +32,39 @@ from companion.app.recorder import open_append, read_log
 from sitl.campaign.metrics import mission_metrics
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
+from sitl.config import API_PORT_REMOTE, GCS_PORT_REMOTE, MAX_INSTANCE
 from sitl.mission import MissionError, MissionSpec, fly
 from sitl.process import SitlProcessError
 
 logger = logging.getLogger(__name__)
 
-INSTANCE_BASE = 70  # worker k flies SITL instance 70 + k (its own ports)
+# Worker k flies SITL instance INSTANCE_BASE + k (its own ports). The tests fly instances 1 to 29, so a campaign
+# and the tests can run side by side with up to 10 workers; with more, lower --instance-base.
+INSTANCE_BASE = 30
 
 
 class CampaignError(Exception):
     """A campaign cannot start or resume (which folder, what is wrong)."""
+
+
+def worker_instances(instance_base: int, workers: int) -> list[int]:
+    """The SITL instances of ``workers`` workers from ``instance_base``; a clear error where one cannot be flown."""
+    if workers < 1:
+        raise CampaignError(f"workers must be at least 1, got {workers}")
+    instances = list(range(instance_base, instance_base + workers))
+    if instances[0] < 0 or instances[-1] > MAX_INSTANCE:
+        raise CampaignError(
+            f"{workers} workers from instance base {instance_base} need SITL instances {instances[0]} to "
+            f"{instances[-1]}; instances are 0 to {MAX_INSTANCE} (PX4's ports meet from 40 up): "
+            f"lower --instance-base to at most {MAX_INSTANCE + 1 - workers}"
+        )
+    gcs_clash = API_PORT_REMOTE + instance_base <= GCS_PORT_REMOTE < API_PORT_REMOTE + instance_base + workers
+    if gcs_clash:
+        raise CampaignError(
+            f"instance {GCS_PORT_REMOTE - API_PORT_REMOTE} (between {instances[0]} and {instances[-1]}) would put a "
+            f"worker's API link on the ground-station port {GCS_PORT_REMOTE}; choose another --instance-base"
+        )
+    return instances
 
 
 def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance: int, **extra: Any) -> MissionSpec:
@@ -176,6 +199,7 @@ def run_campaign(
     # A mission that could not be flown (an infrastructure error, not a landing) is flown again.
     todo = sorted((p for p in plans if p.mission_id not in done or "error" in done[p.mission_id]), key=lambda p: p.run)
     workers = workers or spec.workers
+    worker_ids = worker_instances(instance_base, workers)
 
     def flown() -> int:  # an error row is not a mission done: it is flown again
         return sum("error" not in r for r in done.values())
@@ -189,8 +213,8 @@ def run_campaign(
         flown_here, interrupted = 0, True
         context = multiprocessing.get_context("spawn")
         instances = context.Queue()
-        for k in range(workers):
-            instances.put(instance_base + k)
+        for instance in worker_ids:
+            instances.put(instance)
         try:
             with (
                 open_append(results_path) as results,

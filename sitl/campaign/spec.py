@@ -46,7 +46,9 @@ class CampaignSpec(StrictModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     master_seed: int = Field(ge=0)
     runs: int = Field(ge=1, le=100_000, description="Missions per condition and strategy.")
-    workers: int = Field(default=2, ge=1, le=64, description="Parallel missions (each a SITL and a companion).")
+    workers: int = Field(
+        default=2, ge=1, le=40, description="Parallel missions (each a SITL and a companion, on instances 0 to 39)."
+    )
     mission_config: Path = Field(default=DEFAULT_MISSION_CONFIG, description="The companion's base config.")
     mission: dict[str, Any] = Field(default_factory=dict, description="Overrides for every mission's config.")
     conditions: list[ConditionSpec] = Field(min_length=1)
