@@ -91,6 +91,24 @@ def test_results_from_before_segments_are_estimated_unless_a_reconstructed_segme
     assert claimed.note
 
 
+def test_a_flight_replaced_by_a_later_one_keeps_its_wall_time_and_is_counted(tmp_path: Path) -> None:
+    # "b" was flown before segments were recorded, then flown again in segment 1 (its result was stale).
+    log = SegmentLog(tmp_path / "segments.jsonl")
+    start = {
+        "kind": "start", "segment": 1, "utc": "2026-11-21T10:00:00Z", "commit": "c1", "workers": 2,
+        "machine": {"cpu_model": "x", "logical_cpus": 2},
+    }  # fmt: skip
+    log.path.write_text(json.dumps(start) + "\n")
+    old_b = result("b", wall_s=300.0)
+    every_line = [result("a", wall_s=100.0), old_b, result("b", segment=1, finished_utc="2026-11-21T10:10:00Z")]
+    current = [every_line[0], every_line[2]]
+    before, first = segments(current, log, default_workers=2, every_line=every_line)
+    assert (before.missions, before.superseded) == (1, 1)
+    assert before.wall_s == pytest.approx(200.0)  # (100 + 300) / 2 workers: the replaced flight took time too
+    assert (first.missions, first.superseded) == (1, 0)
+    assert first.wall_s == pytest.approx(600.0)
+
+
 @pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
 def test_the_source_commit_says_when_the_tree_differs_from_it(tmp_path: Path) -> None:
     assert source_commit(tmp_path) is None  # not a repository

@@ -13,8 +13,8 @@ import pytest
 
 from companion.config import ConfigError
 from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
-from sitl.campaign.metrics import MissionMetrics, mission_metrics
-from sitl.campaign.runner import CampaignError, worker_instances
+from sitl.campaign.metrics import METRICS_VERSION, MissionMetrics, mission_metrics, stale
+from sitl.campaign.runner import CampaignError, missions_to_fly, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
 from sitl.config import SitlConfig
@@ -173,6 +173,90 @@ def test_a_person_under_the_descending_vehicle_is_not_a_success(tmp_path: Path) 
     assert not m.warning_1m
     assert m.people_within_1_5m == 1
     assert 0.0 <= m.zone_iou <= 1.0
+
+
+def _write_hold(run_dir: Path, truth_until_s: float) -> None:
+    """A hand-made mission that never lands: the companion holds at 10 m at t = 3 s and lets go; the SITL's ground
+    truth runs on until ``truth_until_s`` (when it was stopped, a wall-clock matter) while a walker comes under it."""
+    (run_dir / "flight").mkdir(parents=True)
+    config = {"perception": {"zones": {"vehicle_radius_m": 0.5}}}
+    search = {"phase": "search", "kind": "setpoint", "target": None, "reason": "search"}
+    flight = [
+        {"t_s": None, "kind": "header", "config": config},
+        {"t_s": 0.0, "kind": "decision", "source": "start", "decision": search},
+        {"t_s": 0.0, "kind": "command", "command": "setpoint"},
+        {"t_s": 2.0, "kind": "command", "command": "setpoint"},
+        {
+            "t_s": 3.0,
+            "kind": "decision",
+            "source": "time",
+            "decision": {"phase": "failsafe", "kind": "hold", "target": None, "reason": "no landing: hold"},
+        },
+        {"t_s": 3.0, "kind": "command", "command": "hold"},
+        {"t_s": None, "kind": "end", "outcome": {"phase": "failsafe", "reason": "no landing: hold", "failsafes": []}},
+    ]
+    (run_dir / "flight" / "flight.jsonl").write_text("\n".join(json.dumps(r) for r in flight) + "\n")
+    header = {"kind": "header", "seed": 1, "positions_ne_m": [[8.0, 0.0]], "radii_m": [0.25], "moving": [True]}
+    truth: list[dict[str, Any]] = [header]
+    for k in range(round(truth_until_s / 0.1) + 1):
+        t = 0.1 * k
+        walker_n = 8.0 - max(0.0, t - 3.0) * 4.0  # still until the hold, then it walks under the vehicle
+        truth.append(
+            {
+                "kind": "truth",
+                "t_s": t,
+                "position_ned_m": [0.5 * min(t, 3.0) + 0.01 * max(0.0, t - 3.0), 0.0, -10.0],  # drifts after
+                "mode": "HOLD" if t >= 3.0 else "OFFBOARD",
+                "landed_state": "IN_AIR",
+                "on_ground": False,
+                "armed": True,
+                "positions_ne_m": [[walker_n, 0.0]],
+            }
+        )
+    (run_dir / "truth.jsonl").write_text("\n".join(json.dumps(r) for r in truth) + "\n")
+
+
+def test_a_mission_without_touchdown_ends_at_the_companions_last_record_not_at_the_end_of_the_truth(
+    tmp_path: Path,
+) -> None:
+    # The same mission, its SITL stopped 0.1 s or 1.5 s (simulated) after the companion let go: the same metrics.
+    _write_hold(tmp_path / "soon", truth_until_s=3.1)
+    _write_hold(tmp_path / "late", truth_until_s=4.5)
+    soon = mission_metrics(tmp_path / "soon", "c/s/0000", "c", "s", 0, 1)
+    late = mission_metrics(tmp_path / "late", "c/s/0000", "c", "s", 0, 1)
+    assert soon.to_json() == late.to_json()
+    assert not soon.landed
+    assert not soon.success
+    assert soon.path_length_m == pytest.approx(1.5)  # 0.5 m/s for 3 s; the drift after the hold is not counted
+    assert soon.nearest_person_min_m == pytest.approx(8.0 - 1.5 - 0.25)  # at the hold, before the walker came
+    assert soon.people_cells == [[28, 20, 1]]  # the walker 8 m north (row 8 + 20) when the companion let go
+    assert soon.metrics_version == METRICS_VERSION
+
+
+def test_a_result_of_an_earlier_metrics_definition_is_flown_again_on_resume() -> None:
+    spec = CampaignSpec.model_validate(
+        {
+            "name": "x",
+            "master_seed": 1,
+            "runs": 2,
+            "conditions": [{"name": "a"}],
+            "strategies": [{"name": "s", "policy": "oldest"}],
+        }
+    )
+    first, second = spec.missions()
+    landed_v1 = {"mission_id": first.mission_id, "landed": True}  # version 1, touched down: unchanged by version 2
+    held_v1 = {"mission_id": second.mission_id, "landed": False}  # version 1, no touchdown: stale
+    assert not stale(landed_v1)
+    assert stale(held_v1)
+    assert not stale(held_v1 | {"metrics_version": 2})
+    assert missions_to_fly(spec.missions(), {first.mission_id: landed_v1, second.mission_id: held_v1}) == [second]
+    assert missions_to_fly(spec.missions(), {first.mission_id: landed_v1 | {"error": "x"}}) == [first, second]
+    assert (
+        missions_to_fly(
+            spec.missions(), {m.mission_id: {"landed": False, "metrics_version": 2} for m in (first, second)}
+        )
+        == []
+    )
 
 
 # -- the regression gate (sitl/campaign/gate.py) ------------------------------------------------------------------

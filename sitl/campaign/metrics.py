@@ -2,7 +2,11 @@
 
 Distances are horizontal, metres, to the edge of a person's body (centre distance minus body radius). The *final
 descent* runs from the companion's last entry into the descent phase before its landing command (or, without one,
-from its last command) to the touchdown (or the end of the ground truth).
+from its last command) to the touchdown, or, without a touchdown, to the companion's last record (vehicle time).
+
+A mission's metrics depend on its seed and configs only: every window ends at an instant of the vehicle's clock that
+the lockstep fixes, never at the end of the ground truth (the SITL runs on for a wall-clock moment after the companion
+lets go, a little longer or shorter with the machine's load).
 """
 
 from __future__ import annotations
@@ -17,6 +21,25 @@ import numpy as np
 
 from companion.app.recorder import read_log
 from sitl.mission import body_edges_m, people_at, read_truth, touchdown
+
+METRICS_VERSION = 2
+"""Raised when a definition changes what stored results hold; :func:`stale` says which of them it changes.
+
+1. The first campaigns.
+2. A mission without a touchdown ends at the companion's last record, not at the end of the ground truth: the nearest
+   person, the path length and the people map of such a mission no longer depend on when the SITL was stopped.
+"""
+
+
+def stale(result: dict[str, Any]) -> bool:
+    """Whether a stored result's metrics differ from what the current definitions give (it is flown again on resume).
+
+    Version 1 results of missions that touched down are unchanged by version 2; those without a touchdown are stale.
+    """
+    if "error" in result:
+        return False
+    version = int(result.get("metrics_version", 1))
+    return version < 2 and not result.get("landed", False)
 
 
 @dataclass
@@ -49,8 +72,10 @@ class MissionMetrics:
     touchdown_north_m: float
     touchdown_east_m: float
     people_cells: list[list[int]]
-    """People at touchdown (or the end) on a 1 m grid over [-20, 20) m: ``[row, col, count]`` of the occupied cells
-    (row from north -20 m, col from east -20 m), for the report's touchdown-over-density plots."""
+    """People at touchdown (or at the companion's last record) on a 1 m grid over [-20, 20) m: ``[row, col, count]``
+    of the occupied cells (row from north -20 m, col from east -20 m), for the report's touchdown-over-density plots."""
+    metrics_version: int = METRICS_VERSION
+    """The definitions these were computed with (:data:`METRICS_VERSION`)."""
 
     def to_json(self) -> dict[str, Any]:
         """JSON-able, NaN as None, floats rounded to 6 decimals (results compare exactly across runs)."""
@@ -95,7 +120,11 @@ def mission_metrics(
     decisions = [r for r in flight if r["kind"] == "decision"]
     started = next((float(r["t_s"]) for r in decisions if r.get("source") == "start"), math.nan)
     down = touchdown(truth)
-    t_end = float(down["t_s"]) if down is not None else (float(truth[-1]["t_s"]) if truth else math.nan)
+    # Without a touchdown the mission ends where the companion's log does (a hold, a yield, its time limit): an instant
+    # of the lockstep, unlike the end of the ground truth, which depends on how soon the SITL was stopped.
+    stamped = [float(r["t_s"]) for r in flight if r.get("t_s") is not None]
+    t_end = float(down["t_s"]) if down is not None else (max(stamped) if stamped else math.nan)
+    truth = [r for r in truth if r["t_s"] <= t_end + 1e-9] if down is None else truth
 
     descent_t, target = _final_descent(flight)
     window = [r for r in truth if descent_t is not None and descent_t - 1e-9 <= r["t_s"] <= t_end + 1e-9]
@@ -126,7 +155,9 @@ def mission_metrics(
             big, small = max(r_zone, free), min(r_zone, free)
             iou = (small / big) ** 2 if big > 0 else nan
 
-    path = np.array([r["position_ned_m"] for r in truth if math.isfinite(started) and started <= r["t_s"] <= t_end])
+    path = np.array(
+        [r["position_ned_m"] for r in truth if math.isfinite(started) and started <= r["t_s"] <= t_end + 1e-9]
+    )
     path_length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
     targets = [d["decision"]["target"]["track_id"] for d in decisions if d["decision"]["target"] is not None]
     reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)

@@ -122,6 +122,7 @@ class Segment:
     missions: int = 0
     wall_s: float = 0.0
     estimated: bool = False  # wall time from the missions' own wall_s, not from the segment's clock
+    superseded: int = 0  # missions this segment flew whose result a later flight replaced (errors aside)
     cpu: str | None = None
     note: str = ""  # e.g. how a segment recorded after the fact was reconstructed
 
@@ -131,31 +132,47 @@ class Segment:
         return 3600.0 * self.missions / self.wall_s if self.wall_s > 0 else float("nan")
 
 
-def segments(results: list[dict[str, Any]], log: SegmentLog, default_workers: int) -> list[Segment]:
-    """The segments that flew ``results`` (the current result of each mission), oldest first."""
+def segments(
+    results: list[dict[str, Any]],
+    log: SegmentLog,
+    default_workers: int,
+    every_line: list[dict[str, Any]] | None = None,
+) -> list[Segment]:
+    """The segments that flew ``results`` (the current result of each mission), oldest first.
+
+    ``every_line`` (all of ``results.jsonl``, superseded lines included) counts the flights whose result a later one
+    replaced, and puts their wall time into the estimate for the results flown before segments were recorded.
+    """
     records = log.records()
     starts = {int(r["segment"]): r for r in records if r.get("kind") == "start"}
     ends = {int(r["segment"]): r for r in records if r.get("kind") == "end"}
     claimed = {m: number for number, r in starts.items() for m in r.get("mission_ids", [])}  # reconstructed ones
-    by_segment: dict[int | None, list[dict[str, Any]]] = {}
-    for r in results:
-        if "error" not in r:
-            by_segment.setdefault(r.get("segment", claimed.get(r["mission_id"])), []).append(r)
+
+    def by_segment(rows: list[dict[str, Any]]) -> dict[int | None, list[dict[str, Any]]]:
+        out: dict[int | None, list[dict[str, Any]]] = {}
+        for r in rows:
+            if "error" not in r:
+                out.setdefault(r.get("segment", claimed.get(r["mission_id"])), []).append(r)
+        return out
+
+    current = by_segment(results)
+    flights = by_segment(every_line if every_line is not None else results)
     out = []
-    unrecorded = by_segment.get(None, [])
-    if unrecorded:
+    unrecorded = current.get(None, [])
+    if flights.get(None):
         out.append(
             Segment(
                 number=None,
                 commits=sorted({str(r["commit"]) for r in unrecorded if r.get("commit")}),
                 workers=default_workers,
                 missions=len(unrecorded),
-                wall_s=sum(float(r.get("wall_s", 0.0)) for r in unrecorded) / default_workers,
+                wall_s=sum(float(r.get("wall_s", 0.0)) for r in flights[None]) / default_workers,
                 estimated=True,
+                superseded=len(flights[None]) - len(unrecorded),
             )
         )
     for number in sorted(starts):
-        start, rows = starts[number], by_segment.get(number, [])
+        start, rows = starts[number], current.get(number, [])
         last_finished = max((str(r["finished_utc"]) for r in rows if r.get("finished_utc")), default=None)
         end_utc = ends[number]["utc"] if number in ends else last_finished
         wall_s = (_parse_utc(end_utc) - _parse_utc(start["utc"])).total_seconds() if end_utc else 0.0
@@ -168,6 +185,7 @@ def segments(results: list[dict[str, Any]], log: SegmentLog, default_workers: in
                 ended_utc=end_utc,
                 missions=len(rows),
                 wall_s=wall_s,
+                superseded=len(flights.get(number, [])) - len(rows),
                 cpu=f"{start['machine']['cpu_model']}, {start['machine']['logical_cpus']} logical CPUs",
                 note=str(start.get("note", "")),
             )

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from companion.app.recorder import read_log
+from sitl.campaign.metrics import stale
 from sitl.campaign.provenance import Segment, SegmentLog, segments
 from sitl.campaign.spec import CampaignSpec
 from sitl.campaign.stats import Estimate, bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
@@ -102,12 +104,14 @@ def build_report(spec: CampaignSpec, results: list[dict[str, Any]], out_dir: Pat
                     "nearest_person_mean_difference_m": asdict(diff),
                 }
             )
-    flown = segments(results, SegmentLog(out_dir / "segments.jsonl"), spec.workers)
+    every_line = read_log(out_dir / "results.jsonl") if (out_dir / "results.jsonl").is_file() else None
+    flown = segments(results, SegmentLog(out_dir / "segments.jsonl"), spec.workers, every_line)
     wall_s = sum(seg.wall_s for seg in flown)
     summary = {
         "campaign": spec.name,
         "missions": len(results),
         "errors": len(results) - len(good),
+        "stale": sum(stale(r) for r in good),
         "cells": cells,
         "paired": paired,
         "flown": {
@@ -146,8 +150,14 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
         "",
         f"{summary['missions']} missions of {len(spec.missions())} planned ({spec.runs} per cell, master seed "
         f"{spec.master_seed}); {summary['errors']} that could not be flown (infrastructure) left out. "
-        "Intervals are 95 %: Wilson for rates, bootstrap for "
-        "means. Definitions: docs/campaigns.md.",
+        + (
+            f"{summary['stale']} missions without a touchdown carry metrics of an earlier definition (their nearest "
+            "person and path length ran to the end of the ground truth) and are flown again when the campaign "
+            "resumes. "
+            if summary["stale"]
+            else ""
+        )
+        + "Intervals are 95 %: Wilson for rates, bootstrap for means. Definitions: docs/campaigns.md.",
         "",
         "## Ours",
         "",
@@ -217,8 +227,9 @@ def _flown_markdown(flown: dict[str, Any]) -> list[str]:
         + (", ".join(f"`{c[:12]}`" for c in flown["commits"]) or "unknown")
         + ".",
         "",
-        "| segment | started (UTC) | ended (UTC) | commit | workers | missions | wall h | missions/h | machine |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| segment | started (UTC) | ended (UTC) | commit | workers | missions | flown again later | wall h "
+        "| missions/h | machine |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for seg in rows:
         name = "before segments were recorded" if seg.number is None else str(seg.number)
@@ -226,7 +237,7 @@ def _flown_markdown(flown: dict[str, Any]) -> list[str]:
         commits = ", ".join(f"`{c[:12]}`" for c in seg.commits) or "unknown"
         lines.append(
             f"| {name} | {seg.started_utc or 'n/a'} | {seg.ended_utc or 'n/a'} | {commits} | {seg.workers} "
-            f"| {seg.missions} | {wall} | {_fmt(seg.missions_per_hour, 0)} | {seg.cpu or 'n/a'} |"
+            f"| {seg.missions} | {seg.superseded} | {wall} | {_fmt(seg.missions_per_hour, 0)} | {seg.cpu or 'n/a'} |"
         )
     notes = [f"- Segment {seg.number}: {seg.note}" for seg in rows if seg.note]
     return lines + (["", *notes] if notes else [])

@@ -29,7 +29,7 @@ from typing import Any, TextIO
 import yaml
 
 from companion.app.recorder import open_append, read_log
-from sitl.campaign.metrics import mission_metrics
+from sitl.campaign.metrics import mission_metrics, stale
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.config import API_PORT_REMOTE, GCS_PORT_REMOTE, MAX_INSTANCE
@@ -173,6 +173,14 @@ class Progress:
         self.stream.flush()
 
 
+def missions_to_fly(plans: list[MissionPlan], done: dict[str, dict[str, Any]]) -> list[MissionPlan]:
+    """The planned missions without a usable result, run by run across the cells (so a campaign stopped part-way has
+    every cell about equally far). A mission is flown again when it could not be flown (an infrastructure error, not
+    a landing) or its result is :func:`~sitl.campaign.metrics.stale` (computed by definitions since changed)."""
+    todo = [p for p in plans if p.mission_id not in done or "error" in done[p.mission_id] or stale(done[p.mission_id])]
+    return sorted(todo, key=lambda p: p.run)
+
+
 def run_campaign(
     spec: CampaignSpec,
     out_dir: Path,
@@ -195,14 +203,12 @@ def run_campaign(
     results_path = out_dir / "results.jsonl"
     done = {r["mission_id"]: r for r in read_results(results_path)}
     plans = spec.missions()
-    # Run by run across the cells, so a campaign stopped part-way has every cell about equally far.
-    # A mission that could not be flown (an infrastructure error, not a landing) is flown again.
-    todo = sorted((p for p in plans if p.mission_id not in done or "error" in done[p.mission_id]), key=lambda p: p.run)
+    todo = missions_to_fly(plans, done)
     workers = workers or spec.workers
     worker_ids = worker_instances(instance_base, workers)
 
-    def flown() -> int:  # an error row is not a mission done: it is flown again
-        return sum("error" not in r for r in done.values())
+    def flown() -> int:  # an error or a stale result is not a mission done: it is flown again
+        return sum("error" not in r and not stale(r) for r in done.values())
 
     bar = Progress(len(plans), flown()) if progress else None
     if todo:
