@@ -248,7 +248,7 @@ def _campaign_replay(args: argparse.Namespace) -> int:
     import yaml
 
     from companion.app.replay import replay
-    from sitl.campaign.metrics import mission_metrics
+    from sitl.campaign.metrics import mission_metrics, stale
     from sitl.campaign.runner import mission_spec, read_results
     from sitl.campaign.spec import CampaignSpec
     from sitl.mission import fly
@@ -268,9 +268,15 @@ def _campaign_replay(args: argparse.Namespace) -> int:
     report = replay(out / "flight", video_path=out / "camera.mp4")
     again = mission_metrics(out, plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
     logged = next((r for r in read_results(folder / "results.jsonl") if r["mission_id"] == args.mission), None)
-    same = logged is not None and all(logged.get(k) == v for k, v in again.to_json().items())
+    # A result of an earlier metrics definition that the change leaves alone (not stale) compares field by field.
+    same = logged is not None and all(logged.get(k) == v for k, v in again.to_json().items() if k != "metrics_version")
     sys.stdout.write(json.dumps(again.to_json(), indent=2) + "\n")
     sys.stdout.write(f"wrote {out / 'camera.mp4'} (replay {'identical' if report.identical else 'DIFFERENT'})\n")
+    if logged is not None and stale(logged):
+        sys.stdout.write(
+            "the campaign's result is stale (an earlier metrics definition): the campaign flies it again\n"
+        )
+        return 0 if report.identical else 1
     if logged is not None:
         sys.stdout.write(f"metrics {'identical to' if same else 'DIFFERENT from'} the campaign's result\n")
     return 0 if report.identical and (logged is None or same) else 1

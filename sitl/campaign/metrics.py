@@ -23,7 +23,7 @@ from companion.app.recorder import read_log
 from sitl.mission import body_edges_m, people_at, read_truth, touchdown
 
 METRICS_VERSION = 2
-"""Raised when a definition changes what stored results hold; :func:`stale` says which of them it changes.
+"""Incremented when a definition changes what stored results hold; :func:`stale` says which of them it changes.
 
 1. The first campaigns.
 2. A mission without a touchdown ends at the companion's last record, not at the end of the ground truth: the nearest
