@@ -29,10 +29,11 @@ from typing import Any, TextIO
 import yaml
 
 from companion.app.recorder import open_append, read_log
+from companion.config import ConfigError, validate_config
 from sitl.campaign.metrics import mission_metrics, stale
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
-from sitl.config import API_PORT_REMOTE, GCS_PORT_REMOTE, MAX_INSTANCE
+from sitl.config import MAX_INSTANCE, SitlConfig
 from sitl.mission import MissionError, MissionSpec, fly
 from sitl.process import SitlProcessError
 
@@ -58,12 +59,11 @@ def worker_instances(instance_base: int, workers: int) -> list[int]:
             f"{instances[-1]}; instances are 0 to {MAX_INSTANCE} (PX4's ports meet from 40 up): "
             f"lower --instance-base to at most {MAX_INSTANCE + 1 - workers}"
         )
-    gcs_clash = API_PORT_REMOTE + instance_base <= GCS_PORT_REMOTE < API_PORT_REMOTE + instance_base + workers
-    if gcs_clash:
-        raise CampaignError(
-            f"instance {GCS_PORT_REMOTE - API_PORT_REMOTE} (between {instances[0]} and {instances[-1]}) would put a "
-            f"worker's API link on the ground-station port {GCS_PORT_REMOTE}; choose another --instance-base"
-        )
+    for instance in instances:  # the SITL's own checks (an API link on the ground-station port)
+        try:
+            validate_config(SitlConfig, {"instance": instance}, source="campaign workers", prefix="sitl")
+        except ConfigError as exc:
+            raise CampaignError(f"{exc}; choose another --instance-base") from None
     return instances
 
 
