@@ -30,8 +30,11 @@ def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int) -> SitlProc
     return SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
 
 
-def pilot_takes_off(sitl: SitlProcess, gcs: GroundStation, instance: int, altitude_m: float) -> None:
-    """The pilot (a ground station) arms and takes off; returns once the vehicle holds at ``altitude_m``."""
+def pilot_takes_off(
+    sitl: SitlProcess, gcs: GroundStation, instance: int, altitude_m: float, then_modes: tuple[str, ...] = ()
+) -> None:
+    """The pilot (a ground station) arms and takes off; returns once the vehicle holds at ``altitude_m``, or is
+    already in one of ``then_modes`` there (a companion waiting for the hold may take over before a poll sees it)."""
     wait_until(lambda: gcs.poll() is not None and gcs.vehicle_addr, 10, "the vehicle on the GCS link")
     sysid = SitlConfig(instance=instance).system_id  # PX4 style: instance + 1
 
@@ -44,7 +47,7 @@ def pilot_takes_off(sitl: SitlProcess, gcs: GroundStation, instance: int, altitu
     gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, takeoff_amsl_m))
     state_when(
         sitl,
-        lambda st: st["mode"] == "AUTO.LOITER" and st["position_ned_m"][2] < -(altitude_m - 1.0),
+        lambda st: st["mode"] in ("AUTO.LOITER", *then_modes) and st["position_ned_m"][2] < -(altitude_m - 1.0),
         30,
         f"hover at {altitude_m:g} m",
     )
@@ -136,7 +139,7 @@ def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_t
         on_ground = sitl.state()
         # The pilot takes off and hands over by switching to HOLD (the end of a takeoff is HOLD): the companion
         # takes OFFBOARD from there. Then the pilot takes over in position control: it must yield at once.
-        pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)
+        pilot_takes_off(sitl, gcs, instance, altitude_m=10.0, then_modes=("OFFBOARD",))
         state_when(sitl, lambda st: st["mode"] == "OFFBOARD", 30, "the companion in OFFBOARD after the handover")
         assert sitl.request({"cmd": "pilot_mode", "mode": "POSCTL"})["result"] == 0
         out, err = fly.communicate(timeout=20)  # it must yield and end, not fight the pilot
