@@ -109,6 +109,24 @@ def test_a_flight_replaced_by_a_later_one_keeps_its_wall_time_and_is_counted(tmp
     assert first.wall_s == pytest.approx(600.0)
 
 
+def test_a_killed_segment_whose_flights_were_all_replaced_still_lasts_until_its_last_flight(tmp_path: Path) -> None:
+    log = SegmentLog(tmp_path / "segments.jsonl")
+    start = {
+        "kind": "start", "segment": 1, "utc": "2026-11-21T10:00:00Z", "commit": "c1", "workers": 2,
+        "machine": {"cpu_model": "x", "logical_cpus": 2},
+    }  # fmt: skip
+    log.path.write_text(json.dumps(start) + "\n")  # killed: no end record
+    log.start("c2", workers=2, missions_done=1)
+    every_line = [
+        result("a", segment=1, finished_utc="2026-11-21T10:15:00Z"),
+        result("a", segment=2, finished_utc="2026-11-21T12:10:00Z"),  # flown again: the first result was stale
+    ]
+    first, _second = segments([every_line[1]], log, default_workers=2, every_line=every_line)
+    assert (first.missions, first.superseded) == (0, 1)
+    assert first.ended_utc == "2026-11-21T10:15:00Z"
+    assert first.wall_s == pytest.approx(900.0)
+
+
 @pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
 def test_the_source_commit_says_when_the_tree_differs_from_it(tmp_path: Path) -> None:
     assert source_commit(tmp_path) is None  # not a repository

@@ -172,8 +172,9 @@ def segments(
             )
         )
     for number in sorted(starts):
-        start, rows = starts[number], current.get(number, [])
-        last_finished = max((str(r["finished_utc"]) for r in rows if r.get("finished_utc")), default=None)
+        start, rows, flown = starts[number], current.get(number, []), flights.get(number, [])
+        # A killed segment (no end record) ended at its last flight, replaced later or not: it took that time.
+        last_finished = max((str(r["finished_utc"]) for r in flown if r.get("finished_utc")), default=None)
         end_utc = ends[number]["utc"] if number in ends else last_finished
         wall_s = (_parse_utc(end_utc) - _parse_utc(start["utc"])).total_seconds() if end_utc else 0.0
         out.append(
@@ -185,7 +186,7 @@ def segments(
                 ended_utc=end_utc,
                 missions=len(rows),
                 wall_s=wall_s,
-                superseded=len(flights.get(number, [])) - len(rows),
+                superseded=len(flown) - len(rows),
                 cpu=f"{start['machine']['cpu_model']}, {start['machine']['logical_cpus']} logical CPUs",
                 note=str(start.get("note", "")),
             )
