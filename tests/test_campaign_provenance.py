@@ -19,6 +19,12 @@ def result(mission_id: str, **fields: Any) -> dict[str, Any]:
     return {"mission_id": mission_id, "success": True, **fields}
 
 
+def start_line(utc: str = "2026-11-21T10:00:00Z", commit: str = "c1", workers: int = 2, **fields: Any) -> str:
+    """Segment 1's start record, one line of ``segments.jsonl`` written by hand (a fixed clock and machine)."""
+    record = {"kind": "start", "segment": 1, "utc": utc, "commit": commit, "workers": workers}
+    return json.dumps({**record, "machine": {"cpu_model": "x", "logical_cpus": 2}, **fields}) + "\n"
+
+
 def test_a_segment_lasts_from_its_start_to_its_end_and_counts_its_missions(tmp_path: Path) -> None:
     log = SegmentLog(tmp_path / "segments.jsonl")
     number = log.start("abc123", workers=2, missions_done=0)
@@ -48,20 +54,7 @@ def test_a_segment_lasts_from_its_start_to_its_end_and_counts_its_missions(tmp_p
 
 def test_a_killed_segment_ends_at_its_last_mission_and_a_new_one_is_numbered_next(tmp_path: Path) -> None:
     log = SegmentLog(tmp_path / "segments.jsonl")
-    log.path.write_text(
-        json.dumps(
-            {
-                "kind": "start",
-                "segment": 1,
-                "utc": "2026-11-21T10:00:00Z",
-                "commit": "c1",
-                "workers": 3,
-                "machine": {"cpu_model": "x", "logical_cpus": 2},
-            }
-        )
-        + "\n"
-        + '{"kind": "end", "segm'  # a torn line, as a kill -9 mid-write leaves it
-    )
+    log.path.write_text(start_line(workers=3) + '{"kind": "end", "segm')  # a torn line, as a kill -9 leaves it
     assert log.start("c2", workers=2, missions_done=1) == 2
     results = [result("a", segment=1, finished_utc="2026-11-21T10:20:00Z"), result("b", segment=2)]
     first, second = segments(results, log, default_workers=2)
@@ -77,12 +70,11 @@ def test_results_from_before_segments_are_estimated_unless_a_reconstructed_segme
     assert estimated.estimated
     assert estimated.missions == 3
     assert estimated.wall_s == pytest.approx(245.0)  # (100 + 300 + 90) / 2 workers
-    reconstructed = {
-        "kind": "start", "segment": 1, "utc": "2026-11-21T15:53:34Z", "commit": "3a0b9c1", "workers": 3,
-        "machine": {"cpu_model": "x", "logical_cpus": 2}, "mission_ids": ["c"], "note": "from the campaign log",
-    }  # fmt: skip
+    reconstructed = start_line(
+        "2026-11-21T15:53:34Z", "3a0b9c1", workers=3, mission_ids=["c"], note="from the campaign log"
+    )
     end = {"kind": "end", "segment": 1, "utc": "2026-11-21T16:53:34Z", "flown": 1, "interrupted": True}
-    log.path.write_text(json.dumps(reconstructed) + "\n" + json.dumps(end) + "\n")
+    log.path.write_text(reconstructed + json.dumps(end) + "\n")
     before, claimed = segments(old, log, default_workers=2)
     assert before.missions == 2
     assert before.wall_s == pytest.approx(200.0)
@@ -94,11 +86,7 @@ def test_results_from_before_segments_are_estimated_unless_a_reconstructed_segme
 def test_a_flight_replaced_by_a_later_one_keeps_its_wall_time_and_is_counted(tmp_path: Path) -> None:
     # "b" was flown before segments were recorded, then flown again in segment 1 (its result was stale).
     log = SegmentLog(tmp_path / "segments.jsonl")
-    start = {
-        "kind": "start", "segment": 1, "utc": "2026-11-21T10:00:00Z", "commit": "c1", "workers": 2,
-        "machine": {"cpu_model": "x", "logical_cpus": 2},
-    }  # fmt: skip
-    log.path.write_text(json.dumps(start) + "\n")
+    log.path.write_text(start_line())
     old_b = result("b", wall_s=300.0)
     every_line = [result("a", wall_s=100.0), old_b, result("b", segment=1, finished_utc="2026-11-21T10:10:00Z")]
     current = [every_line[0], every_line[2]]
@@ -111,11 +99,7 @@ def test_a_flight_replaced_by_a_later_one_keeps_its_wall_time_and_is_counted(tmp
 
 def test_a_killed_segment_whose_flights_were_all_replaced_still_lasts_until_its_last_flight(tmp_path: Path) -> None:
     log = SegmentLog(tmp_path / "segments.jsonl")
-    start = {
-        "kind": "start", "segment": 1, "utc": "2026-11-21T10:00:00Z", "commit": "c1", "workers": 2,
-        "machine": {"cpu_model": "x", "logical_cpus": 2},
-    }  # fmt: skip
-    log.path.write_text(json.dumps(start) + "\n")  # killed: no end record
+    log.path.write_text(start_line())  # killed: no end record
     log.start("c2", workers=2, missions_done=1)
     every_line = [
         result("a", segment=1, finished_utc="2026-11-21T10:15:00Z"),
