@@ -84,6 +84,9 @@ def test_the_report_is_written_and_every_metric_is_in_its_range(one_worker: Path
         if r["nearest_person_min_m"] is not None:
             assert r["nearest_person_min_m"] <= r["nearest_person_mean_m"] + 1e-9
         assert r["path_length_m"] >= 0.0
+        assert r["touched_obstacle"] <= r["landed"]
+        assert (r["obstacle_distance_m"] is None) == (not r["landed"])
+        assert r["obstacle_distance_m"] is None or r["obstacle_distance_m"] >= 0.0
     # Paired scenes: both strategies of a condition flew the same seed.
     seeds = {(r["condition"], r["strategy"]): r["seed"] for r in results}
     assert seeds["static", "oldest"] == seeds["static", "biggest"] != seeds["moving_20", "oldest"]
@@ -94,6 +97,7 @@ def test_the_report_is_written_and_every_metric_is_in_its_range(one_worker: Path
     report = (one_worker / "report.md").read_text()
     assert "The paper's Table I beside ours" in report
     assert "Paired comparisons" in report
+    assert "on an obstacle" in report
     for plot in ("success.png", "nearest_person.png", "touchdowns_static.png", "touchdowns_moving_20.png"):
         assert (one_worker / plot).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (one_worker / "results.csv").read_text().count("\n") == 5

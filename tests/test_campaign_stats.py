@@ -13,11 +13,21 @@ import pytest
 
 from companion.config import ConfigError
 from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
-from sitl.campaign.metrics import METRICS_VERSION, MissionMetrics, mission_metrics, stale
+from sitl.campaign.metrics import (
+    METRICS_VERSION,
+    MissionMetrics,
+    mission_metrics,
+    nearest_obstacle,
+    park_layout,
+    stale,
+    with_obstacles,
+)
+from sitl.campaign.report import completed
 from sitl.campaign.runner import CampaignError, missions_to_fly, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
 from sitl.config import SitlConfig
+from sitl.world.park import ObjectKind
 
 pytestmark = pytest.mark.unit
 
@@ -86,6 +96,7 @@ def test_a_bad_campaign_spec_names_the_field(tmp_path: Path) -> None:
 def _write_mission(run_dir: Path, walker_ne: list[tuple[float, float]]) -> None:
     """A hand-made mission: descent from t = 1 s at (0, 0), touchdown at t = 3 s; one person walking."""
     (run_dir / "flight").mkdir(parents=True)
+    (run_dir / "sitl.yaml").write_text("sitl: {seed: 1}\n")
     config = {"perception": {"zones": {"vehicle_radius_m": 0.5}}}
     target = {"north_m": 0.0, "east_m": 0.0, "radius_m": 2.0, "track_id": 4}
     flight = [
@@ -173,12 +184,59 @@ def test_a_person_under_the_descending_vehicle_is_not_a_success(tmp_path: Path) 
     assert not m.warning_1m
     assert m.people_within_1_5m == 1
     assert 0.0 <= m.zone_iou <= 1.0
+    # What lies under the touchdown point (0, 0) comes from the park of the SITL's seed (sitl.yaml).
+    distance_m, kind = nearest_obstacle(park_layout(1, 30.0), 0.0, 0.0)
+    assert m.obstacle_distance_m == pytest.approx(distance_m)
+    assert m.obstacle_kind == kind
+    assert m.touched_obstacle == (distance_m < 0.5)
+
+
+def test_a_touchdown_under_a_tree_crown_is_on_an_obstacle_though_nobody_is_near() -> None:
+    objects = park_layout(7, 30.0)
+    tree = next(o for o in objects if o.kind is ObjectKind.TREE)
+    radius_m = tree.size_m / 2
+    assert radius_m >= 1.5  # crowns are 3 to 6 m across
+    # Seen from above: inside the crown is distance 0; 0.3 m beyond its edge, the 0.5 m footprint still overlaps it.
+    assert tree.footprint_distance_m(tree.north_m + 0.5 * radius_m, tree.east_m) == 0.0
+    assert tree.footprint_distance_m(tree.north_m, tree.east_m + radius_m + 0.3) == pytest.approx(0.3)
+    blob = next(o for o in objects if o.kind is ObjectKind.DARK_BLOB)
+    assert blob.footprint_distance_m(blob.north_m, blob.east_m) == math.inf  # paint on the ground: no obstacle
+    # A stored result of version 2 (no obstacle fields) is completed from its seed and touchdown point.
+    v2 = {"mission_id": "c/s/0000", "landed": True, "metrics_version": 2, "success": True}
+    under = with_obstacles(v2 | {"touchdown_north_m": tree.north_m, "touchdown_east_m": tree.east_m}, objects, 0.5)
+    assert under["touched_obstacle"]
+    assert under["success"]
+    assert (under["obstacle_distance_m"], under["obstacle_kind"]) == (0.0, "tree")
+    held = with_obstacles(v2 | {"landed": False, "touchdown_north_m": None, "touchdown_east_m": None}, objects, 0.5)
+    assert (held["touched_obstacle"], held["obstacle_distance_m"], held["obstacle_kind"]) == (False, None, None)
+    assert with_obstacles(under | {"touched_obstacle": False}, objects, 0.5)["touched_obstacle"] is False  # kept
+
+
+def test_the_report_completes_earlier_results_from_the_campaigns_own_scenes() -> None:
+    spec = load_campaign_spec(REPO_ROOT / "mission_configs" / "campaigns" / "paper_table1.yaml")
+    plan = next(p for p in spec.missions() if p.mission_id == "moving_20/oldest/0035")
+    assert plan.vehicle_radius_m(spec) == pytest.approx(0.5)
+    assert plan.scenario().moving_fraction == pytest.approx(0.2)
+    tree = next(o for o in park_layout(plan.seed, plan.scenario().roi_side_m) if o.kind is ObjectKind.TREE)
+    stored = {
+        "mission_id": plan.mission_id,
+        "landed": True,
+        "touchdown_north_m": tree.north_m,
+        "touchdown_east_m": tree.east_m,
+        "metrics_version": 2,
+    }
+    error = {"mission_id": plan.mission_id, "error": "no SITL"}
+    done = completed(spec, [stored, error])
+    assert done[0]["touched_obstacle"]
+    assert done[0]["obstacle_kind"] == "tree"
+    assert done[1] == error
 
 
 def _write_hold(run_dir: Path, truth_until_s: float) -> None:
     """A hand-made mission that never lands: the companion holds at 10 m at t = 3 s and lets go; the SITL's ground
     truth runs on until ``truth_until_s`` (when it was stopped, a wall-clock matter) while a walker comes under it."""
     (run_dir / "flight").mkdir(parents=True)
+    (run_dir / "sitl.yaml").write_text("sitl: {seed: 1}\n")
     config = {"perception": {"zones": {"vehicle_radius_m": 0.5}}}
     search = {"phase": "search", "kind": "setpoint", "target": None, "reason": "search"}
     flight = [
@@ -285,7 +343,8 @@ def _results(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[dict[str, 
                 people_within_1_5m=int(bad), touchdown_nearest_m=0.3 if bad else 4.0, zone_area_m2=20.0,
                 nearest_person_mean_m=0.5 if bad else 4.0, nearest_person_min_m=0.3 if bad else 4.0, zone_iou=0.8,
                 time_to_land_s=40.0, path_length_m=30.0, reselections=0, aborts=0, failsafes=0,
-                touchdown_north_m=1.0, touchdown_east_m=2.0, people_cells=[],
+                touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0, obstacle_kind="bench",
+                touched_obstacle=False, people_cells=[],
             ).to_json()
         )  # fmt: skip
     return rows

@@ -10,6 +10,7 @@ import pytest
 
 from companion.config import ConfigError, validate_config
 from sitl.world.crowd import BodyType, Crowd, CrowdError
+from sitl.world.park import ObjectKind, Park
 from sitl.world.scenario import ScenarioConfig, WalkerKind, WeatherKind
 from sitl.world.weather import WeatherSchedule, WeatherState, apply_weather
 
@@ -198,3 +199,15 @@ def test_dynamic_weather_changes_at_the_period_and_is_seeded() -> None:
     )
     fixed = WeatherSchedule(ScenarioConfig(weather=[WeatherKind.FOG]), 4)
     assert fixed.state_at(0.0) == fixed.state_at(500.0)
+
+
+@pytest.mark.parametrize("seed", [1, 2026, 3484895844])
+def test_the_park_layout_alone_has_the_same_objects_as_the_painted_park(seed: int) -> None:
+    # Metrics rebuild the park of a mission flown long ago from its seed, without painting its texture.
+    painted, layout = Park(seed), Park(seed, paint=False)
+    assert layout.objects == painted.objects
+    assert {o.kind for o in layout.objects} >= {ObjectKind.TREE, ObjectKind.BENCH, ObjectKind.DARK_BLOB}
+    assert painted.painted
+    assert not layout.painted
+    assert layout.ground_bgr.shape == (1, 1, 3)
+    assert painted.ground_bgr.shape == (1800, 1800, 3)

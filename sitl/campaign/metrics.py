@@ -4,6 +4,9 @@ Distances are horizontal, metres, to the edge of a person's body (centre distanc
 descent* runs from the companion's last entry into the descent phase before its landing command (or, without one,
 from its last command) to the touchdown, or, without a touchdown, to the companion's last record (vehicle time).
 
+What lies under the touchdown comes from the park the SITL rendered, rebuilt from the mission's seed (the SITL has
+no collision: a vehicle that descends into a tree crown lands under it).
+
 A mission's metrics depend on its seed and configs only: every window ends at an instant of the vehicle's clock that
 the lockstep fixes, never at the end of the ground truth (the SITL runs on for a wall-clock moment after the companion
 lets go, a little longer or shorter with the machine's load).
@@ -20,14 +23,20 @@ from typing import Any
 import numpy as np
 
 from companion.app.recorder import read_log
+from companion.config import load_yaml_config
+from sitl.config import SitlConfig
 from sitl.mission import body_edges_m, people_at, read_truth, touchdown
+from sitl.world.park import Park, ParkObject
 
-METRICS_VERSION = 2
+METRICS_VERSION = 3
 """Incremented when a definition changes what stored results hold; :func:`stale` says which of them it changes.
 
 1. The first campaigns.
 2. A mission without a touchdown ends at the companion's last record, not at the end of the ground truth: the nearest
    person, the path length and the people map of such a mission no longer depend on when the SITL was stopped.
+3. Adds what lies under the touchdown (``obstacle_distance_m``, ``obstacle_kind``, ``touched_obstacle``). Nothing
+   else changes, so version 2 results are not stale: :func:`with_obstacles` completes them from their seed and
+   touchdown point without flying them again.
 """
 
 
@@ -71,6 +80,14 @@ class MissionMetrics:
     failsafes: int
     touchdown_north_m: float
     touchdown_east_m: float
+    obstacle_distance_m: float
+    """Horizontal distance from the touchdown point to the nearest solid park object's outline seen from above (tree
+    crown, car, bench, bin, bush, pole), 0 inside it; NaN without a touchdown."""
+    obstacle_kind: str | None
+    """That object's kind."""
+    touched_obstacle: bool
+    """The vehicle's footprint (``vehicle_radius_m``) overlapped that outline at touchdown: a real vehicle would have
+    hit it. Not part of ``success``, which is about people (the issue's definition)."""
     people_cells: list[list[int]]
     """People at touchdown (or at the companion's last record) on a 1 m grid over [-20, 20) m: ``[row, col, count]``
     of the occupied cells (row from north -20 m, col from east -20 m), for the report's touchdown-over-density plots."""
@@ -116,6 +133,7 @@ def mission_metrics(
     flight = read_log(run_dir / "flight" / "flight.jsonl")
     config = next(r for r in flight if r["kind"] == "header")["config"]
     vehicle_radius_m = float(config["perception"]["zones"]["vehicle_radius_m"])
+    sitl = load_yaml_config(SitlConfig, run_dir / "sitl.yaml", section="sitl")
     end: dict[str, Any] = next((r["outcome"] for r in reversed(flight) if r["kind"] == "end"), {})
     decisions = [r for r in flight if r["kind"] == "decision"]
     started = next((float(r["t_s"]) for r in decisions if r.get("source") == "start"), math.nan)
@@ -162,6 +180,11 @@ def mission_metrics(
     targets = [d["decision"]["target"]["track_id"] for d in decisions if d["decision"]["target"] is not None]
     reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)
     aborts = sum(1 for d in decisions if "climb back" in d["decision"]["reason"])
+    obstacle_m, obstacle_kind = (
+        nearest_obstacle(park_layout(sitl.seed, sitl.scenario.roi_side_m), *down["position_ned_m"][:2])
+        if down is not None
+        else (nan, None)
+    )
     return MissionMetrics(
         mission_id=mission_id,
         condition=condition,
@@ -188,6 +211,9 @@ def mission_metrics(
         failsafes=len(end.get("failsafes", [])),
         touchdown_north_m=float(down["position_ned_m"][0]) if down is not None else nan,
         touchdown_east_m=float(down["position_ned_m"][1]) if down is not None else nan,
+        obstacle_distance_m=obstacle_m,
+        obstacle_kind=obstacle_kind,
+        touched_obstacle=obstacle_m < vehicle_radius_m,
         people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else {})),
     )
 
@@ -203,3 +229,34 @@ def _people_cells(header: dict[str, Any], record: dict[str, Any]) -> list[list[i
         if 0 <= row < 2 * GRID_HALF_M and 0 <= col < 2 * GRID_HALF_M:
             cells[(row, col)] = cells.get((row, col), 0) + 1
     return [[row, col, count] for (row, col), count in sorted(cells.items())]
+
+
+def park_layout(seed: int, roi_side_m: float) -> list[ParkObject]:
+    """The objects of the park a SITL with this seed and ROI renders (its layout only: no texture is painted)."""
+    return Park(seed, roi_side_m=roi_side_m, paint=False).objects
+
+
+def nearest_obstacle(objects: list[ParkObject], north_m: float, east_m: float) -> tuple[float, str | None]:
+    """Distance (m) from a ground point (NED north, east) to the nearest solid object's outline, and its kind;
+    ``(inf, None)`` without one."""
+    best, kind = math.inf, None
+    for o in objects:
+        d = o.footprint_distance_m(north_m, east_m)
+        if d < best:
+            best, kind = d, o.kind.value
+    return best, kind
+
+
+def with_obstacles(result: dict[str, Any], objects: list[ParkObject], vehicle_radius_m: float) -> dict[str, Any]:
+    """A stored result of version 2 completed with what lies under its touchdown (see :data:`METRICS_VERSION`); a
+    result that has them, or an error line, is returned as it is."""
+    if "error" in result or "obstacle_distance_m" in result:
+        return result
+    north, east = result.get("touchdown_north_m"), result.get("touchdown_east_m")
+    distance, kind = (math.nan, None) if north is None or east is None else nearest_obstacle(objects, north, east)
+    return {
+        **result,
+        "obstacle_distance_m": round(distance, 6) if math.isfinite(distance) else None,
+        "obstacle_kind": kind,
+        "touched_obstacle": distance < vehicle_radius_m,
+    }

@@ -11,9 +11,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from pydantic import Field, model_validator
 
-from companion.config import StrictModel, load_yaml_config
+from companion.app.mission import MissionConfig
+from companion.config import StrictModel, load_yaml_config, validate_config
 from companion.perception.config import SelectionPolicyName
 from sitl.mission import DEFAULT_MISSION_CONFIG, deep_merge
 from sitl.world.scenario import ScenarioConfig
@@ -138,6 +140,17 @@ class MissionPlan:
             deep_merge(spec.mission, self.strategy.mission),
         )
         return sitl, mission
+
+    def scenario(self) -> ScenarioConfig:
+        """The scenario the SITL flies: the condition's overrides (of its scenario, then of its SITL config)."""
+        sitl = deep_merge({"scenario": self.condition.scenario}, self.condition.sitl)
+        return ScenarioConfig.model_validate(sitl.get("scenario", {}))
+
+    def vehicle_radius_m(self, spec: CampaignSpec) -> float:
+        """The companion's footprint radius (m, propellers included) in this mission's config."""
+        base = yaml.safe_load(spec.mission_config.read_text()) or {}
+        config = validate_config(MissionConfig, deep_merge(base, self.overrides(spec)[1]), source=self.mission_id)
+        return config.perception.zones.vehicle_radius_m
 
 
 def load_campaign_spec(path: str | Path) -> CampaignSpec:

@@ -12,7 +12,7 @@ import numpy.typing as npt
 import trimesh
 
 from sitl.world.crowd import Appearance, BodyType
-from sitl.world.park import ObjectKind, ParkObject
+from sitl.world.park import BENCH_BACK_M, BENCH_SEAT_DEPTH_M, CAR_WIDTH_M, POLE_LAMP_RADIUS_M, ObjectKind, ParkObject
 
 F64Array = npt.NDArray[np.float64]
 RGB = tuple[int, int, int]
@@ -126,13 +126,13 @@ def object_mesh(o: ParkObject) -> trimesh.Trimesh:
         crown_colour = (40 + colour[0] % 30, 90 + colour[1] % 50, 40 + colour[2] % 30)
         parts = [trunk, _sphere(o.size_m / 2, (0.0, 0.0, o.height_m - o.size_m / 3), crown_colour, subdivisions=1)]
     elif o.kind is ObjectKind.CAR:
-        body = _box((1.8, o.size_m, 0.8), (0.0, 0.0, 0.55), colour)
+        body = _box((CAR_WIDTH_M, o.size_m, 0.8), (0.0, 0.0, 0.55), colour)
         cabin = _box((1.6, o.size_m * 0.5, 0.6), (0.0, -0.2, 1.2), (50, 60, 70))
         parts = [body, cabin]
     elif o.kind is ObjectKind.BENCH:
         parts = [
-            _box((0.5, o.size_m, 0.06), (0.0, 0.0, o.height_m), (120, 80, 50)),
-            _box((0.08, o.size_m, 0.4), (-0.25, 0.0, o.height_m + 0.2), (120, 80, 50)),
+            _box((BENCH_SEAT_DEPTH_M, o.size_m, 0.06), (0.0, 0.0, o.height_m), (120, 80, 50)),
+            _box((BENCH_BACK_M, o.size_m, 0.4), (-BENCH_SEAT_DEPTH_M / 2, 0.0, o.height_m + 0.2), (120, 80, 50)),
         ]
     elif o.kind is ObjectKind.BIN:
         parts = [_cylinder(o.size_m / 2, o.height_m, 0.0, colour)]
@@ -141,7 +141,7 @@ def object_mesh(o: ParkObject) -> trimesh.Trimesh:
     elif o.kind is ObjectKind.POLE:
         parts = [
             _cylinder(o.size_m / 2, o.height_m, 0.0, (110, 110, 115)),
-            _sphere(0.25, (0.0, 0.0, o.height_m), (240, 240, 210)),
+            _sphere(POLE_LAMP_RADIUS_M, (0.0, 0.0, o.height_m), (240, 240, 210)),
         ]
     else:  # flat blobs on the ground: stains, manhole covers, litter, light patches
         tone = (25, 25, 30) if o.kind is ObjectKind.DARK_BLOB else (235, 235, 225)

@@ -33,9 +33,23 @@ class ObjectKind(enum.Enum):
     BRIGHT_BLOB = "bright_blob"
 
 
+FLAT_KINDS = frozenset({ObjectKind.DARK_BLOB, ObjectKind.BRIGHT_BLOB})
+"""Marks painted on the ground: a vehicle can land on them."""
+
+# Shapes seen from above, as :func:`sitl.render.meshes.object_mesh` builds them.
+CAR_WIDTH_M = 1.8
+BENCH_SEAT_DEPTH_M = 0.5
+BENCH_BACK_M = 0.08  # the backrest's thickness, on the seat's back edge
+POLE_LAMP_RADIUS_M = 0.25
+
+
 @dataclass(frozen=True)
 class ParkObject:
-    """One object: kind, ground position (north_m, east_m), size (m) and heading (rad), colour (BGR)."""
+    """One object: kind, ground position (north_m, east_m), size (m) and heading (rad), colour (BGR).
+
+    ``size_m`` is a diameter (tree crown, bush, bin, pole) or a length along the heading (car, bench); the heading is
+    from north towards east.
+    """
 
     kind: ObjectKind
     north_m: float
@@ -45,6 +59,23 @@ class ParkObject:
     heading_rad: float
     colour_bgr: tuple[int, int, int]
 
+    def footprint_distance_m(self, north_m: float, east_m: float) -> float:
+        """Horizontal distance (m) from a point to the object's outline seen from above, 0 inside it.
+
+        Trees count by their crowns, which hide what is under them. ``inf`` for flat marks on the ground
+        (:data:`FLAT_KINDS`), which are no obstacle.
+        """
+        if self.kind in FLAT_KINDS:
+            return math.inf
+        d_north, d_east = north_m - self.north_m, east_m - self.east_m
+        if self.kind in (ObjectKind.CAR, ObjectKind.BENCH):
+            half_width = CAR_WIDTH_M / 2 if self.kind is ObjectKind.CAR else BENCH_SEAT_DEPTH_M / 2 + BENCH_BACK_M / 2
+            cos_h, sin_h = math.cos(self.heading_rad), math.sin(self.heading_rad)
+            along, across = d_north * cos_h + d_east * sin_h, -d_north * sin_h + d_east * cos_h
+            return math.hypot(max(abs(along) - self.size_m / 2, 0.0), max(abs(across) - half_width, 0.0))
+        radius = max(self.size_m / 2, POLE_LAMP_RADIUS_M) if self.kind is ObjectKind.POLE else self.size_m / 2
+        return max(math.hypot(d_north, d_east) - radius, 0.0)
+
 
 GRASS = ((60, 120, 70), (55, 105, 85), (70, 125, 95), (50, 110, 60))
 ASPHALT = (95, 95, 100)
@@ -53,10 +84,15 @@ SAND = (140, 180, 205)
 COURT = ((70, 90, 160), (160, 100, 60), (60, 130, 60))
 
 
+def _noise_shape(shape: tuple[int, int], blur_px: float) -> tuple[tuple[int, int], int]:
+    """The shape :func:`smooth_noise` draws at, and its upsampling factor."""
+    factor = max(1, int(blur_px // 4))
+    return (max(1, shape[0] // factor), max(1, shape[1] // factor)), factor
+
+
 def smooth_noise(rng: np.random.Generator, shape: tuple[int, int], blur_px: float) -> npt.NDArray[np.float32]:
     """Unit-variance Gaussian noise of correlation length ``blur_px``; smooth fields are made at low resolution."""
-    factor = max(1, int(blur_px // 4))
-    small = (max(1, shape[0] // factor), max(1, shape[1] // factor))
+    small, factor = _noise_shape(shape, blur_px)
     field = rng.standard_normal(small).astype(np.float32)
     if blur_px > 0:
         field = np.asarray(cv2.GaussianBlur(field, (0, 0), blur_px / factor), dtype=np.float32)
@@ -81,6 +117,9 @@ class Park:
         Metres per ground-texture pixel.
     style : Style
         Grass colours: all, or the training or held-out half (dataset style split).
+    paint : bool
+        False: the layout only (the same objects, from the same random draws, in about a tenth of the time); the
+        ground texture is then a 1 x 1 placeholder. For ground-truth questions such as what lies under a touchdown.
     """
 
     def __init__(
@@ -90,24 +129,35 @@ class Park:
         extent_m: float = 45.0,
         texture_res_m: float = 0.05,
         style: Style = Style.ANY,
+        paint: bool = True,
     ) -> None:
         rng = np.random.default_rng([seed, 5])
         self.style = style
         self.extent_m = extent_m
         self.texture_res_m = texture_res_m
-        self.ground_bgr = self._ground(rng)
+        self.painted = paint
+        self.ground_bgr = self._ground(rng, paint)
         self.objects = self._objects(rng, roi_side_m / 2)
 
-    def _ground(self, rng: np.random.Generator) -> U8Image:
+    def _ground(self, rng: np.random.Generator, paint: bool) -> U8Image:
+        """The texture; unpainted, every random draw is the same but the images are 1 x 1 (so are the objects)."""
         size = round(2 * self.extent_m / self.texture_res_m)
+
+        def noise(blur_px: float) -> npt.NDArray[np.float32]:
+            if paint:
+                return smooth_noise(rng, (size, size), blur_px)
+            rng.standard_normal(_noise_shape((size, size), blur_px)[0])
+            return np.zeros((1, 1), np.float32)
+
         grasses: tuple[tuple[int, int, int], ...] = {Style.TRAIN: GRASS[:2], Style.HELDOUT: GRASS[2:]}.get(
             self.style, GRASS
         )
         base = np.array(grasses[int(rng.integers(len(grasses)))], dtype=np.float32)
-        fine = smooth_noise(rng, (size, size), 1.0)
-        shade = 1.0 + 0.12 * smooth_noise(rng, (size, size), 40.0) + 0.06 * fine
+        fine = noise(1.0)
+        shade = 1.0 + 0.12 * noise(40.0) + 0.06 * fine
         ground = base[None, None, :] * shade[:, :, None]
-        yy, xx = np.mgrid[0:size, 0:size].astype(np.float32) - size / 2
+        canvas = size if paint else 1
+        yy, xx = np.mgrid[0:canvas, 0:canvas].astype(np.float32) - size / 2
         px_per_m = 1.0 / self.texture_res_m
         # Sand patches and a paved plaza.
         for _ in range(int(rng.integers(1, 3))):
