@@ -93,6 +93,8 @@ def test_a_flight_replaced_by_a_later_one_keeps_its_wall_time_and_is_counted(tmp
     before, first = segments(current, log, default_workers=2, every_line=every_line)
     assert (before.missions, before.superseded) == (1, 1)
     assert before.wall_s == pytest.approx(200.0)  # (100 + 300) / 2 workers: the replaced flight took time too
+    assert before.missions_per_hour == pytest.approx(18.0)  # 1 result in the table in 200 s
+    assert before.flights_per_hour == pytest.approx(36.0)  # 2 flights in 200 s
     assert (first.missions, first.superseded) == (1, 0)
     assert first.wall_s == pytest.approx(600.0)
 

@@ -131,6 +131,12 @@ class Segment:
         """Missions flown (with a result) per hour of this segment's wall time."""
         return 3600.0 * self.missions / self.wall_s if self.wall_s > 0 else float("nan")
 
+    @property
+    def flights_per_hour(self) -> float:
+        """Missions flown per hour of wall time, those whose result a later flight replaced included: how fast the
+        segment flew (``missions_per_hour`` is how fast it added to the table)."""
+        return 3600.0 * (self.missions + self.superseded) / self.wall_s if self.wall_s > 0 else float("nan")
+
 
 def segments(
     results: list[dict[str, Any]],

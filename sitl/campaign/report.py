@@ -260,8 +260,8 @@ def _flown_markdown(flown: dict[str, Any]) -> list[str]:
         + ".",
         "",
         "| segment | started (UTC) | ended (UTC) | commit | workers | missions | flown again later | wall h "
-        "| missions/h | machine |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| missions/h | flights/h | machine |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for seg in rows:
         name = "before segments were recorded" if seg.number is None else str(seg.number)
@@ -269,9 +269,15 @@ def _flown_markdown(flown: dict[str, Any]) -> list[str]:
         commits = ", ".join(f"`{c[:12]}`" for c in seg.commits) or "unknown"
         lines.append(
             f"| {name} | {seg.started_utc or 'n/a'} | {seg.ended_utc or 'n/a'} | {commits} | {seg.workers} "
-            f"| {seg.missions} | {seg.superseded} | {wall} | {_fmt(seg.missions_per_hour, 0)} | {seg.cpu or 'n/a'} |"
+            f"| {seg.missions} | {seg.superseded} | {wall} | {_fmt(seg.missions_per_hour, 0)} "
+            f"| {_fmt(seg.flights_per_hour, 0)} | {seg.cpu or 'n/a'} |"
         )
     notes = [f"- Segment {seg.number}: {seg.note}" for seg in rows if seg.note]
+    lines += [
+        "",
+        "*missions/h* counts the segment's results still in the table; *flights/h* also counts those a later flight "
+        "replaced (a stale result flown again), so it says how fast the segment flew.",
+    ]
     return lines + (["", *notes] if notes else [])
 
 
