@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from companion.app.mission import MissionConfig
 from companion.config import ConfigError, validate_config
 from companion.guidance.geofence import Geofence, GeofenceConfig
 
@@ -42,3 +43,15 @@ def test_bad_fences_are_named() -> None:
         validate_config(GeofenceConfig, {"min_altitude_m": 50, "max_altitude_m": 40}, prefix="geofence")
     with pytest.raises(ConfigError, match="1 m"):
         validate_config(GeofenceConfig, {"polygon_ne_m": [(0, 0), (0, 1), (0, 2)]}, prefix="geofence")
+
+
+def test_a_landing_area_must_lie_inside_the_geofence() -> None:
+    fence = {"polygon_ne_m": [(-25.0, -25.0), (-25.0, 25.0), (25.0, 25.0), (25.0, -25.0)]}
+    roi = [(-15.0, -15.0), (-15.0, 15.0), (15.0, 15.0), (15.0, -15.0)]
+    config = validate_config(
+        MissionConfig, {"geofence": fence, "perception": {"zones": {"landing_area_ne_m": roi}}}, prefix="mission"
+    )
+    assert config.perception.zones.landing_area_ne_m == roi
+    beyond = [*roi[:2], (30.0, 15.0), roi[3]]
+    with pytest.raises(ConfigError, match=r"landing_area_ne_m vertex \(30.0, 15.0\) lies outside geofence"):
+        validate_config(MissionConfig, {"geofence": fence, "perception": {"zones": {"landing_area_ne_m": beyond}}})

@@ -8,9 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
+from companion.config import ConfigError, validate_config
 from companion.perception.config import ZoneConfig
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
-from companion.perception.zones import Zone, ZoneFinder, circle_iou
+from companion.perception.zones import Zone, ZoneFinder, circle_iou, landing_area_mask
 
 pytestmark = pytest.mark.unit
 
@@ -141,3 +142,68 @@ def test_circle_iou_matrix_shape_and_degenerate_circles() -> None:
 
 def test_zone_area() -> None:
     assert Zone(0.0, 0.0, 2.0).area_m2 == pytest.approx(4 * math.pi)
+
+
+# -- the landing area ------------------------------------------------------------------------------------------
+L_SHAPE = [(-15.0, -5.0), (-15.0, 12.0), (-8.0, 12.0), (-8.0, 2.0), (5.0, 2.0), (5.0, -5.0)]  # concave
+
+
+def test_the_landing_area_mask_is_the_exact_inside_of_a_concave_polygon() -> None:
+    from matplotlib.path import Path as PolygonPath
+
+    mask = landing_area_mask(np.asarray(L_SHAPE), GRID)
+    n, e = np.meshgrid(GRID.north_centres_m, GRID.east_centres_m, indexing="ij")
+    reference = PolygonPath(L_SHAPE).contains_points(np.stack([n.ravel(), e.ravel()], axis=1)).reshape(n.shape)
+    assert mask.shape == (GRID.rows, GRID.cols)
+    assert np.array_equal(mask.astype(bool), reference)
+    assert mask.sum() == pytest.approx((17 * 7 + 13 * 7) / GRID.resolution_m**2, rel=0.01)  # area 210 m^2
+
+
+def test_zones_lie_inside_the_landing_area_and_its_edge_bounds_them_like_a_person() -> None:
+    everything_free = occupancy_with_free_discs([(0.0, 0.0, 100.0)])
+    config = ZoneConfig(n_proposals=10, vehicle_radius_m=0.5, margin_m=0.5, landing_area_ne_m=L_SHAPE)
+    zones = ZoneFinder(config).find(everything_free)
+    assert len(zones) >= 3
+    # The biggest zone sits in the L's outer corner, touching its two outer edges and the inner corner (-8, 2):
+    # 2 (r - 7)^2 = r^2, so r = 7 / (1 + 1/sqrt 2) = 4.10 m.
+    assert zones[0].radius_m == pytest.approx(7.0 / (1.0 + 1.0 / math.sqrt(2.0)), abs=GRID.resolution_m)
+    assert zones[0].north_m == pytest.approx(-10.9, abs=0.15)  # r - 15
+    assert zones[0].east_m == pytest.approx(-0.9, abs=0.15)  # r - 5
+    boundary = PolygonLine(L_SHAPE)
+    for zone in zones:
+        assert boundary.inside(zone.north_m, zone.east_m)
+        assert boundary.distance_m(zone.north_m, zone.east_m) >= zone.radius_m - GRID.resolution_m / 2 - 1e-9
+    # Without the area, the same map's biggest zone is bounded only by the grid.
+    assert ZoneFinder(ZoneConfig(n_proposals=1)).find(everything_free)[0].radius_m > 10.0
+
+
+class PolygonLine:
+    """Brute-force reference: point-in-polygon and distance to the polygon's edges."""
+
+    def __init__(self, vertices: list[tuple[float, float]]) -> None:
+        self.a = np.asarray(vertices, np.float64)
+        self.b = np.roll(self.a, -1, axis=0)
+
+    def distance_m(self, north_m: float, east_m: float) -> float:
+        p = np.array([north_m, east_m])
+        ab = self.b - self.a
+        t = np.clip(np.einsum("ij,ij->i", p - self.a, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+        return float(np.min(np.linalg.norm(self.a + t[:, None] * ab - p, axis=1)))
+
+    def inside(self, north_m: float, east_m: float) -> bool:
+        from matplotlib.path import Path as PolygonPath
+
+        return bool(PolygonPath(self.a).contains_point((north_m, east_m)))
+
+
+@pytest.mark.parametrize(
+    ("area", "message"),
+    [
+        ([(0.0, 0.0), (1.0, 1.0)], "at least 3 finite vertices"),
+        ([(0.0, 0.0), (0.0, 1.0), (1.0, 0.0)], "encloses 0.50 m^2, less than one zone of the minimum radius"),
+    ],
+)
+def test_a_bad_landing_area_is_named(area: list[tuple[float, float]], message: str) -> None:
+    with pytest.raises(ConfigError, match="landing_area_ne_m") as error:
+        validate_config(ZoneConfig, {"landing_area_ne_m": area}, prefix="perception.zones")
+    assert message in str(error.value)

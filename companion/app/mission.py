@@ -9,10 +9,10 @@ import enum
 from pathlib import Path
 from urllib.parse import urlparse
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from companion.config import StrictModel, load_yaml_config
-from companion.guidance.geofence import GeofenceConfig
+from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import GuidanceConfig
 from companion.perception.config import PerceptionConfig
 from companion.vehicle.link import FlightMode
@@ -167,6 +167,18 @@ class MissionConfig(StrictModel):
     perception: PerceptionConfig = Field(default_factory=PerceptionConfig)
     recorder: RecorderConfig = Field(default_factory=RecorderConfig)
     simulator: SimulatorConfig = Field(default_factory=SimulatorConfig)
+
+    @model_validator(mode="after")
+    def _landing_area_in_fence(self) -> MissionConfig:
+        area = self.perception.zones.landing_area_ne_m
+        fence = Geofence(self.geofence)
+        for north_m, east_m in area or []:
+            if not fence.contains_ne(north_m, east_m):
+                raise ValueError(
+                    f"perception.zones.landing_area_ne_m vertex ({north_m}, {east_m}) lies outside "
+                    "geofence.polygon_ne_m: the companion could not fly to a zone there"
+                )
+        return self
 
 
 def load_mission_config(path: str | Path) -> MissionConfig:

@@ -6,8 +6,10 @@ Symbols in brackets are the paper's (safe-landing-paper.tex, section "SLZ algori
 from __future__ import annotations
 
 import enum
+import math
 from pathlib import Path
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from companion.config import StrictModel, load_yaml_config
@@ -101,6 +103,26 @@ class ZoneConfig(StrictModel):
         default=0.5, gt=0.0, le=10.0, description="Vehicle footprint radius including propellers."
     )
     margin_m: float = Field(default=0.5, ge=0.0, le=20.0, description="Extra clearance around the footprint.")
+    landing_area_ne_m: list[tuple[float, float]] | None = Field(
+        default=None,
+        description="Vertices (north_m, east_m, world NED) of the only area zones may lie in, wholly; its edge "
+        "bounds a zone as a person would. None: anywhere the camera sees (the geofence still applies).",
+    )
+
+    @model_validator(mode="after")
+    def _area(self) -> ZoneConfig:
+        if self.landing_area_ne_m is not None:
+            polygon = np.asarray(self.landing_area_ne_m, np.float64)
+            if len(polygon) < 3 or not np.isfinite(polygon).all():
+                raise ValueError("landing_area_ne_m needs at least 3 finite vertices (north_m, east_m)")
+            x, y = polygon[:, 0], polygon[:, 1]
+            area_m2 = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+            if area_m2 < math.pi * self.min_radius_m**2:
+                raise ValueError(
+                    f"landing_area_ne_m encloses {area_m2:.2f} m^2, less than one zone of the minimum radius "
+                    f"({self.min_radius_m} m: vehicle_radius_m + margin_m)"
+                )
+        return self
 
     @property
     def min_radius_m(self) -> float:

@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.perception.config import ZoneConfig
-from companion.perception.projection import HeadPlaneOccupancy
+from companion.perception.projection import GridSpec, HeadPlaneOccupancy
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,9 @@ class ZoneFinder:
 
     Grid cells are point samples of the occupancy. A zone's radius is the distance from its centre to the
     nearest non-free sample (or to a zone already drawn) less half a cell, the midpoint between the last free
-    and the first non-free sample. The grid's outer ring counts as not free: nothing is known beyond it.
+    and the first non-free sample. The grid's outer ring counts as not free: nothing is known beyond it. With a
+    landing area (``ZoneConfig.landing_area_ne_m``), samples outside it count as not free too, so every zone lies
+    inside the area (to within half a cell) and its edge bounds a zone's radius as a person would.
 
     The centre is refined below the cell size: a parabola through the distance map at the maximum and its
     neighbours gives a sub-cell offset, and the radius is computed exactly at both the cell and the refined
@@ -91,11 +93,14 @@ class ZoneFinder:
 
     def __init__(self, config: ZoneConfig) -> None:
         self.config = config
+        self._area_ne_m = None if config.landing_area_ne_m is None else np.asarray(config.landing_area_ne_m, np.float64)
 
     def find(self, occupancy: HeadPlaneOccupancy) -> list[Zone]:
         """Zones of one head-plane occupancy map, largest first."""
         grid = occupancy.grid
         free = occupancy.free.astype(np.uint8)
+        if self._area_ne_m is not None:
+            free &= landing_area_mask(self._area_ne_m, grid)
         free[[0, -1], :] = 0
         free[:, [0, -1]] = 0
         dist = np.asarray(cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_5), dtype=np.float32)
@@ -160,3 +165,30 @@ class ZoneFinder:
         refined = (row + d_row, col + d_col)
         at_refined = clearance(*refined) if (d_row or d_col) else -math.inf
         return (refined, at_refined) if at_refined > at_cell else ((float(row), float(col)), at_cell)
+
+
+def landing_area_mask(polygon_ne_m: npt.NDArray[np.float64], grid: GridSpec) -> npt.NDArray[np.uint8]:
+    """1 where a cell's centre lies inside the polygon, else 0 (exact crossing-number test on the centres).
+
+    Parameters
+    ----------
+    polygon_ne_m : ndarray, shape (K, 2)
+        Vertices (north_m, east_m), world NED, in order (either direction); convex or not.
+    grid : GridSpec
+        The head-plane grid.
+
+    Returns
+    -------
+    ndarray, shape (rows, cols), uint8
+    """
+    north = grid.north_centres_m[:, None]  # (rows, 1)
+    n0, e0 = polygon_ne_m[:, 0], polygon_ne_m[:, 1]  # (K,)
+    n1, e1 = np.roll(n0, -1), np.roll(e0, -1)
+    # Where each edge crosses the east-west line through each row of centres (half-open: a vertex counts once, a
+    # horizontal edge never).
+    crosses = (n0 <= north) != (n1 <= north)  # (rows, K)
+    t = np.divide(north - n0, n1 - n0, out=np.zeros(crosses.shape), where=crosses)
+    east_cross = np.where(crosses, e0 + t * (e1 - e0), -np.inf)  # (rows, K)
+    # Inside: an odd number of crossings east of the centre.
+    count = (east_cross[:, None, :] > grid.east_centres_m[None, :, None]).sum(axis=2)  # (rows, cols)
+    return np.asarray(count % 2, dtype=np.uint8)
