@@ -407,3 +407,21 @@ def test_slz_campaign_check_against_exits_1_with_a_readable_diff(tmp_path: Path)
     assert "# Regression gate: FAILED" in done.stdout
     assert "| nearest | success | 12 | 100.0 % | 33.3 % | 8 | 0 |" in done.stdout
     assert json.loads((out / "gate.json").read_text())["failed"] is True
+
+
+def test_the_roi_table_flies_the_same_scenes_with_every_zone_in_the_roi() -> None:
+    shipped = load_campaign_spec(REPO_ROOT / "mission_configs" / "campaigns" / "paper_table1.yaml")
+    roi = load_campaign_spec(REPO_ROOT / "mission_configs" / "campaigns" / "paper_table1_roi.yaml")
+    pairs = list(zip(shipped.missions(), roi.missions(), strict=True))
+    assert all(a.mission_id == b.mission_id and a.seed == b.seed for a, b in pairs)  # paired mission by mission
+    assert all(a.overrides(shipped)[0] == b.overrides(roi)[0] for a, b in pairs)  # the same SITL: scenes, starts
+    for plan in (p for _, p in pairs if p.run == 0):
+        half_m = plan.scenario().roi_side_m / 2
+        mission = plan.overrides(roi)[1]
+        assert mission["perception"]["zones"]["landing_area_ne_m"] == [
+            [-half_m, -half_m],
+            [-half_m, half_m],
+            [half_m, half_m],
+            [half_m, -half_m],
+        ]
+        assert plan.vehicle_radius_m(roi) == pytest.approx(0.5)  # the whole companion config validates

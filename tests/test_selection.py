@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from scipy import stats
 
@@ -84,6 +85,27 @@ def test_random_points_cover_the_square_uniformly() -> None:
     uniform = stats.uniform(loc=-15.0, scale=30.0)
     for axis in (0, 1):
         assert stats.kstest([p[axis] for p in points], uniform.cdf).pvalue > 0.001
+
+
+def test_with_a_landing_area_random_points_fall_uniformly_inside_it_wherever_the_vehicle_is() -> None:
+    # An L-shaped area (concave), the vehicle far outside it: every point inside; both arms hit in proportion.
+    area = [(0.0, 0.0), (0.0, 20.0), (5.0, 20.0), (5.0, 5.0), (20.0, 5.0), (20.0, 0.0)]  # 100 + 75 m^2
+    context = SelectionContext(0.0, 100.0, -100.0)
+    points = np.array(
+        [
+            (t.north_m, t.east_m)
+            for seed in range(2000)
+            if (t := RandomPolicy(seed=seed, half_extent_m=15.0, landing_area_ne_m=area).select([], context))
+        ]
+    )
+    assert len(points) == 2000
+    in_east_arm = (points[:, 0] <= 5.0) & (points[:, 1] >= 0.0) & (points[:, 1] <= 20.0)
+    in_north_arm = (points[:, 0] > 5.0) & (points[:, 0] <= 20.0) & (points[:, 1] >= 0.0) & (points[:, 1] <= 5.0)
+    assert (in_east_arm | in_north_arm).all()
+    assert stats.binomtest(int(in_east_arm.sum()), 2000, 100.0 / 175.0).pvalue > 0.001
+    assert make_policy(SelectionConfig(policy=SelectionPolicyName.RANDOM, seed=3), area).select([], context) == (
+        RandomPolicy(seed=3, half_extent_m=15.0, landing_area_ne_m=area).select([], context)
+    )
 
 
 @pytest.mark.parametrize("name", list(SelectionPolicyName))

@@ -110,7 +110,7 @@ class SlzPipeline:
             projector=HeadPlaneProjector(camera, T_body_camera, config.projection),
             zone_finder=ZoneFinder(config.zones),
             tracker=ZoneTracker(config.tracking),
-            policy=make_policy(config.selection),
+            policy=make_policy(config.selection, config.zones.landing_area_ne_m),
         )
 
     def reset(self) -> None:

@@ -12,9 +12,11 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 from companion.perception.config import SelectionConfig, SelectionPolicyName
 from companion.perception.tracking import TrackedZone
+from companion.perception.zones import inside_polygon
 
 
 @dataclass(frozen=True)
@@ -122,7 +124,8 @@ class NearestPolicy:
 
 
 class RandomPolicy:
-    """Blind baseline (paper: "random landing"): a seeded uniform point of the search square.
+    """Blind baseline (paper: "random landing"): a seeded uniform point of the search square, or of the landing area
+    when the mission has one (``perception.zones.landing_area_ne_m``).
 
     It ignores perception entirely. The point is drawn once, at the first call after construction or
     :meth:`reset`, and kept, like a blind emergency landing that commits to a spot.
@@ -130,19 +133,34 @@ class RandomPolicy:
 
     name = "random"
 
-    def __init__(self, seed: int, half_extent_m: float) -> None:
+    def __init__(
+        self, seed: int, half_extent_m: float, landing_area_ne_m: Sequence[tuple[float, float]] | None = None
+    ) -> None:
         self._seed = seed
         self._half_extent_m = half_extent_m
+        self._area = None if landing_area_ne_m is None else np.asarray(landing_area_ne_m, np.float64)
         self._rng = np.random.default_rng(seed)
         self._chosen: Target | None = None
 
     def select(self, tracks: Sequence[TrackedZone], context: SelectionContext) -> Target | None:
         """The committed random point (radius 0, no track)."""
         if self._chosen is None:
-            centre = context.area_centre_ne_m or (context.vehicle_north_m, context.vehicle_east_m)
-            dn, de = self._rng.uniform(-self._half_extent_m, self._half_extent_m, size=2)
-            self._chosen = Target(centre[0] + float(dn), centre[1] + float(de), 0.0, None)
+            if self._area is not None:
+                north_m, east_m = self._in_area(self._area)
+            else:
+                centre = context.area_centre_ne_m or (context.vehicle_north_m, context.vehicle_east_m)
+                dn, de = self._rng.uniform(-self._half_extent_m, self._half_extent_m, size=2)
+                north_m, east_m = centre[0] + float(dn), centre[1] + float(de)
+            self._chosen = Target(north_m, east_m, 0.0, None)
         return self._chosen
+
+    def _in_area(self, polygon: npt.NDArray[np.float64]) -> tuple[float, float]:
+        """A uniform point of the polygon: uniform points of its bounding box until one falls inside."""
+        low, high = polygon.min(axis=0), polygon.max(axis=0)
+        while True:  # the area encloses at least one minimum zone (ZoneConfig), so this ends
+            north_m, east_m = (float(v) for v in self._rng.uniform(low, high))
+            if inside_polygon(polygon, north_m, east_m).item():
+                return north_m, east_m
 
     def reset(self) -> None:
         """Forget the point and restart the random stream from the seed."""
@@ -150,12 +168,14 @@ class RandomPolicy:
         self._chosen = None
 
 
-def make_policy(config: SelectionConfig) -> SelectionPolicy:
-    """The policy named in the config."""
+def make_policy(
+    config: SelectionConfig, landing_area_ne_m: Sequence[tuple[float, float]] | None = None
+) -> SelectionPolicy:
+    """The policy named in the config (the random one draws inside ``landing_area_ne_m`` when there is one)."""
     if config.policy is SelectionPolicyName.BIGGEST:
         return BiggestPolicy()
     if config.policy is SelectionPolicyName.OLDEST:
         return OldestPolicy()
     if config.policy is SelectionPolicyName.NEAREST:
         return NearestPolicy()
-    return RandomPolicy(config.seed, config.random_half_extent_m)
+    return RandomPolicy(config.seed, config.random_half_extent_m, landing_area_ne_m)
