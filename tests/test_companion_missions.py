@@ -21,7 +21,7 @@ import pytest
 
 from companion.app.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
-from sitl.mission import MissionResult, MissionSpec, fly, read_truth
+from sitl.mission import MissionResult, MissionSpec, fly, read_truth, touchdown
 
 pytestmark = pytest.mark.sitl
 
@@ -128,15 +128,42 @@ def test_slz_replay_reproduces_every_logged_decision(demo: Demo) -> None:
     assert done.stdout.strip().endswith("identical")
 
 
-def test_a_mission_with_walking_people_lands_safely(tmp_path: Path) -> None:
+def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_path: Path) -> None:
     walkers = {"scenario": {"moving_fraction": 0.2}}  # the paper's hardest condition: 20 % of people walk
-    r = _fly(tmp_path, "walking", WALKING_SEED, instance=26, sitl_overrides=walkers)
+    roi_half_m = 15.0  # the scenario's 30 m ROI, where the people stand
+    area = [[-roi_half_m, -roi_half_m], [-roi_half_m, roi_half_m], [roi_half_m, roi_half_m], [roi_half_m, -roi_half_m]]
+    held = {"perception": {"zones": {"landing_area_ne_m": area}}}
+    r = _fly(tmp_path, "walking", WALKING_SEED, instance=26, sitl_overrides=walkers, mission_overrides=held)
     assert r.companion_exit_code == 0, Path(r.run_dir, "companion.log").read_text()[-3000:]
     assert r.phase == "done"
     assert r.landed
     assert r.nearest_person_m >= CLEARANCE_M
-    header, _ = read_truth(Path(r.run_dir) / "truth.jsonl")
+    header, truth = read_truth(Path(r.run_dir) / "truth.jsonl")
     assert sum(header["moving"]) >= 10  # the walkers were there
+    # Every zone the companion acted on lay wholly inside the area (to half a 0.1 m cell), and so did the touchdown
+    # (0.5 m for the position controller).
+    targets = [
+        d["decision"]["target"]
+        for d in _records(r.run_dir)
+        if d["kind"] == "decision" and d["decision"]["target"] is not None
+    ]
+    assert targets
+    for t in targets:
+        assert max(abs(t["north_m"]), abs(t["east_m"])) + t["radius_m"] <= roi_half_m + 0.05, t
+    down = touchdown(truth)
+    assert down is not None
+    assert max(abs(v) for v in down["position_ned_m"][:2]) <= roi_half_m + 0.5
+    # `slz report` draws the area on the top view.
+    reported = subprocess.run(
+        [sys.executable, "-m", "companion.cli", "report", str(Path(r.run_dir) / "flight")],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert reported.returncode == 0, reported.stderr[-3000:]
+    assert (Path(r.run_dir) / "flight" / "report" / "top_view.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path, demo: Demo) -> None:

@@ -3,9 +3,10 @@
 Works on any log ``slz fly`` writes: a real flight, a field dry run or a SITL mission. Only the log is used (no
 ground truth, no re-run of the model), so what is drawn is what the companion knew and decided at the time:
 
-- ``top_view.png``: north-up, the vehicle's path (from the decision states), the geofence, the targets acted on
-  (approached, descended over, landed on), the zones tracked when the final descent began (or at the land command,
-  or the last frame), the setpoints sent (or, in a dry run, the ones it would have sent) and the land point;
+- ``top_view.png``: north-up, the vehicle's path (from the decision states), the geofence and the landing area (if
+  one is set), the targets acted on (approached, descended over, landed on), the zones tracked when the final
+  descent began (or at the land command, or the last frame), the setpoints sent (or, in a dry run, the ones it would
+  have sent) and the land point;
 - ``timeline.png``: altitude over time with the phases, the failsafes, and the tracked zones and the target radius;
 - ``camera.mp4`` and ``camera_sheet.jpg``: the saved camera frames with the tracked zones (cyan, with ids) and the
   target (yellow) projected back into the view, captioned with the time, the altitude and the decision in force;
@@ -156,6 +157,11 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
     fig, ax = plt.subplots(figsize=(9.5, 7.0), dpi=100)
     fence = np.asarray(config.geofence.polygon_ne_m, dtype=float)
     ax.add_patch(Polygon(fence[:, ::-1], closed=True, fill=False, edgecolor="red", lw=1.2, label="geofence"))
+    if config.perception.zones.landing_area_ne_m is not None:
+        area = np.asarray(config.perception.zones.landing_area_ne_m, dtype=float)
+        ax.add_patch(
+            Polygon(area[:, ::-1], closed=True, fill=False, edgecolor="green", lw=1.2, ls="--", label="landing area")
+        )
     if decisions:
         ne = np.array([[r["state"]["north_m"], r["state"]["east_m"]] for r in decisions if r["state"]])
         if len(ne):

@@ -23,6 +23,7 @@ from sitl.campaign.metrics import park_layout, stale, with_obstacles
 from sitl.campaign.provenance import Segment, SegmentLog, segments
 from sitl.campaign.spec import CampaignSpec
 from sitl.campaign.stats import Estimate, bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
+from sitl.world.park import ParkObject
 
 # The paper's Table I (AirSim + Unreal, 100 runs per row): success %, warning 1 m %, warning 1.5 m %, SLZ area m^2,
 # average nearest person m, IoU. None where the paper gives '*'. Keyed by (condition, strategy) as named in
@@ -75,14 +76,14 @@ def completed(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[dict[st
     touchdown, from the mission's seed (:func:`sitl.campaign.metrics.with_obstacles`)."""
     plans = {plan.mission_id: plan for plan in spec.missions()}
     radii: dict[str, float] = {}
-    layouts: dict[tuple[int, float], Any] = {}
+    layouts: dict[tuple[int, float], list[ParkObject]] = {}
     out = []
     for r in results:
         plan = plans.get(r["mission_id"])
         if "error" in r or "obstacle_distance_m" in r or plan is None:
             out.append(r)
             continue
-        objects = []
+        objects: list[ParkObject] = []
         if r.get("touchdown_north_m") is not None:
             key = (plan.seed, plan.scenario().roi_side_m)
             if key not in layouts:
