@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: setup demo test test-slow lint typecheck pytest bench paper-table training models clean
+.PHONY: setup demo test test-slow lint typecheck pytest bench paper-table paper-table-roi training models clean
 
 setup: $(STAMP)
 
@@ -49,6 +49,10 @@ bench: $(STAMP)
 # The paper's Table I at 100 runs per cell (900 missions; resumable: run it again to continue).
 paper-table: $(STAMP)
 	$(BIN)/slz campaign --spec mission_configs/campaigns/paper_table1.yaml --out runs/campaigns/paper_table1
+
+# The same table with every zone held to the 30 m region of interest, as the paper's missions are (same scenes).
+paper-table-roi: $(STAMP)
+	$(BIN)/slz campaign --spec mission_configs/campaigns/paper_table1_roi.yaml --out runs/campaigns/paper_table1_roi
 
 # Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
 # quantization, evaluation; about an hour on 2 cores). The drone needs neither.
