@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -87,13 +88,34 @@ class _Bgr:
 
 
 _PATCHED: list[bool] = []
+DRAW_ORDER: weakref.WeakKeyDictionary[Any, dict[Any, int]] = weakref.WeakKeyDictionary()
+"""Per pyrender scene: its mesh nodes in the order they were added (see :func:`_patch_pyrender`)."""
 
 
 def _patch_pyrender(pyrender: Any, GL: Any) -> None:
-    """Once per process: MSAA off, and a lean read-back when depth is not wanted."""
+    """Once per process: MSAA off, a lean read-back when depth is not wanted, and a draw order that does not depend
+    on memory addresses."""
     if _PATCHED:
         return
     _PATCHED.append(True)
+
+    # pyrender draws a scene's meshes far to near by their nodes' positions and breaks ties in the order of
+    # ``scene.mesh_nodes``, a set whose order follows the nodes' memory addresses. Our meshes are all at the origin
+    # (their vertices are in world coordinates), so every one ties: their order, and with it the winner of a pixel
+    # where two surfaces meet at one depth, changed from process to process. Measured: 1 or 2 pixels in some frames,
+    # enough for two flights of one seed to land at different points. Ties now go by the order the nodes were
+    # added (``DRAW_ORDER``).
+    def sorted_mesh_nodes(self: Any, scene: Any) -> list[Any]:
+        order = DRAW_ORDER.get(scene, {})
+        camera_at = scene.get_pose(scene.main_camera_node)[:3, 3]
+
+        def key(node: Any) -> tuple[float, int]:
+            return -float(np.linalg.norm(scene.get_pose(node)[:3, 3] - camera_at)), order.get(node, len(order))
+
+        nodes = sorted(scene.mesh_nodes, key=key)
+        return [n for n in nodes if not n.mesh.is_transparent] + [n for n in nodes if n.mesh.is_transparent]
+
+    pyrender.renderer.Renderer._sorted_mesh_nodes = sorted_mesh_nodes
 
     # pyrender 0.1.45 always allocates a 4x multisampled framebuffer; with 0 samples the same code path runs
     # without MSAA, which costs a third of the frame time on a software rasterizer.
@@ -180,6 +202,13 @@ class WorldRenderer:
         )
         self._camera_node = self.scene.add(cam, pose=np.eye(4))
 
+    def _add(self, mesh: Any) -> Any:
+        """Add a mesh at the origin; it is drawn after the meshes added before it (ties of pyrender's order)."""
+        node = self.scene.add(mesh)
+        order = DRAW_ORDER.setdefault(self.scene, {})
+        order[node] = len(order)
+        return node
+
     def _build_static(self) -> None:
         pr = self._pyrender
         e = self.park.extent_m
@@ -199,11 +228,11 @@ class WorldRenderer:
         primitive = pr.Primitive(
             positions=ground.vertices, indices=ground.faces, texcoord_0=uv, material=material, mode=4
         )
-        self._black[self.scene.add(pr.Mesh([primitive]))] = (0, 0, 0)
+        self._black[self._add(pr.Mesh([primitive]))] = (0, 0, 0)
         if self.park.objects:
             objects = trimesh.util.concatenate([object_mesh(o) for o in self.park.objects])
             bake_lighting(objects, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
-            self._black[self.scene.add(pr.Mesh.from_trimesh(objects, smooth=True))] = (0, 0, 0)
+            self._black[self._add(pr.Mesh.from_trimesh(objects, smooth=True))] = (0, 0, 0)
 
     def _person(self, index: int) -> trimesh.Trimesh:
         a = self.crowd.appearances[index]
@@ -229,9 +258,9 @@ class WorldRenderer:
                 m.apply_translation([east, north, 0.0])
                 parts.append(m)
                 shadows.append(self._shadow(i, float(north), float(east)))
-            node = self.scene.add(pr.Mesh.from_trimesh(trimesh.util.concatenate(parts), smooth=True))
+            node = self._add(pr.Mesh.from_trimesh(trimesh.util.concatenate(parts), smooth=True))
             self._people_nodes.append(node)
-            self._black[self.scene.add(pr.Mesh.from_trimesh(trimesh.util.concatenate(shadows), smooth=True))] = (
+            self._black[self._add(pr.Mesh.from_trimesh(trimesh.util.concatenate(shadows), smooth=True))] = (
                 0,
                 0,
                 0,
@@ -295,8 +324,8 @@ class WorldRenderer:
                 )
             ]
         )
-        self._mover_node = self.scene.add(body_mesh)
-        self._mover_shadow_node = self.scene.add(shadow_mesh_)
+        self._mover_node = self._add(body_mesh)
+        self._mover_shadow_node = self._add(shadow_mesh_)
         self._black[self._mover_shadow_node] = (0, 0, 0)
 
     def _rewrite_positions(self, primitive: Any, positions: F64Array) -> None:
