@@ -14,6 +14,7 @@ import numpy.typing as npt
 from pydantic import Field, model_validator
 
 from companion.config import StrictModel
+from companion.perception.geometry import polygon_signed_area_m2
 
 F64Array = npt.NDArray[np.float64]
 
@@ -35,14 +36,9 @@ class GeofenceConfig(StrictModel):
             raise ValueError(
                 f"max_altitude_m ({self.max_altitude_m}) must exceed min_altitude_m ({self.min_altitude_m})"
             )
-        if abs(_signed_area(np.asarray(self.polygon_ne_m, np.float64))) < 1.0:
+        if abs(polygon_signed_area_m2(self.polygon_ne_m)) < 1.0:
             raise ValueError("polygon_ne_m must enclose at least 1 m^2")
         return self
-
-
-def _signed_area(poly: F64Array) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 def _closest_on_segment(p: F64Array, a: F64Array, b: F64Array) -> F64Array:

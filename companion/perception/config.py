@@ -13,6 +13,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from companion.config import StrictModel, load_yaml_config
+from companion.perception.geometry import polygon_signed_area_m2
 
 
 class SelectionPolicyName(str, enum.Enum):
@@ -115,8 +116,7 @@ class ZoneConfig(StrictModel):
             polygon = np.asarray(self.landing_area_ne_m, np.float64)
             if len(polygon) < 3 or not np.isfinite(polygon).all():
                 raise ValueError("landing_area_ne_m needs at least 3 finite vertices (north_m, east_m)")
-            x, y = polygon[:, 0], polygon[:, 1]
-            area_m2 = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+            area_m2 = abs(polygon_signed_area_m2(polygon))
             if area_m2 < math.pi * self.min_radius_m**2:
                 raise ValueError(
                     f"landing_area_ne_m encloses {area_m2:.2f} m^2, less than one zone of the minimum radius "

@@ -1,4 +1,4 @@
-"""Rigid transforms, attitudes and the pinhole camera.
+"""Rigid transforms, attitudes, the pinhole camera, and polygons on the ground (north/east).
 
 Frames (all right-handed)
 -------------------------
@@ -201,3 +201,38 @@ def T_body_camera_from_mount(
     R_nadir = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     R = rot_x(-math.radians(roll_deg)) @ rot_y(math.radians(tilt_deg)) @ R_nadir @ rot_z(math.radians(yaw_deg))
     return make_transform(R, offset_frd_m)
+
+
+def polygon_signed_area_m2(polygon_ne_m: npt.ArrayLike) -> float:
+    """Shoelace area (m^2) of a polygon given as vertices (K, 2) north/east m; the sign gives the direction."""
+    poly = np.asarray(polygon_ne_m, np.float64)
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def inside_polygon(
+    polygon_ne_m: npt.NDArray[np.float64], north_m: npt.ArrayLike, east_m: npt.ArrayLike
+) -> npt.NDArray[np.bool_]:
+    """Whether points lie inside a polygon, by the number of its edges they cross going east (odd: inside).
+
+    Parameters
+    ----------
+    polygon_ne_m : ndarray, shape (K, 2)
+        Vertices (north_m, east_m), in order (either direction); convex or not.
+    north_m, east_m : array_like
+        The points' coordinates (m), broadcast against each other.
+
+    Returns
+    -------
+    ndarray of bool, the broadcast shape of ``north_m`` and ``east_m``
+    """
+    north = np.asarray(north_m, np.float64)[..., None]
+    east = np.asarray(east_m, np.float64)[..., None]
+    n0, e0 = polygon_ne_m[:, 0], polygon_ne_m[:, 1]  # (K,)
+    n1, e1 = np.roll(n0, -1), np.roll(e0, -1)
+    # Where each edge crosses the east-west line through each point (half-open: a vertex counts once, an east-west
+    # edge never).
+    crosses = (n0 <= north) != (n1 <= north)
+    t = np.divide(north - n0, n1 - n0, out=np.zeros(crosses.shape), where=crosses)
+    east_cross = np.where(crosses, e0 + t * (e1 - e0), -np.inf)
+    return np.asarray(np.count_nonzero(east_cross > east, axis=-1) % 2 == 1)

@@ -15,8 +15,8 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.perception.config import SelectionConfig, SelectionPolicyName
+from companion.perception.geometry import inside_polygon
 from companion.perception.tracking import TrackedZone
-from companion.perception.zones import inside_polygon
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.perception.config import ZoneConfig
+from companion.perception.geometry import inside_polygon
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
 
 
@@ -165,34 +166,6 @@ class ZoneFinder:
         refined = (row + d_row, col + d_col)
         at_refined = clearance(*refined) if (d_row or d_col) else -math.inf
         return (refined, at_refined) if at_refined > at_cell else ((float(row), float(col)), at_cell)
-
-
-def inside_polygon(
-    polygon_ne_m: npt.NDArray[np.float64], north_m: npt.ArrayLike, east_m: npt.ArrayLike
-) -> npt.NDArray[np.bool_]:
-    """Whether points lie inside a polygon, by the number of its edges they cross going east (odd: inside).
-
-    Parameters
-    ----------
-    polygon_ne_m : ndarray, shape (K, 2)
-        Vertices (north_m, east_m), in order (either direction); convex or not.
-    north_m, east_m : array_like
-        The points' coordinates (m), broadcast against each other.
-
-    Returns
-    -------
-    ndarray of bool, the broadcast shape of ``north_m`` and ``east_m``
-    """
-    north = np.asarray(north_m, np.float64)[..., None]
-    east = np.asarray(east_m, np.float64)[..., None]
-    n0, e0 = polygon_ne_m[:, 0], polygon_ne_m[:, 1]  # (K,)
-    n1, e1 = np.roll(n0, -1), np.roll(e0, -1)
-    # Where each edge crosses the east-west line through each point (half-open: a vertex counts once, an east-west
-    # edge never).
-    crosses = (n0 <= north) != (n1 <= north)
-    t = np.divide(north - n0, n1 - n0, out=np.zeros(crosses.shape), where=crosses)
-    east_cross = np.where(crosses, e0 + t * (e1 - e0), -np.inf)
-    return np.asarray(np.count_nonzero(east_cross > east, axis=-1) % 2 == 1)
 
 
 def landing_area_mask(polygon_ne_m: npt.NDArray[np.float64], grid: GridSpec) -> npt.NDArray[np.uint8]:
