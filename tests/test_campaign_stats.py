@@ -22,7 +22,7 @@ from sitl.campaign.metrics import (
     stale,
     with_obstacles,
 )
-from sitl.campaign.report import completed
+from sitl.campaign.report import build_report, completed
 from sitl.campaign.runner import CampaignError, missions_to_fly, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
@@ -348,6 +348,20 @@ def _results(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[dict[str, 
             ).to_json()
         )  # fmt: skip
     return rows
+
+
+def test_a_partial_campaigns_report_says_how_many_missions_are_not_flown_yet(tmp_path: Path) -> None:
+    spec = load_campaign_spec(_gate_spec(tmp_path, runs=4))
+    rows = _results(spec, {})
+    cut_off = {k: rows[5][k] for k in ("mission_id", "condition", "strategy", "run", "seed")} | {"error": "no SITL"}
+    summary = build_report(spec, [*rows[:5], cut_off], tmp_path / "partial")
+    assert (summary["missions"], summary["errors"]) == (6, 1)
+    text = (tmp_path / "partial" / "report.md").read_text()
+    assert "5 missions flown of 8 planned (4 per cell, master seed 3). 3 not flown yet (1 of them cut off" in text
+    build_report(spec, rows, tmp_path / "whole")
+    text = (tmp_path / "whole" / "report.md").read_text()
+    assert "8 missions flown of 8 planned (4 per cell, master seed 3). Intervals are 95 %" in text
+    assert "not flown yet" not in text
 
 
 def test_the_gate_fails_a_strategy_significantly_worse_on_the_same_scenes(tmp_path: Path) -> None:

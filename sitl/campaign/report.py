@@ -170,12 +170,25 @@ def _est(d: dict[str, Any]) -> Estimate:
     return Estimate(d["value"], d["low"], d["high"], d["n"])
 
 
+def _flown_line(spec: CampaignSpec, summary: dict[str, Any]) -> str:
+    """How far the campaign is: missions flown, those not flown yet (never started, or cut off by an infrastructure
+    error: both are flown when the campaign resumes)."""
+    planned = len(spec.missions())
+    flown = summary["missions"] - summary["errors"]
+    line = f"{flown} missions flown of {planned} planned ({spec.runs} per cell, master seed {spec.master_seed}). "
+    if flown < planned:
+        line += f"{planned - flown} not flown yet"
+        if summary["errors"]:
+            line += f" ({summary['errors']} of them cut off by an infrastructure error, not a landing)"
+        line += ": the same command resumes the campaign. "
+    return line
+
+
 def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> str:
     lines = [
         f"# Campaign `{spec.name}`",
         "",
-        f"{summary['missions']} missions of {len(spec.missions())} planned ({spec.runs} per cell, master seed "
-        f"{spec.master_seed}); {summary['errors']} that could not be flown (infrastructure) left out. "
+        _flown_line(spec, summary)
         + (
             f"{summary['stale']} missions without a touchdown carry metrics of an earlier definition (their nearest "
             "person and path length ran to the end of the ground truth) and are flown again when the campaign "
