@@ -23,7 +23,7 @@ from sitl.campaign.metrics import (
     with_obstacles,
 )
 from sitl.campaign.report import build_report, completed
-from sitl.campaign.runner import CampaignError, missions_to_fly, worker_instances
+from sitl.campaign.runner import CampaignError, error_result, missions_to_fly, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
 from sitl.config import SitlConfig
@@ -353,8 +353,7 @@ def _results(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[dict[str, 
 def test_a_partial_campaigns_report_says_how_many_missions_are_not_flown_yet(tmp_path: Path) -> None:
     spec = load_campaign_spec(_gate_spec(tmp_path, runs=4))
     rows = _results(spec, {})
-    cut_off = {k: rows[5][k] for k in ("mission_id", "condition", "strategy", "run", "seed")} | {"error": "no SITL"}
-    summary = build_report(spec, [*rows[:5], cut_off], tmp_path / "partial")
+    summary = build_report(spec, [*rows[:5], error_result(spec.missions()[5], "no SITL")], tmp_path / "partial")
     assert (summary["missions"], summary["errors"]) == (6, 1)
     text = (tmp_path / "partial" / "report.md").read_text()
     assert "5 missions flown of 8 planned (4 per cell, master seed 3). 3 not flown yet (1 of them cut off" in text
