@@ -22,7 +22,7 @@ from sitl.campaign.metrics import (
     stale,
     with_obstacles,
 )
-from sitl.campaign.report import build_report, completed
+from sitl.campaign.report import build_report, completed, people_density
 from sitl.campaign.runner import CampaignError, error_result, missions_to_fly, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
@@ -361,6 +361,20 @@ def test_a_partial_campaigns_report_says_how_many_missions_are_not_flown_yet(tmp
     text = (tmp_path / "whole" / "report.md").read_text()
     assert "8 missions flown of 8 planned (4 per cell, master seed 3). Intervals are 95 %" in text
     assert "not flown yet" not in text
+
+
+def test_the_people_map_averages_the_missions_that_carry_one() -> None:
+    # Two missions with a map (2 people in one cell, then 1 there and 1 elsewhere) and one restored from results.csv
+    # without: the mean is over the two, not diluted by the third as if its park were empty.
+    rows: list[dict[str, Any]] = [
+        {"people_cells": [[28, 20, 2]]},
+        {"people_cells": [[28, 20, 1], [0, 39, 1]]},
+        {"mission_id": "restored/without/map"},
+    ]
+    density = people_density(rows)
+    assert density.shape == (40, 40)
+    assert (density[28, 20], density[0, 39], density.sum()) == (1.5, 0.5, 2.0)
+    assert people_density([{"mission_id": "restored/without/map"}]).sum() == 0.0
 
 
 def test_the_gate_fails_a_strategy_significantly_worse_on_the_same_scenes(tmp_path: Path) -> None:

@@ -299,6 +299,18 @@ def _fmt(value: float | None, digits: int = 2) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
+def people_density(rows: list[dict[str, Any]]) -> np.ndarray:
+    """People per mission on the report's 1 m grid, shape (40, 40) (row: north from -20 m, col: east from -20 m): the
+    mean of the ``people_cells`` maps of the results that carry one (a result restored from ``results.csv``, which
+    does not hold them, is left out rather than counted as an empty park); zeros when none does."""
+    mapped = [r["people_cells"] for r in rows if "people_cells" in r]
+    density = np.zeros((40, 40))
+    for cells in mapped:
+        for row, col, count in cells:
+            density[row, col] += count
+    return density / max(len(mapped), 1)
+
+
 def _plots(spec: CampaignSpec, good: list[dict[str, Any]], cells: dict[str, Any], out_dir: Path) -> list[str]:
     import matplotlib
 
@@ -348,12 +360,8 @@ def _plots(spec: CampaignSpec, good: list[dict[str, Any]], cells: dict[str, Any]
 
     for condition in dict.fromkeys(c for c, _ in spec.cell_names()):
         rows = [r for r in good if r["condition"] == condition]
-        density = np.zeros((40, 40))
-        for r in rows:
-            for row, col, count in r.get("people_cells", []):
-                density[row, col] += count
         fig, ax = plt.subplots(figsize=(5.5, 5))
-        ax.imshow(density / max(len(rows), 1), origin="lower", extent=(-20, 20, -20, 20), cmap="Greys")
+        ax.imshow(people_density(rows), origin="lower", extent=(-20, 20, -20, 20), cmap="Greys")
         for k, strategy in enumerate(dict.fromkeys(s for c, s in spec.cell_names() if c == condition)):
             points = [
                 (r["touchdown_east_m"], r["touchdown_north_m"])
