@@ -281,7 +281,7 @@ def _campaign_replay(args: argparse.Namespace) -> int:
     )
     sys.stdout.write(json.dumps(again.to_json(), indent=2) + "\n")
     sys.stdout.write(f"wrote {out / 'camera.mp4'} (replay {'identical' if report.identical else 'DIFFERENT'})\n")
-    if logged is not None and stale(logged):
+    if logged is not None and stale(logged, plan.strategy.policy.value):
         sys.stdout.write(
             "the campaign's result is stale (an earlier metrics definition): the campaign flies it again\n"
         )

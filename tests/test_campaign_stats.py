@@ -6,6 +6,7 @@ import json
 import math
 import subprocess
 import sys
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -22,10 +23,10 @@ from sitl.campaign.metrics import (
     stale,
     with_obstacles,
 )
-from sitl.campaign.report import build_report, completed, people_density
+from sitl.campaign.report import PAPER_TABLE1, build_report, completed, paper_comparison, people_density
 from sitl.campaign.runner import CampaignError, error_result, missions_to_fly, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
-from sitl.campaign.stats import bootstrap_mean, mcnemar_exact, paired_mean_difference, wilson
+from sitl.campaign.stats import bootstrap_mean, holm, mcnemar_exact, paired_mean_difference, rate_difference, wilson
 from sitl.config import SitlConfig
 from sitl.world.park import ObjectKind
 
@@ -62,6 +63,44 @@ def test_mcnemar_counts_discordant_pairs() -> None:
     assert test.p_value == pytest.approx(2 * 0.5**8)  # exact two-sided binomial
     assert mcnemar_exact([True, False], [True, False]).p_value == 1.0
     assert paired_mean_difference([3.0, 4.0], [1.0, 1.0]).value == pytest.approx(2.5)
+
+
+def test_two_independent_rates_give_newcombes_interval_and_fishers_p() -> None:
+    # Newcombe (1998), Table II, example (a): 56/70 against 48/80, method 10: 0.2000 [0.0524, 0.3339].
+    r = rate_difference(56, 70, 48, 80)
+    assert r.difference.value == pytest.approx(0.2)
+    assert r.difference.low == pytest.approx(0.0524, abs=5e-5)
+    assert r.difference.high == pytest.approx(0.3339, abs=5e-5)
+    # Fisher's tea-tasting table, 3 of 4 against 1 of 4: two-sided p = 34/70.
+    assert rate_difference(3, 4, 1, 4).p_value == pytest.approx(34 / 70)
+    assert rate_difference(5, 10, 5, 10).p_value == pytest.approx(1.0)
+    with pytest.raises(ValueError, match=r"\[0, n\]"):
+        rate_difference(11, 10, 5, 10)
+
+
+def test_holm_adjusts_step_down_and_keeps_the_order() -> None:
+    # Sorted 0.01, 0.03, 0.04 -> 3 x 0.01, 2 x 0.03, max(0.06, 1 x 0.04): monotone.
+    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    assert holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])
+    assert holm([]) == []
+
+
+def test_our_success_against_the_papers_counts_row_by_row() -> None:
+    def cell(successes: int, n: int) -> dict[str, Any]:
+        return {"success": asdict(wilson(successes, n))}
+
+    cells = {"static/biggest": cell(63, 100), "weather/oldest": cell(86, 100), "static/nearest": cell(5, 10)}
+    rows = paper_comparison(cells)
+    assert [r["cell"] for r in rows] == ["static/biggest", "weather/oldest"]  # the paper has no 'nearest' row
+    biggest, oldest = rows
+    paper_biggest = round(PAPER_TABLE1[("static", "biggest")][0])
+    assert (biggest["ours_successes"], biggest["paper_successes"]) == (63, paper_biggest)
+    assert biggest["difference"]["value"] == pytest.approx(0.63 - paper_biggest / 100)
+    assert biggest["difference"]["high"] < 0  # 63 of 100 against 99 of 100: lower, whatever the correction
+    assert biggest["p_holm"] == pytest.approx(min(1.0, 2 * biggest["p"]))  # the smaller of two p-values
+    assert biggest["p_holm"] < 0.05
+    assert oldest["difference"]["value"] == pytest.approx(0.0)  # 86 of 100 on both sides
+    assert oldest["p"] == pytest.approx(1.0)
 
 
 def test_every_strategy_of_a_condition_flies_the_same_scenes_from_the_same_start() -> None:
@@ -315,6 +354,24 @@ def test_a_result_of_an_earlier_metrics_definition_is_flown_again_on_resume() ->
         )
         == []
     )
+
+
+def test_random_baseline_results_drawn_around_the_vehicle_are_flown_again() -> None:
+    spec = CampaignSpec.model_validate(
+        {
+            "name": "x",
+            "master_seed": 1,
+            "runs": 1,
+            "conditions": [{"name": "a"}],
+            "strategies": [{"name": "blind", "policy": "random"}, {"name": "s", "policy": "oldest"}],
+        }
+    )
+    blind, oldest = spec.missions()
+    v3 = {"landed": True, "metrics_version": 3}
+    assert stale(v3, "random")  # version 4 draws the point around the search area's centre
+    assert not stale(v3, "oldest")
+    assert not stale(v3 | {"metrics_version": 4}, "random")
+    assert missions_to_fly(spec.missions(), {blind.mission_id: v3, oldest.mission_id: v3}) == [blind]
 
 
 # -- the regression gate (sitl/campaign/gate.py) ------------------------------------------------------------------

@@ -16,6 +16,7 @@ from companion.perception.geometry import (
     T_body_camera_from_mount,
     invert_transform,
     make_transform,
+    polygon_centroid_ne_m,
 )
 
 pytestmark = pytest.mark.unit
@@ -95,3 +96,16 @@ def test_camera_from_hfov_and_scaling() -> None:
     assert quarter.fx_px == pytest.approx(80.0)
     # The centre of the image stays the centre: (319.5 + 0.5) / 4 - 0.5 = 79.5.
     assert quarter.cx_px == pytest.approx(79.5)
+
+
+def test_the_centroid_of_a_polygon_is_its_centre_of_area_in_either_direction() -> None:
+    square = [(-25.0, -25.0), (-25.0, 25.0), (25.0, 25.0), (25.0, -25.0)]  # mission_configs/sitl.yaml's geofence
+    assert polygon_centroid_ne_m(square) == pytest.approx((0.0, 0.0))
+    # An L: a 2 x 1 bar (area 2, centre (1, 0.5)) and a unit square (area 1, centre (0.5, 1.5)) -> (5/6, 5/6).
+    ell = [(0.0, 0.0), (2.0, 0.0), (2.0, 1.0), (1.0, 1.0), (1.0, 2.0), (0.0, 2.0)]
+    assert polygon_centroid_ne_m(ell) == pytest.approx((5 / 6, 5 / 6))
+    assert polygon_centroid_ne_m(ell[::-1]) == pytest.approx((5 / 6, 5 / 6))
+    # Not the vertex mean: many vertices on one side do not pull it.
+    dense = [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0), (3.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)]
+    assert polygon_centroid_ne_m(dense) == pytest.approx((2.0, 2.0))
+    assert polygon_centroid_ne_m([(0.0, 0.0), (2.0, 2.0), (4.0, 4.0)]) == pytest.approx((2.0, 2.0))  # no area

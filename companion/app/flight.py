@@ -43,7 +43,7 @@ from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase, VehicleState
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import Pose
+from companion.perception.geometry import Pose, polygon_centroid_ne_m
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.vehicle.link import FlightMode, VehicleError, VehicleLink
 from companion.vehicle.lockstep import LockstepClient, Tick
@@ -149,6 +149,8 @@ class FlightApp:
         self.guidance = LandingGuidance(
             config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m
         )
+        # The search area's centre for the blind random baseline (the paper's ROI): the geofence's centroid.
+        self._area_centre_ne_m = polygon_centroid_ne_m(config.geofence.polygon_ne_m)
         self.outcome = FlightOutcome()
         self._executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="perception")
         self._beat_wall = time.monotonic()
@@ -237,7 +239,12 @@ class FlightApp:
         loop = asyncio.get_running_loop()
         try:
             result: FrameResult = await loop.run_in_executor(
-                self._executor, self.pipeline.process, frame.image_bgr, pose, frame.t_capture_s
+                self._executor,
+                self.pipeline.process,
+                frame.image_bgr,
+                pose,
+                frame.t_capture_s,
+                self._area_centre_ne_m,
             )
         except PerceptionError as exc:  # one bad frame or pose; a lasting failure trips the silence failsafe
             self.outcome.frames_failed += 1

@@ -161,7 +161,8 @@ class SelectionConfig(StrictModel):
         gt=0.0,
         le=500.0,
         description="The random policy draws its point in a square of this half side around the search area's "
-        "centre (the vehicle's position when none is given): 15 m gives the paper's 30 m x 30 m ROI.",
+        "centre (the flight app gives the geofence's centroid; the vehicle's position when none is given): 15 m "
+        "gives the paper's 30 m x 30 m ROI around the SITL park's centre.",
     )
 
 

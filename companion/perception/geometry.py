@@ -210,6 +210,21 @@ def polygon_signed_area_m2(polygon_ne_m: npt.ArrayLike) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
+def polygon_centroid_ne_m(polygon_ne_m: npt.ArrayLike) -> tuple[float, float]:
+    """Area centroid (north_m, east_m) of a simple polygon given as vertices (K, 2), in either direction.
+
+    A polygon without area (all vertices on a line) gives the mean of its vertices.
+    """
+    poly = np.asarray(polygon_ne_m, np.float64)
+    x, y = poly[:, 0], poly[:, 1]
+    x1, y1 = np.roll(x, -1), np.roll(y, -1)
+    cross = x * y1 - x1 * y
+    area2 = float(cross.sum())  # twice the signed area
+    if abs(area2) < 1e-12:
+        return float(x.mean()), float(y.mean())
+    return float(((x + x1) * cross).sum() / (3.0 * area2)), float(((y + y1) * cross).sum() / (3.0 * area2))
+
+
 def inside_polygon(
     polygon_ne_m: npt.NDArray[np.float64], north_m: npt.ArrayLike, east_m: npt.ArrayLike
 ) -> npt.NDArray[np.bool_]:

@@ -28,7 +28,7 @@ from sitl.config import SitlConfig
 from sitl.mission import body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
-METRICS_VERSION = 3
+METRICS_VERSION = 4
 """Incremented when a definition changes what stored results hold; :func:`stale` says which of them it changes.
 
 1. The first campaigns.
@@ -37,18 +37,24 @@ METRICS_VERSION = 3
 3. Adds what lies under the touchdown (``obstacle_distance_m``, ``obstacle_kind``, ``touched_obstacle``). Nothing
    else changes, so version 2 results are not stale: :func:`with_obstacles` completes them from their seed and
    touchdown point without flying them again.
+4. The blind random baseline draws its point around the search area's centre (the geofence's centroid: the paper's
+   30 m ROI in the SITL), no longer around the vehicle's position at its first frame, which put some points outside
+   the crowd and some outside the geofence (a search until the time limit). Earlier results of the random policy are
+   stale; no other result changes.
 """
 
 
-def stale(result: dict[str, Any]) -> bool:
-    """Whether a stored result's metrics differ from what the current definitions give (it is flown again on resume).
+def stale(result: dict[str, Any], policy: str | None = None) -> bool:
+    """Whether a stored result differs from what the current definitions give (it is flown again on resume).
 
     Version 1 results of missions that touched down are unchanged by version 2; those without a touchdown are stale.
+    Results of the random policy (``policy``, the mission's selection policy, as its plan names it) before version 4
+    are stale.
     """
     if "error" in result:
         return False
     version = int(result.get("metrics_version", 1))
-    return version < 2 and not result.get("landed", False)
+    return (version < 2 and not result.get("landed", False)) or (version < 4 and policy == "random")
 
 
 @dataclass

@@ -177,7 +177,13 @@ def missions_to_fly(plans: list[MissionPlan], done: dict[str, dict[str, Any]]) -
     """The planned missions without a usable result, run by run across the cells (so a campaign stopped part-way has
     every cell about equally far). A mission is flown again when it could not be flown (an infrastructure error, not
     a landing) or its result is :func:`~sitl.campaign.metrics.stale` (computed by definitions since changed)."""
-    todo = [p for p in plans if p.mission_id not in done or "error" in done[p.mission_id] or stale(done[p.mission_id])]
+    todo = [
+        p
+        for p in plans
+        if p.mission_id not in done
+        or "error" in done[p.mission_id]
+        or stale(done[p.mission_id], p.strategy.policy.value)
+    ]
     return sorted(todo, key=lambda p: p.run)
 
 
@@ -207,8 +213,10 @@ def run_campaign(
     workers = workers or spec.workers
     worker_ids = worker_instances(instance_base, workers)
 
+    policies = {p.mission_id: p.strategy.policy.value for p in plans}
+
     def flown() -> int:  # an error or a stale result is not a mission done: it is flown again
-        return sum("error" not in r and not stale(r) for r in done.values())
+        return sum("error" not in r and not stale(r, policies.get(k)) for k, r in done.items())
 
     bar = Progress(len(plans), flown()) if progress else None
     if todo:

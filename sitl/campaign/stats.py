@@ -1,4 +1,5 @@
-"""Statistics for campaign reports: Wilson intervals for rates, bootstrap intervals for means, paired comparisons.
+"""Statistics for campaign reports: Wilson intervals for rates, bootstrap intervals for means, paired comparisons,
+and rates of two independent samples (ours against a published table).
 
 All resampling is seeded, so a report is the same every time it is made from the same results.
 """
@@ -98,3 +99,46 @@ def paired_mean_difference(a: Sequence[float], b: Sequence[float], seed: int = 0
         if x is not None and y is not None and math.isfinite(x) and math.isfinite(y)
     ]
     return bootstrap_mean(diffs, seed)
+
+
+@dataclass(frozen=True)
+class RateDifference:
+    """Two independent rates: ``a - b`` with its 95 % interval, and Fisher's exact test of equal rates."""
+
+    difference: Estimate
+    p_value: float
+
+
+def rate_difference(successes_a: int, n_a: int, successes_b: int, n_b: int) -> RateDifference:
+    """The difference of two independent rates, ``successes_a / n_a - successes_b / n_b``.
+
+    The interval is Newcombe's hybrid score interval (his method 10: from the two Wilson intervals; Newcombe 1998,
+    Statistics in Medicine 17:873), the test Fisher's exact test, two-sided. ``difference.n`` is ``n_a + n_b``.
+    """
+    if n_a <= 0 or n_b <= 0:
+        raise ValueError(f"two rates need samples, got n_a={n_a} and n_b={n_b}")
+    for k, n in ((successes_a, n_a), (successes_b, n_b)):
+        if not 0 <= k <= n:
+            raise ValueError(f"successes must lie in [0, n], got {k} of {n}")
+    a, b = wilson(successes_a, n_a), wilson(successes_b, n_b)
+    d = a.value - b.value
+    low = d - math.sqrt((a.value - a.low) ** 2 + (b.high - b.value) ** 2)
+    high = d + math.sqrt((a.high - a.value) ** 2 + (b.value - b.low) ** 2)
+    table = np.array([[successes_a, n_a - successes_a], [successes_b, n_b - successes_b]], dtype=np.int64)
+    p = float(scipy_stats.fisher_exact(table, alternative="two-sided").pvalue)
+    return RateDifference(Estimate(d, low, high, n_a + n_b), p)
+
+
+def holm(p_values: Sequence[float]) -> list[float]:
+    """Holm's step-down adjustment of a family of p-values (same order as given; each at most 1).
+
+    Reject the hypotheses whose adjusted p is below alpha: the chance of any false rejection in the family is then
+    at most alpha.
+    """
+    order = sorted(range(len(p_values)), key=lambda i: p_values[i])
+    adjusted = [1.0] * len(p_values)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (len(p_values) - rank) * p_values[i]))
+        adjusted[i] = running
+    return adjusted
