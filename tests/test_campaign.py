@@ -205,12 +205,16 @@ def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_fli
     assert segments[1]["interrupted"] is True
 
 
-@pytest.mark.slow  # 30 s: one more mission flown; in `make test-slow`
+@pytest.mark.slow  # 60 s: one mission flown twice; in `make test-slow`
 def test_one_mission_is_re_flown_from_its_seed_with_its_video(one_worker: Path, tmp_path: Path) -> None:
     command = [sys.executable, "-m", "companion.cli", "campaign", "replay", str(one_worker), "static/oldest/0000"]
     command += ["--out", str(tmp_path / "replay"), "--instance", "15"]
-    done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False)
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
-    assert "metrics identical to the campaign's result" in done.stdout
-    assert "(replay identical)" in done.stdout
-    assert (tmp_path / "replay" / "camera.mp4").stat().st_size > 100_000
+    # Twice into the same folder: the second replay starts its own flight log, not a second flight in the first's.
+    for _ in range(2):
+        done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False)
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+        assert "metrics identical to the campaign's result" in done.stdout
+        assert "(replay identical)" in done.stdout
+        assert (tmp_path / "replay" / "camera.mp4").stat().st_size > 100_000
+    log = (tmp_path / "replay" / "flight" / "flight.jsonl").read_text().splitlines()
+    assert [json.loads(line)["kind"] for line in log].count("header") == 1
