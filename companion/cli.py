@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import shutil
 import signal
 import sys
 from collections.abc import Sequence
@@ -266,9 +265,6 @@ def _campaign_replay(args: argparse.Namespace) -> int:
         sys.stderr.write(f"slz campaign replay: no mission {args.mission!r} in {folder}\n")
         return 2
     out = Path(args.out) if args.out else folder / "replays" / args.mission
-    # The flight log appends (it must survive a crash), so a replay into a folder that holds an earlier replay's
-    # starts it afresh: two flights in one log are not one mission.
-    shutil.rmtree(out / "flight", ignore_errors=True)
     fly(mission_spec(spec, plan, out, args.instance, record_frames=True))
     report = replay(out / "flight", video_path=out / "camera.mp4")
     again = mission_metrics(out, plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)

@@ -14,6 +14,7 @@ import json
 import logging
 import math
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -279,7 +280,12 @@ def _autopilot_lands(spec: MissionSpec) -> bool:
 
 
 def fly(spec: MissionSpec) -> MissionResult:
-    """Fly one mission (see the module docstring); writes ``result.json`` in the run folder."""
+    """Fly one mission (see the module docstring); writes ``result.json`` in the run folder.
+
+    A run folder holds one mission: the companion's flight log appends (it must survive a crash), so the log of an
+    earlier flight in the same folder (a replay flown again) is removed first.
+    """
+    shutil.rmtree(spec.run_dir / "flight", ignore_errors=True)
     sitl_path, mission_path = write_configs(spec)
     started = time.monotonic()
     sitl = SitlProcess(["--config", str(sitl_path)], spec.instance, spec.run_dir)
