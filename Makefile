@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: setup demo test test-slow lint typecheck pytest bench paper-table paper-table-roi training models clean
+.PHONY: setup demo test test-slow lint typecheck pytest bench paper-table paper-table-roi eval-real training models clean
 
 setup: $(STAMP)
 
@@ -53,6 +53,14 @@ paper-table: $(STAMP)
 # The same table with every zone held to the 30 m region of interest, as the paper's missions are (same scenes).
 paper-table-roi: $(STAMP)
 	$(BIN)/slz campaign --spec mission_configs/campaigns/paper_table1_roi.yaml --out runs/campaigns/paper_table1_roi
+
+# Real aerial frames (every set under ../shared/datasets, evaluation only): person recall, false-occupied ground and
+# count ratio at native and half scale, each shipped model beside the others on the same frames, in one run.
+# Writes models/eval/results/real.{json,md}; overlays under runs/eval/real/.
+EVAL_REAL_MODELS ?= --model slz-lite=models/density/slz_lite.onnx --model slz-lite-int8=models/density/slz_lite_int8.onnx \
+	--model slz-ccnn=models/density/slz_ccnn.onnx
+eval-real: $(STAMP)
+	$(BIN)/python -m models.eval.real $(EVAL_REAL_MODELS) --out models/eval/results/real
 
 # Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
 # quantization, evaluation; about an hour on 2 cores). The drone needs neither.

@@ -18,6 +18,9 @@ from companion.perception.density import (
     DensityModelContract,
     OnnxDensityModel,
     TensorLayout,
+    downscaled_size,
+    input_scale,
+    predict_downscaled,
 )
 from companion.perception.errors import PerceptionError
 
@@ -195,3 +198,40 @@ def test_shipped_placeholder_model_is_the_builders_output(tmp_path: Path) -> Non
     shipped = Path(__file__).resolve().parent.parent / "models" / "blob_detector" / "blob_detector.onnx"
     rebuilt = save_model(build_blob_density_model(), tmp_path / "rebuilt.onnx")
     assert shipped.read_bytes() == rebuilt.read_bytes(), "run models/blob_detector/build.py"
+
+
+@pytest.mark.parametrize("scale", [0.25, 0.5, 0.73])
+def test_a_shrunk_frame_maps_its_blob_to_the_same_place_with_coarser_cells(
+    blob_model: OnnxDensityModel, scale: float
+) -> None:
+    frame = np.full((480, 640, 3), 90, dtype=np.uint8)
+    frame[192:224, 384:416] = 250  # a 32 px bright square centred at (u, v) = (399.5, 207.5)
+    density = predict_downscaled(blob_model, frame, scale)
+    small_w, small_h = downscaled_size(640, 480, scale)
+    assert small_w % 16 == 0
+    assert small_h % 16 == 0
+    assert density.values.shape == (small_h // 4, small_w // 4)
+    assert (density.frame_width_px, density.frame_height_px) == (640, 480)
+    assert density.stride_x == pytest.approx(640 * 4 / small_w)
+    rows, cols = np.mgrid[: density.values.shape[0], : density.values.shape[1]]
+    mass = density.values.astype(np.float64)
+    assert mass.sum() > 0.0
+    u = float(((cols + 0.5) * mass).sum() / mass.sum()) * density.stride_x  # centre of the response, frame px
+    v = float(((rows + 0.5) * mass).sum() / mass.sum()) * density.stride_y
+    assert abs(u - 399.5) <= density.stride_x
+    assert abs(v - 207.5) <= density.stride_y
+    np.testing.assert_array_equal(predict_downscaled(blob_model, frame, 1.0).values, blob_model.predict(frame).values)
+
+
+def test_input_scale_follows_the_ground_sampling_distance() -> None:
+    assert input_scale(0.09, 0.045) == 1.0  # coarser than the limit: as it is
+    assert input_scale(0.015, 0.045) == pytest.approx(1 / 3)
+    assert input_scale(0.001, 0.0) == 1.0  # off
+    with pytest.raises(PerceptionError, match="ground sampling distance"):
+        input_scale(float("nan"), 0.045)
+
+
+@pytest.mark.parametrize("scale", [0.0, -0.5, 1.5, float("nan")])
+def test_a_scale_outside_0_1_is_refused(blob_model: OnnxDensityModel, scale: float) -> None:
+    with pytest.raises(PerceptionError, match="scale must be in"):
+        predict_downscaled(blob_model, np.zeros((480, 640, 3), np.uint8), scale)

@@ -65,7 +65,8 @@ def test_occupancy_scores_on_a_generated_frame(tmp_path: Path) -> None:
     assert good.false_occupied_px < 0.05 * good.free_ground_px
     assert good.predicted_count == pytest.approx(len(heads))
     assert good.matched["8px"] >= 0.9 * len(heads)
-    summary = summarise([good], ALTITUDE_BANDS_M[0] if good.altitude_m < 16 else (8.0, 40.0))
+    band = next(b for b in ALTITUDE_BANDS_M if b[0] <= good.altitude_m < b[1])
+    summary = summarise([good], band)
     assert summary.frames == 1
     assert summary.count_mae == pytest.approx(0.0, abs=1e-3)
     assert 0.0 <= summary.occupancy_miss_rate <= 1.0

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
 from companion.perception.config import PerceptionConfig
-from companion.perception.density import DensityMap, DensityModel, OnnxDensityModel
+from companion.perception.density import DensityMap, DensityModel, OnnxDensityModel, downscaled_size
 from companion.perception.errors import PerceptionError
 from companion.perception.geometry import Pose
 from companion.perception.pipeline import STAGES, FrameResult, SlzPipeline, camera_from_config
@@ -23,18 +24,32 @@ def scenes() -> list[FlatScene]:
 
 
 class OracleDensity:
-    """Perfect perception from the renderer's person mask: the fraction of each stride-4 cell covered by people."""
+    """Perfect perception from the renderer's person mask: the fraction of each stride-4 cell covered by people.
+
+    When the pipeline shrinks the frame (``scale`` < 1, set by the test from ``SlzPipeline.input_scale``), the mask
+    is shrunk the same way into the top-left corner of the model's input, as a network would see it.
+    """
 
     def __init__(self) -> None:
         self.mask: np.ndarray = np.zeros((480, 640), dtype=bool)
+        self.scale = 1.0
 
     def predict(self, frame_bgr: np.ndarray) -> DensityMap:
         h, w = self.mask.shape
-        cells = self.mask.reshape(h // 4, 4, w // 4, 4).mean(axis=(1, 3)).astype(np.float32)
+        coverage = self.mask.astype(np.float32)
+        if self.scale < 1.0:
+            small_w, small_h = downscaled_size(w, h, self.scale)
+            coverage = np.zeros((h, w), np.float32)
+            coverage[:small_h, :small_w] = cv2.resize(
+                self.mask.astype(np.float32), (small_w, small_h), interpolation=cv2.INTER_AREA
+            )
+        cells = coverage.reshape(h // 4, 4, w // 4, 4).mean(axis=(1, 3)).astype(np.float32)
         return DensityMap(cells, frame_width_px=w, frame_height_px=h)
 
 
 POSES = [  # (altitude_m, camera tilt_deg, roll_rad)
+    (5.0, 0.0, 0.0),  # shrunk: the final descent
+    (9.0, 10.0, 0.05),  # shrunk
     (12.0, 0.0, 0.0),
     (20.0, 0.0, 0.08),
     (25.0, 20.0, -0.05),
@@ -61,6 +76,7 @@ def run_frames(
         frame = scene.render(camera, T_body_camera, pose)
         if oracle is not None:
             oracle.mask = frame.person_mask
+            oracle.scale = pipeline.input_scale(pose)
         result = pipeline.process(frame.image_bgr, pose, 0.0)
         assert set(result.timings_ms) == set(STAGES)
         out.append((scene, frame, result))
@@ -86,9 +102,12 @@ def test_with_perfect_perception_zones_never_contain_a_person(
     oracle = OracleDensity()
     runs = run_frames(scenes, config, oracle, oracle, altitude_m, tilt_deg, roll_rad)
     assert_zones_free_of_people(runs, config.zones.min_radius_m)
+    shrunk = altitude_m < 15.0  # the default min_gsd_m_per_px (0.045) is the finest GSD at about 16 m
+    for _, _, result in runs:
+        assert (result.density.stride_x > 4.0) == shrunk
 
 
-@pytest.mark.parametrize(("altitude_m", "tilt_deg", "roll_rad"), POSES[:2])
+@pytest.mark.parametrize(("altitude_m", "tilt_deg", "roll_rad"), POSES[2:4])
 def test_real_onnx_model_zones_contain_no_person(
     scenes: list[FlatScene],
     blob_model: OnnxDensityModel,
@@ -103,7 +122,7 @@ def test_real_onnx_model_zones_contain_no_person(
     assert_zones_free_of_people(runs, config.zones.min_radius_m)
     for _, frame, result in runs:
         h, w = frame.person_mask.shape
-        occupied = np.repeat(np.repeat(result.occupancy.values == 0, 4, axis=0), 4, axis=1)[:h, :w]
+        occupied = cv2.resize(result.occupancy.values, (w, h), interpolation=cv2.INTER_NEAREST) == 0
         assert occupied[frame.person_mask].mean() > 0.97  # pixel recall of the occupancy map
 
 

@@ -18,8 +18,9 @@
   above ground (the paper: 2 m above the zone). When for ``unsafe_frames_to_abort`` frames in a row a person is seen
   inside the footprint around the landing point, or the tracked zone is narrower than ``min_zone_radius_m``, the
   vehicle climbs back by ``climb_back_m`` and searches again. Below ``blind_altitude_m`` the head plane is too close
-  to the camera to see the whole zone, and below ``perception_min_altitude_m`` the maps are not trusted at all (the
-  density model was trained at 8-40 m): the descent continues on the last map that saw the whole footprint free.
+  to the camera to see the whole zone, and below ``perception_min_altitude_m`` (3 m) the maps are not trusted at all
+  (the head plane is about to leave the camera's depth range): the descent continues on the last map that saw the
+  whole footprint free.
 - **land**: at or below ``land_altitude_m`` over the target, a landing is commanded only when a map no older than
   ``landing_map_max_age_s`` saw the whole footprint (vehicle radius plus margin) free, and no later frame saw a person
   in it. Otherwise the vehicle climbs back and re-selects.
@@ -81,13 +82,14 @@ class GuidanceConfig(StrictModel):
         default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
     )
     perception_min_altitude_m: float = Field(
-        default=12.0,
+        default=3.0,
         ge=0.0,
         le=50.0,
-        description="Below this, maps do not decide: the descent continues on the last map from above it. The "
-        "shipped model calls plain grass 'people' below about 10 m (persistent false positives measured in SITL "
-        "descents, though it was trained on 8-40 m), so 12 m; a person who walks into the footprint later is not "
-        "seen (models/density/MODEL_CARD.md).",
+        description="Below this, maps do not decide: the descent continues on the last map from above it, and a "
+        "person who walks into the footprint later is not seen. The model read magnified grass as people below "
+        "about 10 m until frames were shrunk to its training scale (perception.model.min_gsd_m_per_px); with "
+        "that it decides down to 3 m (models/density/MODEL_CARD.md). Below about 2.2 m the head plane is closer "
+        "to the camera than the projection's minimum depth.",
     )
     landing_map_max_age_s: float = Field(
         default=12.0,

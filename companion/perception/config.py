@@ -43,6 +43,15 @@ class ModelConfig(StrictModel):
         "(e.g. TensorrtExecutionProvider, CUDAExecutionProvider on a Jetson).",
     )
     intra_op_threads: int = Field(default=1, ge=0, le=64, description="0 lets onnxruntime choose.")
+    min_gsd_m_per_px: float = Field(
+        default=0.045,
+        ge=0.0,
+        le=1.0,
+        description="Frames finer than this ground sampling distance (metres per pixel on the head plane: a low "
+        "altitude) are shrunk to it before the model sees them, so that ground texture keeps the scale the model "
+        "was trained on; 0 disables. 0.045 is the finest GSD of a nadir 90-degree 640 px camera at about 16 m "
+        "(chosen on training-style frames, models/density/MODEL_CARD.md).",
+    )
     engine_cache_dir: Path | None = Field(
         default=None,
         description="TensorRT: keep built engines (and the timing cache) here, on a persistent path, so only the "

@@ -11,6 +11,7 @@ from __future__ import annotations
 import enum
 import json
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -327,3 +328,63 @@ class OnnxDensityModel:
         frame_bgr = check_frame(frame_bgr, "density.predict")
         values = self._run(frame_bgr)
         return DensityMap(values, frame_width_px=frame_bgr.shape[1], frame_height_px=frame_bgr.shape[0])
+
+
+def downscaled_size(width_px: int, height_px: int, scale: float) -> tuple[int, int]:
+    """(width, height) of a frame shrunk by ``scale`` in :func:`predict_downscaled`: rounded to multiples of 16 px
+    (whole cells of any stride dividing 16, so the map's stride is exact), at least 16, at most the frame."""
+    return (
+        min(width_px, max(16, 16 * round(width_px * scale / 16))),
+        min(height_px, max(16, 16 * round(height_px * scale / 16))),
+    )
+
+
+def predict_downscaled(model: DensityModel, frame_bgr: U8Image, scale: float) -> DensityMap:
+    """Density of a frame shrunk by ``scale`` (0 < scale <= 1), as the model would see it from farther away.
+
+    A network trained on people a few pixels wide reads texture magnified by a low altitude (grass, gravel,
+    snowflakes) as heads. Shrinking the frame shows it the ground at the scale it was trained on. The shrunk frame is
+    padded back to the frame's size with its edge pixels, the model runs once, and the cells over the padding are cut
+    off: the map keeps the frame's size with coarser cells (``stride`` divided by ``scale``), each still holding
+    people per cell, so the occupancy threshold means what it meant at the trained scale.
+
+    Parameters
+    ----------
+    model : DensityModel
+        Any density model (its input size is the frame's).
+    frame_bgr : ndarray, shape (H, W, 3), uint8
+        The camera frame.
+    scale : float
+        Shrink factor, (0, 1]; 1 runs the model on the frame as it is.
+
+    Returns
+    -------
+    DensityMap
+        Shape (h' / s, w' / s) for the shrunk size (h', w'), rounded to multiples of 16 px, and the model's stride
+        s (a divisor of 16), over the whole frame (``frame_width_px`` W, ``frame_height_px`` H).
+    """
+    frame_bgr = check_frame(frame_bgr, "density.predict_downscaled")
+    if not (math.isfinite(scale) and 0.0 < scale <= 1.0):
+        raise PerceptionError("density.predict_downscaled", f"scale must be in (0, 1], got {scale}")
+    if scale == 1.0:
+        return model.predict(frame_bgr)
+    h, w = frame_bgr.shape[:2]
+    small_w, small_h = downscaled_size(w, h, scale)
+    small = cv2.resize(frame_bgr, (small_w, small_h), interpolation=cv2.INTER_AREA)
+    padded = np.asarray(cv2.copyMakeBorder(small, 0, h - small_h, 0, w - small_w, cv2.BORDER_REPLICATE), np.uint8)
+    full = model.predict(padded)
+    rows = min(full.values.shape[0], math.ceil(small_h / full.stride_y))
+    cols = min(full.values.shape[1], math.ceil(small_w / full.stride_x))
+    values = np.ascontiguousarray(full.values[:rows, :cols])
+    return DensityMap(values, frame_width_px=w, frame_height_px=h)
+
+
+def input_scale(gsd_m_per_px: float, min_gsd_m_per_px: float) -> float:
+    """How much to shrink a frame whose finest ground sampling distance is ``gsd_m_per_px`` (metres per pixel on
+    the head plane) so that it is no finer than ``min_gsd_m_per_px``: ``min(1, gsd / min_gsd)``; 1 when
+    ``min_gsd_m_per_px`` is 0 (off)."""
+    if min_gsd_m_per_px <= 0.0:
+        return 1.0
+    if not (math.isfinite(gsd_m_per_px) and gsd_m_per_px > 0.0):
+        raise PerceptionError("density.input_scale", f"ground sampling distance must be > 0, got {gsd_m_per_px}")
+    return min(1.0, gsd_m_per_px / min_gsd_m_per_px)

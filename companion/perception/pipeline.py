@@ -6,13 +6,22 @@ density model, another selection policy) without touching the rest.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
 from companion.perception.config import CameraConfig, PerceptionConfig
-from companion.perception.density import DensityMap, DensityModel, OnnxDensityModel, U8Image, check_frame
+from companion.perception.density import (
+    DensityMap,
+    DensityModel,
+    OnnxDensityModel,
+    U8Image,
+    check_frame,
+    input_scale,
+    predict_downscaled,
+)
 from companion.perception.errors import PerceptionError
 from companion.perception.geometry import F64Array, PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.occupancy import OccupancyImage, OccupancyMapper
@@ -91,7 +100,11 @@ class SlzPipeline:
         zone_finder: ZoneFinder,
         tracker: ZoneTracker,
         policy: SelectionPolicy,
+        min_gsd_m_per_px: float = 0.0,
     ) -> None:
+        if not (math.isfinite(min_gsd_m_per_px) and min_gsd_m_per_px >= 0.0):
+            raise PerceptionError("pipeline", f"min_gsd_m_per_px must be >= 0, got {min_gsd_m_per_px}")
+        self.min_gsd_m_per_px = min_gsd_m_per_px
         self.density_model = density_model
         self.occupancy = occupancy
         self.projector = projector
@@ -111,6 +124,7 @@ class SlzPipeline:
             zone_finder=ZoneFinder(config.zones),
             tracker=ZoneTracker(config.tracking),
             policy=make_policy(config.selection, config.zones.landing_area_ne_m),
+            min_gsd_m_per_px=config.model.min_gsd_m_per_px,
         )
 
     def reset(self) -> None:
@@ -143,8 +157,20 @@ class SlzPipeline:
                 f"camera config says {cam.width_px}x{cam.height_px}",
             )
         timings: dict[str, float] = {}
-        density = _timed(timings, "density", lambda: self.density_model.predict(frame_bgr))
+        scale = self.input_scale(pose)
+        density = _timed(timings, "density", lambda: predict_downscaled(self.density_model, frame_bgr, scale))
         return self._after_density(density, pose, t_s, area_centre_ne_m, timings)
+
+    def input_scale(self, pose: Pose) -> float:
+        """How much the frame is shrunk before the model sees it at this pose (1: not at all).
+
+        Below the altitude where the frame's finest ground sampling distance reaches ``min_gsd_m_per_px``, the
+        frame is shrunk to that GSD (:func:`~companion.perception.density.predict_downscaled`): the model then sees
+        the ground at a scale it was trained on, and the density map has coarser cells.
+        """
+        if self.min_gsd_m_per_px <= 0.0:
+            return 1.0
+        return input_scale(self.projector.finest_gsd_m_per_px(pose), self.min_gsd_m_per_px)
 
     def process_density(
         self,

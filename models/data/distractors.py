@@ -8,6 +8,7 @@ paste them onto frames, away from the people, as unlabelled background.
 from __future__ import annotations
 
 import enum
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -34,6 +35,42 @@ class DistractorKind(str, enum.Enum):
     """Soft dark polygons: shadows of poles, walls and trees."""
     LINES = "lines"
     """Painted lines, kerbs and cracks."""
+    FOLIAGE = "foliage"
+    """Bushes, hedges and flower beds: leaf-sized blobs over fractal shading with dark gaps, some flowers."""
+    PHOTO = "photo"
+    """A tinted crop of a real CC0 photo texture (grass, gravel, brick; ``models/data/textures/SOURCES.md``)."""
+
+
+TEXTURE_DIR = Path(__file__).parent / "textures"
+_textures: list[F32Array] = []
+
+
+def photo_textures() -> list[F32Array]:
+    """The CC0 photo textures (grayscale, float32 0-255), read once."""
+    if not _textures:
+        for path in sorted(TEXTURE_DIR.glob("*.jpg")):
+            image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+            if image is None:
+                raise FileNotFoundError(f"texture missing or unreadable: {path}")
+            _textures.append(image.astype(np.float32))
+        if not _textures:
+            raise FileNotFoundError(f"no photo textures (*.jpg) in {TEXTURE_DIR}")
+    return _textures
+
+
+def fractal_noise(size_px: int, rng: np.random.Generator, octaves: int = 4) -> F32Array:
+    """Noise with most of its energy at coarse scales (octaves of upsampled white noise), shape (s, s), 0-1."""
+    out = np.zeros((size_px, size_px), np.float32)
+    weight_total = 0.0
+    for octave in range(octaves):
+        cells = max(2, size_px >> (octaves - octave))
+        layer = rng.random((cells, cells)).astype(np.float32)
+        weight = 0.5**octave
+        out += weight * np.asarray(cv2.resize(layer, (size_px, size_px), interpolation=cv2.INTER_CUBIC), np.float32)
+        weight_total += weight
+    out /= weight_total
+    lo, hi = float(out.min()), float(out.max())
+    return (out - lo) / (hi - lo) if hi > lo else np.full_like(out, 0.5)
 
 
 def _colour(rng: np.random.Generator, low: int = 20, high: int = 235) -> npt.NDArray[np.float32]:
@@ -114,6 +151,35 @@ def draw(kind: DistractorKind, size_px: int, rng: np.random.Generator) -> tuple[
     elif kind is DistractorKind.SHADOW:
         pts = rng.uniform(0, s, size=(int(rng.integers(3, 7)), 2)).astype(np.int32)
         cv2.fillPoly(alpha, [cv2.convexHull(pts)], float(rng.uniform(0.3, 0.6)))
+    elif kind is DistractorKind.FOLIAGE:
+        leaf = np.array([rng.uniform(20, 90), rng.uniform(50, 150), rng.uniform(20, 110)], np.float32)
+        if rng.random() < 0.3:  # dry or autumn leaves, soil of a bed
+            leaf = np.array([rng.uniform(30, 90), rng.uniform(60, 140), rng.uniform(90, 170)], np.float32)
+        shading = fractal_noise(s, rng)
+        colour[:] = leaf * (0.3 + 0.9 * shading)[:, :, None]
+        for _ in range(int(rng.integers(s * s // 60, s * s // 12))):
+            c = (int(rng.integers(0, s)), int(rng.integers(0, s)))
+            axes = (int(rng.integers(1, 4)), int(rng.integers(1, 3)))
+            shade = leaf * rng.uniform(0.2, 1.6)
+            cv2.ellipse(colour, c, axes, float(rng.uniform(0, 180)), 0, 360, tuple(float(x) for x in shade), -1)
+        if rng.random() < 0.4:  # flowers: small bright dots
+            petal = _colour(rng, 120, 255)
+            for _ in range(int(rng.integers(s // 4, s * 2))):
+                c = (int(rng.integers(0, s)), int(rng.integers(0, s)))
+                cv2.circle(colour, c, int(rng.integers(1, 3)), tuple(float(x) for x in petal), -1)
+        alpha[:] = (fractal_noise(s, rng, octaves=3) > rng.uniform(0.2, 0.5)).astype(np.float32)
+        cv2.circle(alpha, (s // 2, s // 2), s // 3, 1.0, -1)
+    elif kind is DistractorKind.PHOTO:
+        texture = photo_textures()[int(rng.integers(len(photo_textures())))]
+        scale = float(rng.uniform(0.25, 1.5))
+        side = min(texture.shape[0], max(8, round(s / scale)))
+        y0, x0 = (int(rng.integers(0, texture.shape[i] - side + 1)) for i in (0, 1))
+        crop = np.asarray(cv2.resize(texture[y0 : y0 + side, x0 : x0 + side], (s, s)), np.float32) / 255.0
+        crop = np.clip((crop - crop.mean()) * rng.uniform(0.6, 1.6) + 0.5, 0.0, 1.0)
+        natural = ((60, 140, 70), (70, 110, 140), (150, 150, 150), (90, 160, 190), (60, 90, 60))  # BGR
+        tint = np.array(natural[int(rng.integers(len(natural)))], np.float32) if rng.random() < 0.7 else _colour(rng)
+        colour[:] = crop[:, :, None] * tint[None, None, :] * rng.uniform(0.8, 1.6)
+        alpha[:] = 1.0
     else:  # LINES
         paint = _colour(rng, 150, 255) if rng.random() < 0.6 else _colour(rng, 10, 60)
         for _ in range(int(rng.integers(1, 4))):

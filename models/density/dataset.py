@@ -77,6 +77,8 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         False gives centre crops without augmentation (validation).
     distractors : bool
         Paste procedural hard negatives (``models/data/distractors.py``); False for the ablation without them.
+    scale_range : (float, float)
+        Crops are rescaled by a factor drawn log-uniformly in this range (another altitude, another lens).
     """
 
     def __init__(
@@ -87,7 +89,11 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         seed: int,
         augment: bool = True,
         distractors: bool = True,
+        scale_range: tuple[float, float] = (0.7, 1.4),
     ) -> None:
+        if not 0.1 <= scale_range[0] <= scale_range[1] <= 10.0:
+            raise ValueError(f"scale_range must satisfy 0.1 <= low <= high <= 10, got {scale_range}")
+        self.scale_range = scale_range
         if crop_px % OUTPUT_STRIDE:
             raise ValueError(f"crop_px must be a multiple of {OUTPUT_STRIDE}, got {crop_px}")
         self.frames, self.crop_px, self.samples, self.seed, self.augment = (
@@ -111,7 +117,7 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         image, mask, heads = frame.image_bgr, frame.person_mask, frame.heads_px
         c = self.crop_px
         if self.augment:
-            scale = math.exp(rng.uniform(math.log(0.7), math.log(1.4)))
+            scale = math.exp(rng.uniform(math.log(self.scale_range[0]), math.log(self.scale_range[1])))
             h, w = image.shape[:2]
             new_w, new_h = max(c, round(w * scale)), max(c, round(h * scale))
             sx, sy = new_w / w, new_h / h

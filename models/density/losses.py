@@ -20,6 +20,12 @@ class LossKind(str, enum.Enum):
     """Bayesian Loss with the background term ("Bayesian+"): the expected count of each head is one."""
     MSE = "mse"
     """Pixel-wise squared error against Gaussian-smoothed head points (the classic MCNN target)."""
+    MSE_MARGIN = "mse-margin"
+    """MSE plus hinges at the deployed occupancy threshold: empty ground below it, head cores above it."""
+
+
+OCCUPANCY_THRESHOLD = 0.01
+"""People per cell at which the shipped perception config calls a cell occupied (``occupancy.density_threshold``)."""
 
 
 def _cell_centres(h: int, w: int, stride: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
@@ -105,10 +111,38 @@ def mse_loss(density: torch.Tensor, points: list[torch.Tensor], stride: int, sig
     return functional.mse_loss(density, target, reduction="sum") / n * math.sqrt(h * w)
 
 
+def mse_margin_loss(
+    density: torch.Tensor,
+    points: list[torch.Tensor],
+    stride: int,
+    sigma_px: float = 4.0,
+    threshold: float = OCCUPANCY_THRESHOLD,
+    weight: float = 30.0,
+) -> torch.Tensor:
+    """:func:`mse_loss` plus two hinges that speak the occupancy map's language.
+
+    MSE leaves a small positive floor on textured ground that the low occupancy threshold turns into "people".
+    Here every *background* cell (target below a tenth of ``threshold``: about three sigmas from every head) pays
+    linearly for each bit of density above half the threshold, and every *head core* cell (target at least twice
+    the threshold) pays for each bit below twice the threshold. Each hinge is the mean over its cells in units of
+    the threshold, times ``weight``, so that neither empty crops nor crowded ones dominate.
+    """
+    n, _, h, w = density.shape
+    target = point_density_target(points, h, w, stride, sigma_px)
+    mse = functional.mse_loss(density, target, reduction="sum") / n * math.sqrt(h * w)
+    background = (target < 0.1 * threshold).float()
+    core = (target >= 2.0 * threshold).float()
+    over = (functional.relu(density - 0.5 * threshold) * background).sum() / background.sum().clamp_min(1.0)
+    under = (functional.relu(2.0 * threshold - density) * core).sum() / core.sum().clamp_min(1.0)
+    return mse + weight * (over + under) / threshold
+
+
 def density_loss(
     kind: LossKind, density: torch.Tensor, points: list[torch.Tensor], stride: int, sigma_px: float
 ) -> torch.Tensor:
     """The configured loss."""
     if kind is LossKind.BAYESIAN:
         return bayesian_loss(density, points, stride, sigma_px)
+    if kind is LossKind.MSE_MARGIN:
+        return mse_margin_loss(density, points, stride, sigma_px)
     return mse_loss(density, points, stride, sigma_px)

@@ -21,12 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from companion.perception.config import load_perception_config
-from companion.perception.density import OnnxDensityModel
+from companion.perception.density import OnnxDensityModel, input_scale, predict_downscaled
 from models.data.images import read_bgr, read_mask
 from models.eval.metrics import (
     ALTITUDE_BANDS_M,
     BandSummary,
     FrameScore,
+    frame_gsd_m_per_px,
     score_frame,
     summaries_table,
     summarise,
@@ -35,10 +36,20 @@ from models.eval.metrics import (
 
 
 def evaluate_model(
-    model: OnnxDensityModel, split_dir: Path, config_path: Path, limit: int | None = None
+    model: OnnxDensityModel,
+    split_dir: Path,
+    config_path: Path,
+    limit: int | None = None,
+    min_gsd_m_per_px: float | None = None,
 ) -> list[FrameScore]:
-    """Score every labelled frame of ``split_dir`` (sorted by stem, at most ``limit``)."""
-    occupancy = load_perception_config(config_path).occupancy
+    """Score every labelled frame of ``split_dir`` (sorted by stem, at most ``limit``).
+
+    Frames are shrunk as the pipeline shrinks them (``perception.model.min_gsd_m_per_px`` of the config, or
+    ``min_gsd_m_per_px`` when given).
+    """
+    config = load_perception_config(config_path)
+    occupancy = config.occupancy
+    min_gsd = config.model.min_gsd_m_per_px if min_gsd_m_per_px is None else min_gsd_m_per_px
     scores: list[FrameScore] = []
     labels = sorted(p for p in split_dir.glob("*.json") if p.stem.isdigit())
     if not labels:
@@ -48,7 +59,7 @@ def evaluate_model(
         label = json.loads(label_path.read_text(encoding="utf-8"))
         image = read_bgr(split_dir / f"{stem}.png")
         mask = read_mask(split_dir / f"{stem}.mask.png")
-        density = model.predict(image)
+        density = predict_downscaled(model, image, input_scale(frame_gsd_m_per_px(label), min_gsd))
         heads = np.asarray(label["heads"], np.float32).reshape(-1, 2)
         scores.append(score_frame(stem, density, heads, mask, label, occupancy))
     return scores
@@ -61,6 +72,9 @@ def main() -> int:
     parser.add_argument("--config", type=Path, default=Path("mission_configs/perception.yaml"))
     parser.add_argument("--out", type=Path, default=Path("models/eval/results/heldout"))
     parser.add_argument("--limit", type=int, default=None)
+    parser.add_argument(
+        "--min-gsd", type=float, default=None, help="override perception.model.min_gsd_m_per_px (0: off)"
+    )
     parser.add_argument("--per-frame", action="store_true", help="also write every frame's scores to the JSON")
     args = parser.parse_args()
     rows: list[tuple[str, BandSummary]] = []
@@ -70,7 +84,7 @@ def main() -> int:
         if not path:
             parser.error(f"--model wants NAME=PATH, got {spec!r}")
         start = time.monotonic()
-        scores = evaluate_model(OnnxDensityModel(path), args.data, args.config, args.limit)
+        scores = evaluate_model(OnnxDensityModel(path), args.data, args.config, args.limit, args.min_gsd)
         bands = [summarise(scores, band) for band in ALTITUDE_BANDS_M]
         overall = summarise(scores, (ALTITUDE_BANDS_M[0][0], ALTITUDE_BANDS_M[-1][1]))
         rows += [(name, b) for b in bands] + [(name, overall)]

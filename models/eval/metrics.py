@@ -27,12 +27,13 @@ from scipy.optimize import linear_sum_assignment
 
 from companion.perception.config import OccupancyConfig, ProjectionConfig
 from companion.perception.density import DensityMap
+from companion.perception.errors import PerceptionError
 from companion.perception.geometry import PinholeCamera, Pose
 from companion.perception.occupancy import OccupancyMapper
 from companion.perception.projection import OCCUPIED, HeadPlaneProjector
 
 F32Array = npt.NDArray[np.float32]
-ALTITUDE_BANDS_M: tuple[tuple[float, float], ...] = ((8.0, 16.0), (16.0, 28.0), (28.0, 40.0))
+ALTITUDE_BANDS_M: tuple[tuple[float, float], ...] = ((2.0, 8.0), (8.0, 12.0), (12.0, 16.0), (16.0, 28.0), (28.0, 40.0))
 MATCH_RADII_PX = (4.0, 8.0)
 
 
@@ -90,6 +91,25 @@ class FrameScore:
     false_occupied_px: int
 
 
+def frame_gsd_m_per_px(label: dict[str, object]) -> float:
+    """The finest ground sampling distance on the head plane (m per pixel) of a generated frame (its JSON label).
+
+    Below about 2.2 m the head plane is closer to the camera than ``min_depth_m``: then the ground plane's.
+    """
+    cam = label["camera"]
+    assert isinstance(cam, dict)
+    camera = PinholeCamera(
+        int(cam["width_px"]), int(cam["height_px"]), cam["fx_px"], cam["fy_px"], cam["cx_px"], cam["cy_px"]
+    )
+    pose = Pose(np.asarray(label["T_world_body"], np.float64))
+    T_body_camera = np.asarray(label["T_body_camera"], np.float64)
+    try:
+        return HeadPlaneProjector(camera, T_body_camera, ProjectionConfig()).finest_gsd_m_per_px(pose)
+    except PerceptionError:
+        ground = ProjectionConfig(head_height_m=0.0)
+        return HeadPlaneProjector(camera, T_body_camera, ground).finest_gsd_m_per_px(pose)
+
+
 def score_frame(
     stem: str,
     density: DensityMap,
@@ -99,14 +119,7 @@ def score_frame(
     occupancy: OccupancyConfig,
 ) -> FrameScore:
     """Score one frame (``label`` is the generator's JSON: camera, poses, altitude)."""
-    cam = label["camera"]
-    assert isinstance(cam, dict)
-    camera = PinholeCamera(
-        int(cam["width_px"]), int(cam["height_px"]), cam["fx_px"], cam["fy_px"], cam["cx_px"], cam["cy_px"]
-    )
-    pose = Pose(np.asarray(label["T_world_body"], np.float64))
-    projector = HeadPlaneProjector(camera, np.asarray(label["T_body_camera"], np.float64), ProjectionConfig())
-    gsd = projector.finest_gsd_m_per_px(pose)
+    gsd = frame_gsd_m_per_px(label)
     occ = OccupancyMapper(occupancy).compute(density, gsd)
     h, w = person_mask.shape
     occupied = cv2.resize(occ.values, (w, h), interpolation=cv2.INTER_NEAREST) == OCCUPIED
