@@ -63,7 +63,7 @@ eval-real: $(STAMP)
 	$(BIN)/python -m models.eval.real $(EVAL_REAL_MODELS) --out models/eval/results/real
 
 # Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
-# quantization, evaluation; about an hour on 2 cores). The drone needs neither.
+# quantization, evaluation, ablations; about two hours on 2 cores). The drone needs neither.
 training: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,training]'
 

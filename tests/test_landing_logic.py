@@ -259,9 +259,10 @@ def test_used_up_reselections_hold_and_never_land() -> None:
     zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
     g.on_frame(_frame(0.2, [zone], target, occupied), state)
     assert g.on_frame(_frame(0.25, [zone], target, occupied), state).phase is LandingPhase.SEARCH
-    assert g.on_frame(_frame(0.3, [zone], target, _map()), state).phase is LandingPhase.DESCENT
-    g.on_frame(_frame(0.35, [zone], target, occupied), state)
-    last = g.on_frame(_frame(0.4, [zone], target, occupied), state)
+    climbed = VehicleState(0.3, state.north_m, state.east_m, -(14.0 + g.config.climb_back_m), 0.0)
+    assert g.on_frame(_frame(0.3, [zone], target, _map()), climbed).phase is LandingPhase.DESCENT
+    g.on_frame(_frame(0.35, [zone], target, occupied), climbed)
+    last = g.on_frame(_frame(0.4, [zone], target, occupied), climbed)
     assert last.phase is LandingPhase.FAILSAFE
     assert last.kind is CommandKind.HOLD  # not the configured land: the map just refused a landing here
 
@@ -299,3 +300,26 @@ def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
     assert d.phase is LandingPhase.FAILSAFE
     assert d.kind is CommandKind.HOLD  # never a blind landing
     assert not g.commanding
+
+
+def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
+    g = _guidance()
+    state = _descending_over(g, 4.0)
+    zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
+    for k in range(g.config.unsafe_frames_to_abort):
+        d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
+    assert d.phase is LandingPhase.SEARCH
+    climb_to = 4.0 + g.config.climb_back_m
+    # Another free zone right under the vehicle: approached (climbing), not descended onto from 4 m.
+    other, other_target = _track(4, 0.3, 0.1, 3.0), Target(0.3, 0.1, 3.0, 4)
+    t = 1.0
+    while state.altitude_m < climb_to - g.config.land_tolerance_m:
+        t += 0.1
+        d = g.on_frame(_frame(t, [other], other_target, _map()), state)
+        assert d.phase is LandingPhase.APPROACH, f"at {state.altitude_m:.1f} m"
+        assert d.setpoint is not None
+        assert -d.setpoint.down_m > state.altitude_m  # climbing
+        state = _fly(state, min(-d.setpoint.down_m, state.altitude_m + 0.5), d.setpoint.north_m, d.setpoint.east_m, t)
+        assert t < 10.0
+    d = g.on_frame(_frame(t + 0.1, [other], other_target, _map()), state)
+    assert d.phase is LandingPhase.DESCENT  # back up: the new zone may be descended onto

@@ -17,10 +17,10 @@
   refined by the target's track while it is seen near it) and the vehicle descends towards ``approach_height_m``
   above ground (the paper: 2 m above the zone). When for ``unsafe_frames_to_abort`` frames in a row a person is seen
   inside the footprint around the landing point, or the tracked zone is narrower than ``min_zone_radius_m``, the
-  vehicle climbs back by ``climb_back_m`` and searches again. Below ``blind_altitude_m`` the head plane is too close
-  to the camera to see the whole zone, and below ``perception_min_altitude_m`` (3 m) the maps are not trusted at all
-  (the head plane is about to leave the camera's depth range): the descent continues on the last map that saw the
-  whole footprint free.
+  vehicle climbs back by ``climb_back_m`` and searches again; a new descent starts only once it is back up there.
+  Below ``blind_altitude_m`` the head plane is too close to the camera to see the whole zone, and below
+  ``perception_min_altitude_m`` (3 m) the maps are not trusted at all (the head plane is about to leave the camera's
+  depth range): the descent continues on the last map that saw the whole footprint free.
 - **land**: at or below ``land_altitude_m`` over the target, a landing is commanded only when a map no older than
   ``landing_map_max_age_s`` saw the whole footprint (vehicle radius plus margin) free, and no later frame saw a person
   in it. Otherwise the vehicle climbs back and re-selects.
@@ -261,6 +261,7 @@ class LandingGuidance:
         self._search_origin: tuple[float, float] | None = None
         self._search_started_s = 0.0
         self._search_altitude_m = config.search_altitude_m
+        self._reclimb_m: float | None = None  # after an aborted descent: no new descent below this altitude
         self._resume_phase = LandingPhase.SEARCH
         self._heading_deg: float | None = None
         self._started_s: float | None = None
@@ -316,6 +317,9 @@ class LandingGuidance:
             return self._failsafe(state, used, FailsafeAction.HOLD)
         climb_to = min(state.altitude_m + self.config.climb_back_m, self.config.search_altitude_m)
         self._search_altitude_m = max(climb_to, state.altitude_m)
+        # The next descent starts from there, not from here: low down the camera sees a few metres around the
+        # footprint, and a zone next to the one just refused would be captured at once, again and again.
+        self._reclimb_m = climb_to if climb_to > state.altitude_m else None
         return self._setpoint(
             state,
             LandingPhase.SEARCH,
@@ -385,8 +389,14 @@ class LandingGuidance:
             )
         self._last_target_s = state.t_s
         self._search_origin = None
+        if self._reclimb_m is not None and state.altitude_m >= self._reclimb_m - c.land_tolerance_m:
+            self._reclimb_m = None  # climbed back (within the slack position control leaves)
         offset = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
-        if offset <= c.capture_radius_m and (target.radius_m >= self.min_zone_radius_m or c.blind_landing):
+        if (
+            offset <= c.capture_radius_m
+            and (target.radius_m >= self.min_zone_radius_m or c.blind_landing)
+            and self._reclimb_m is None
+        ):
             self._locked = target
             self._unsafe_frames = 0
             self._enter(LandingPhase.DESCENT, state.t_s)
@@ -395,10 +405,11 @@ class LandingGuidance:
             state,
             LandingPhase.APPROACH,
             target,
-            f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)",
+            f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)"
+            + ("" if self._reclimb_m is None else f", climbing back to {self._reclimb_m:.1f} m first"),
             target.north_m,
             target.east_m,
-            max(state.altitude_m, c.land_altitude_m),
+            max(state.altitude_m, c.land_altitude_m, self._reclimb_m or 0.0),
         )
 
     def _descent(self, result: FrameResult, state: VehicleState) -> Decision:

@@ -93,8 +93,10 @@ def main() -> int:
         models[name] = {"path": path, "bands": bands, "all": overall, **({"frames": scores} if args.per_frame else {})}
         sys.stderr.write(f"{name}: {len(scores)} frames in {time.monotonic() - start:.0f} s\n")
     table = summaries_table(rows)
-    write_json(args.out.with_suffix(".json"), payload)
-    args.out.with_suffix(".md").write_text(table, encoding="utf-8")
+    # OUT.json and OUT.md; a name such as "heldout_0.045" keeps its dot
+    base = args.out.with_suffix("") if args.out.suffix in (".json", ".md") else args.out
+    write_json(base.parent / f"{base.name}.json", payload)
+    (base.parent / f"{base.name}.md").write_text(table, encoding="utf-8")
     sys.stdout.write(table)
     return 0
 

@@ -403,10 +403,11 @@ def main() -> int:
         assert isinstance(models, dict)
         models[name] = {"path": path, "sets": per_set}
     table = summary_table(summaries)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
+    base = args.out.with_suffix("") if args.out.suffix in (".json", ".md") else args.out  # "real_0.5" keeps its dot
+    base.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(payload, indent=2, allow_nan=True).replace("NaN", "null")
-    args.out.with_suffix(".json").write_text(text + "\n", encoding="utf-8")
-    args.out.with_suffix(".md").write_text(table, encoding="utf-8")
+    (base.parent / f"{base.name}.json").write_text(text + "\n", encoding="utf-8")
+    (base.parent / f"{base.name}.md").write_text(table, encoding="utf-8")
     sys.stdout.write(table)
     return 0
 
