@@ -304,12 +304,12 @@ def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
 
 def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
     g = _guidance()
-    state = _descending_over(g, 4.0)
+    state = _descending_over(g, 5.0)
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(g.config.unsafe_frames_to_abort):
         d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
     assert d.phase is LandingPhase.SEARCH
-    climb_to = 4.0 + g.config.climb_back_m
+    climb_to = 5.0 + g.config.climb_back_m
     # Another free zone right under the vehicle: approached (climbing), not descended onto from 4 m.
     other, other_target = _track(4, 0.3, 0.1, 3.0), Target(0.3, 0.1, 3.0, 4)
     t = 1.0

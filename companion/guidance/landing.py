@@ -19,8 +19,8 @@
   inside the footprint around the landing point, or the tracked zone is narrower than ``min_zone_radius_m``, the
   vehicle climbs back by ``climb_back_m`` and searches again; a new descent starts only once it is back up there.
   Below ``blind_altitude_m`` the head plane is too close to the camera to see the whole zone, and below
-  ``perception_min_altitude_m`` (3 m) the maps are not trusted at all (the head plane is about to leave the camera's
-  depth range): the descent continues on the last map that saw the whole footprint free.
+  ``perception_min_altitude_m`` (4.5 m, the same) the maps are not trusted at all (the whole view then lies within the
+  footprint and its margin): the descent continues on the last map that saw the whole footprint free.
 - **land**: at or below ``land_altitude_m`` over the target, a landing is commanded only when a map no older than
   ``landing_map_max_age_s`` saw the whole footprint (vehicle radius plus margin) free, and no later frame saw a person
   in it. Otherwise the vehicle climbs back and re-selects.
@@ -82,14 +82,14 @@ class GuidanceConfig(StrictModel):
         default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
     )
     perception_min_altitude_m: float = Field(
-        default=3.0,
+        default=4.5,
         ge=0.0,
         le=50.0,
         description="Below this, maps do not decide: the descent continues on the last map from above it, and a "
         "person who walks into the footprint later is not seen. The model read magnified grass as people below "
-        "about 10 m until frames were shrunk to its training scale (perception.model.min_gsd_m_per_px); with "
-        "that it decides down to 3 m (models/density/MODEL_CARD.md). Below about 2.2 m the head plane is closer "
-        "to the camera than the projection's minimum depth.",
+        "about 10 m until frames were shrunk to its training scale (perception.model.min_gsd_m_per_px), and the "
+        "floor was 12 m; now it is blind_altitude_m: lower, the whole view lies within the footprint and its "
+        "margin, so a shadow at the frame's edge aborted descents (models/density/MODEL_CARD.md).",
     )
     landing_map_max_age_s: float = Field(
         default=12.0,
