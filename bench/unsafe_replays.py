@@ -32,7 +32,16 @@ TABLES = {
     "paper_table1": ("docs/results/paper_table1", "mission_configs/campaigns/paper_table1.yaml"),
     "paper_table1_roi": ("docs/results/paper_table1_roi", "mission_configs/campaigns/paper_table1_roi.yaml"),
 }
-KEPT = ("landed", "success", "reason", "touchdown_nearest_m", "nearest_person_min_m", "aborts", "reselections")
+KEPT = (
+    "landed",
+    "success",
+    "reason",
+    "touchdown_nearest_m",
+    "nearest_person_min_m",
+    "aborts",
+    "reselections",
+    "touched_obstacle",
+)
 
 
 def unsafe_missions(results_path: Path) -> list[dict[str, Any]]:
