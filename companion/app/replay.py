@@ -93,6 +93,21 @@ class VideoWriter:
             self._writer = None
 
 
+def config_from_header(raw: object) -> MissionConfig:
+    """The mission config a flight was flown with, from its log header (a full dump of the config).
+
+    A log written before frames were shrunk at low altitude has no ``perception.model.min_gsd_m_per_px``: its flight
+    ran the model on whole frames, so the replay does too (0, off), instead of taking today's default.
+    """
+    config = MissionConfig.model_validate(raw)
+    perception = raw.get("perception") if isinstance(raw, dict) else None
+    model = perception.get("model") if isinstance(perception, dict) else None
+    if isinstance(model, dict) and "min_gsd_m_per_px" not in model:
+        unshrunk = config.perception.model.model_copy(update={"min_gsd_m_per_px": 0.0})
+        config = config.model_copy(update={"perception": config.perception.model_copy(update={"model": unshrunk})})
+    return config
+
+
 def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float = 10.0) -> ReplayReport:
     """Replay the flight in ``log_dir`` (its ``flight.jsonl`` and ``frames/``); see the module docstring.
 
@@ -105,7 +120,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     header = next((r for r in records if r["kind"] == "header"), None)
     if header is None:
         raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
-    config = MissionConfig.model_validate(header["config"])
+    config = config_from_header(header["config"])
     frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in records if r["kind"] == "frame"}
     pipeline = SlzPipeline.from_config(config.perception)
     zones = config.perception.zones
