@@ -157,9 +157,10 @@ class SlzPipeline:
                 f"camera config says {cam.width_px}x{cam.height_px}",
             )
         timings: dict[str, float] = {}
-        scale = self.input_scale(pose)
+        gsd = self.projector.finest_gsd_m_per_px(pose)
+        scale = input_scale(gsd, self.min_gsd_m_per_px)
         density = _timed(timings, "density", lambda: predict_downscaled(self.density_model, frame_bgr, scale))
-        return self._after_density(density, pose, t_s, area_centre_ne_m, timings)
+        return self._after_density(density, pose, t_s, area_centre_ne_m, timings, gsd)
 
     def input_scale(self, pose: Pose) -> float:
         """How much the frame is shrunk before the model sees it at this pose (1: not at all).
@@ -189,11 +190,12 @@ class SlzPipeline:
         t_s: float,
         area_centre_ne_m: tuple[float, float] | None,
         timings: dict[str, float],
+        gsd_m_per_px: float | None = None,
     ) -> FrameResult:
         projector = self.projector
 
         def occupancy_stage() -> OccupancyImage:
-            gsd = projector.finest_gsd_m_per_px(pose)
+            gsd = projector.finest_gsd_m_per_px(pose) if gsd_m_per_px is None else gsd_m_per_px
             return self.occupancy.compute(density, gsd)
 
         occupancy = _timed(timings, "occupancy", occupancy_stage)

@@ -116,6 +116,16 @@ def _cell_range(lo_px: float, hi_px: float, stride: float, n: int) -> tuple[int,
     return first, last
 
 
+def box_cells(box_xyxy: F64Array, density: DensityMap, margin_px: float = 0.0) -> tuple[slice, slice]:
+    """(rows, cols) slices of the density cells that overlap a box (x0, y0, x1, y1 frame pixels) grown by
+    ``margin_px`` on every side."""
+    x0, y0, x1, y1 = (float(v) for v in box_xyxy)
+    rows, cols = density.values.shape
+    r0, r1 = _cell_range(y0 - margin_px, y1 + margin_px, density.stride_y, rows)
+    c0, c1 = _cell_range(x0 - margin_px, x1 + margin_px, density.stride_x, cols)
+    return slice(r0, r1), slice(c0, c1)
+
+
 @dataclass(frozen=True)
 class RealFrameScore:
     """Scores of one real frame at one scale (module docstring)."""
@@ -147,18 +157,12 @@ def score_real_frame(
     boxes_xyxy: F64Array,
 ) -> RealFrameScore:
     """Score one frame: ``occupied`` (cells, shape of ``density.values``), boxes (N, 4) in the frame's pixels."""
-    rows, cols = occupied.shape
-    sx, sy = density.stride_x, density.stride_y
     near_person = np.zeros_like(occupied)
     found = 0
-    for x0, y0, x1, y1 in boxes_xyxy:
-        c0, c1 = _cell_range(x0, x1, sx, cols)
-        r0, r1 = _cell_range(y0, y1, sy, rows)
-        found += bool(occupied[r0:r1, c0:c1].any())
-        m = PERSON_MARGIN_FRACTION * max(x1 - x0, y1 - y0)
-        c0, c1 = _cell_range(x0 - m, x1 + m, sx, cols)
-        r0, r1 = _cell_range(y0 - m, y1 + m, sy, rows)
-        near_person[r0:r1, c0:c1] = True
+    for box in boxes_xyxy:
+        found += bool(occupied[box_cells(box, density)].any())
+        margin_px = PERSON_MARGIN_FRACTION * max(box[2] - box[0], box[3] - box[1])
+        near_person[box_cells(box, density, margin_px)] = True
     free = ~near_person
     return RealFrameScore(
         image=image,
@@ -256,12 +260,9 @@ def overlay(image_bgr: U8Image, density: DensityMap, occupied: BoolGrid, score_b
     )[:h, :w].astype(bool)
     out = (image_bgr.astype(np.float32) * 0.65).astype(np.uint8)
     out[cells] = (0.5 * out[cells] + np.array([0, 0, 127], np.float32)).astype(np.uint8)
-    rows, cols = occupied.shape
-    for x0, y0, x1, y1 in score_boxes:
-        c0, c1 = _cell_range(x0, x1, density.stride_x, cols)
-        r0, r1 = _cell_range(y0, y1, density.stride_y, rows)
-        colour = (0, 255, 0) if occupied[r0:r1, c0:c1].any() else (255, 0, 255)
-        cv2.rectangle(out, (int(x0), int(y0)), (math.ceil(x1), math.ceil(y1)), colour, 2)
+    for box in score_boxes:
+        colour = (0, 255, 0) if occupied[box_cells(box, density)].any() else (255, 0, 255)
+        cv2.rectangle(out, (int(box[0]), int(box[1])), (math.ceil(box[2]), math.ceil(box[3])), colour, 2)
     return out
 
 
@@ -334,17 +335,16 @@ def summary_table(summaries: list[RealSummary]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
-def default_sets(root: Path) -> list[Path]:
-    """Every folder under ``root`` that :func:`load_real_set` recognises, sorted."""
+def default_sets(root: Path) -> dict[str, list[BoxedImage]]:
+    """Every folder under ``root`` that :func:`load_real_set` recognises, loaded, by folder name (sorted)."""
     if not root.is_dir():
-        return []
-    found = []
+        return {}
+    found = {}
     for folder in sorted(p for p in root.iterdir() if p.is_dir()):
         try:
-            load_real_set(folder)
+            found[folder.name] = load_real_set(folder)
         except DatasetError:
             continue
-        found.append(folder)
     return found
 
 
@@ -358,8 +358,12 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=Path("models/eval/results/real"))
     parser.add_argument("--overlays", type=Path, default=Path("runs/eval/real"))
     args = parser.parse_args()
-    sets = args.data or default_sets(args.datasets)
-    if not sets:
+    try:
+        loaded = {folder.name: load_real_set(folder) for folder in args.data or []} or default_sets(args.datasets)
+    except DatasetError as exc:
+        sys.stderr.write(f"error: {exc}\n")
+        return 2
+    if not loaded:
         sys.stderr.write(f"error: no real set found (give --data, or put sets under {args.datasets})\n")
         return 2
     occupancy = load_perception_config(args.config).occupancy
@@ -375,11 +379,6 @@ def main() -> int:
         },
         "models": {},
     }
-    try:
-        loaded = {folder.name: load_real_set(folder) for folder in sets}
-    except DatasetError as exc:
-        sys.stderr.write(f"error: {exc}\n")
-        return 2
     for spec in args.model:
         name, _, path = spec.partition("=")
         if not path:
