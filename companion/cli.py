@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from companion import __version__
-from companion.config import ConfigError
+from companion.config import ConfigError, read_yaml_file
 
 logger = logging.getLogger("slz")
 
@@ -245,8 +245,6 @@ def _interrupt(signum: int, frame: object) -> None:
 def _campaign_replay(args: argparse.Namespace) -> int:
     import json
 
-    import yaml
-
     from companion.app.replay import replay
     from sitl.campaign.metrics import mission_metrics, stale
     from sitl.campaign.report import completed
@@ -259,7 +257,7 @@ def _campaign_replay(args: argparse.Namespace) -> int:
     if args.mission is None or not spec_path.is_file():
         sys.stderr.write("slz campaign replay: usage: slz campaign replay CAMPAIGN_FOLDER MISSION_ID\n")
         return 2
-    spec = CampaignSpec.model_validate(yaml.safe_load(spec_path.read_text()))
+    spec = CampaignSpec.model_validate(read_yaml_file(spec_path))
     plan = next((p for p in spec.missions() if p.mission_id == args.mission), None)
     if plan is None:
         sys.stderr.write(f"slz campaign replay: no mission {args.mission!r} in {folder}\n")

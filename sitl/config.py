@@ -50,6 +50,39 @@ class FaultConfig(StrictModel):
     at_s: float = Field(ge=0.0, description="Simulated time of the fault.")
 
 
+MAX_WIND_MPS = 40.0  # each wind component; beyond it the simple drag model (and any real quadrotor) is meaningless
+
+
+class LinkName(str, enum.Enum):
+    """The SITL's two MAVLink links."""
+
+    API = "api"
+    """The companion's (MAVSDK's) offboard link."""
+    GCS = "gcs"
+    """The ground station's link."""
+
+
+class SigningConfig(StrictModel):
+    """MAVLink 2 message signing on some links: outgoing frames signed, unsigned or badly signed frames dropped."""
+
+    key_hex: str = Field(
+        pattern=r"^[0-9a-fA-F]{64}$",
+        description="The shared 32-byte secret as 64 hex digits (as MAVProxy's and QGroundControl's signing setup "
+        "derive it from a passphrase: sha256 of the passphrase).",
+    )
+    links: list[LinkName] = Field(
+        default_factory=lambda: [LinkName.GCS],
+        min_length=1,
+        description="Links that require signatures. The companion's MAVSDK 4.x Python API cannot sign, so the API "
+        "link stays unsigned unless its peer signs (a pymavlink client, MAVProxy).",
+    )
+
+    @property
+    def key(self) -> bytes:
+        """The 32-byte secret."""
+        return bytes.fromhex(self.key_hex)
+
+
 class SitlConfig(StrictModel):
     """One simulated vehicle. Ports follow PX4 SITL and shift with ``instance``."""
 
@@ -72,7 +105,10 @@ class SitlConfig(StrictModel):
     lockstep_timeout_s: float = Field(default=10.0, gt=0.0, le=600.0, description="Wall-clock wait for an ack.")
     seed: int = Field(default=0, ge=0)
     position_noise_m: float = Field(default=0.0, ge=0.0, le=5.0, description="Noise on reported positions.")
-    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    wind_ned_mps: tuple[float, float, float] = Field(
+        default=(0.0, 0.0, 0.0), description=f"Wind, NED m/s, each component within +-{MAX_WIND_MPS:g}."
+    )
+    signing: SigningConfig | None = Field(default=None, description="MAVLink 2 signing; None: off, as PX4's default.")
     params: dict[str, float] = Field(default_factory=dict, description="Parameter overrides, PX4 names.")
     log_path: Path | None = Field(default=None, description="Trajectory log (CSV), ground truth.")
     log_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
@@ -93,6 +129,13 @@ class SitlConfig(StrictModel):
         unknown = sorted(set(value) - known)
         if unknown:
             raise ValueError(f"unknown parameters {unknown}; known: {sorted(known)}")
+        return value
+
+    @field_validator("wind_ned_mps")
+    @classmethod
+    def _wind(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        if any(abs(v) > MAX_WIND_MPS for v in value):
+            raise ValueError(f"each wind component must lie within +-{MAX_WIND_MPS:g} m/s")
         return value
 
     @model_validator(mode="after")

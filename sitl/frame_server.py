@@ -1,8 +1,12 @@
 """The SITL camera's frame stream: a TCP server on loopback that never blocks the simulation.
 
-One client at a time (a new connection replaces the old). Outside lockstep a frame that finds the previous one still
-unsent is dropped and counted, so a slow or vanished client cannot stall the SITL; in lockstep the caller flushes
-with a deadline instead (the client must have the frame before it can acknowledge the tick).
+One client at a time: while it is connected, a second connection is refused (closed at once, counted in
+``FrameStats.refused``), so an intruder on the port cannot take the stream over; once the client has gone (its
+end closed), the next connection is served (a restarted companion).
+
+Outside lockstep a frame that finds the previous one still unsent is dropped and counted, so a slow or vanished
+client cannot stall the SITL; in lockstep the caller flushes with a deadline instead (the client must have the frame
+before it can acknowledge the tick).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ class FrameStats:
     sent: int = 0
     dropped: int = 0
     clients: int = 0
+    refused: int = 0  # connections turned away while a client was connected
 
 
 class FrameServer:
@@ -48,21 +53,43 @@ class FrameServer:
         return self._client is not None
 
     def poll(self) -> None:
-        """Accept a new client (replacing the old) and push pending bytes."""
-        client: socket.socket | None
-        try:
-            client, addr = self._listener.accept()
-        except BlockingIOError:  # nobody is connecting
-            client = None
-        if client is not None:
-            self._drop_client()
+        """Notice a client that left, accept a new one (or refuse it while one is served), push pending bytes."""
+        self._check_client()
+        while True:
+            try:
+                client, addr = self._listener.accept()
+            except BlockingIOError:  # nobody is connecting
+                break
+            if self._client is not None:
+                self.stats.refused += 1
+                logger.warning("frame connection from %s:%d refused: a client is connected", *addr)
+                client.close()
+                continue
             client.setblocking(False)
             client.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 8 << 20)
             client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._client = client
+            self._pending = b""
             self.stats.clients += 1
             logger.info("frame client connected from %s:%d", *addr)
         self._flush_some()
+
+    def _check_client(self) -> None:
+        """Drop the client once its end is closed (it never sends: anything it does send is discarded)."""
+        if self._client is None:
+            return
+        try:
+            for _ in range(16):
+                data = self._client.recv(65536)
+                if not data:  # end of stream: the client closed its end
+                    logger.info("frame client gone")
+                    self._drop_client()
+                    return
+        except BlockingIOError:
+            return
+        except OSError:
+            logger.info("frame client gone")
+            self._drop_client()
 
     def _drop_client(self) -> None:
         if self._client is not None:

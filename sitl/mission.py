@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 
 from companion.app.recorder import read_log
-from companion.config import validate_config
+from companion.config import read_yaml_file, validate_config
 from sitl.config import SitlConfig
 from sitl.process import SitlProcess, die_with_parent, log_tail, terminate_then_kill
 
@@ -176,7 +176,7 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
     )
     sitl_path = spec.run_dir / "sitl.yaml"
     sitl_path.write_text(yaml.safe_dump({"sitl": sitl_section}, sort_keys=False))
-    mission = yaml.safe_load(spec.mission_config.read_text())
+    mission = read_yaml_file(spec.mission_config)
     frames = {"frame_every": 1, "frame_format": "png"} if spec.record_frames else {"frame_every": 0}
     mission = deep_merge(
         mission,

@@ -21,6 +21,7 @@ from typing import Any, TextIO
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.config import quote
 from sitl.autopilot.commander import FORCE_MAGIC, Commander, ControlSource, LandedState, MavResult
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
@@ -37,8 +38,8 @@ from sitl.autopilot.telemetry import (
     TelemetryBuilder,
 )
 from sitl.clock import SimClock
-from sitl.config import FaultKind, SitlConfig
-from sitl.control_channel import ControlChannel
+from sitl.config import MAX_WIND_MPS, FaultKind, LinkName, SitlConfig
+from sitl.control_channel import ControlChannel, RequestError, flag, lockstep_ack, number
 from sitl.dynamics.base import DynamicsError, make_dynamics
 
 logger = logging.getLogger(__name__)
@@ -51,6 +52,29 @@ IDLE_COMMAND = 0.1  # armed on the ground: props spin at idle
 IGNORE_PX, IGNORE_PY, IGNORE_PZ = 1, 2, 4
 IGNORE_VX, IGNORE_VY, IGNORE_VZ = 8, 16, 32
 IGNORE_YAW = 1024
+
+
+def whole(value: float, low: int, high: int, nan_is: int | None = None) -> int | None:
+    """A command parameter as a whole number in [low, high], or None when it is not one (NaN gives ``nan_is``).
+
+    MAVLink carries every COMMAND_LONG parameter as a float: a hostile or broken sender may put NaN, infinity or a
+    huge value where an id or an enum belongs, and ``int()`` of those raises.
+    """
+    if math.isnan(value):
+        return nan_is
+    if not math.isfinite(value) or value != round(value) or not low <= value <= high:
+        return None
+    return int(value)
+
+
+MAX_SENDERS_REPORTED = 32  # per counter in the `state` reply, which must fit one datagram
+
+
+def count_capped(counts: dict[str, int], key: str) -> None:
+    """Count one for ``key``; past MAX_SENDERS_REPORTED keys, new ones share the key ``"other"``."""
+    if key not in counts and len(counts) >= MAX_SENDERS_REPORTED:
+        key = "other"
+    counts[key] = counts.get(key, 0) + 1
 
 
 class SitlError(Exception):
@@ -103,8 +127,15 @@ class SitlVehicle:
         self._frame_client_lost_wall = math.nan
         try:
             sysid, bind = config.system_id, config.bind_address
-            self.links.append(MavlinkLink("api", bind, config.api_port_local, config.api_port_remote, sysid))
-            self.links.append(MavlinkLink("gcs", bind, config.gcs_port_local, config.gcs_port_remote, sysid))
+            signing = config.signing
+            keys = {name: signing.key if signing is not None and name in signing.links else None for name in LinkName}
+            api, gcs = LinkName.API, LinkName.GCS
+            self.links.append(
+                MavlinkLink("api", bind, config.api_port_local, config.api_port_remote, sysid, signing_key=keys[api])
+            )
+            self.links.append(
+                MavlinkLink("gcs", bind, config.gcs_port_local, config.gcs_port_remote, sysid, signing_key=keys[gcs])
+            )
             self.control = ControlChannel(bind, config.control_port)
         except Exception as exc:
             self.close()
@@ -127,6 +158,8 @@ class SitlVehicle:
         self._exit_code = 0
         self._last_heartbeat_wall = -math.inf
         self.setpoints_rejected = 0
+        self.handler_errors = 0  # messages and requests whose handling raised (dropped, logged, counted)
+        self._last_handler_error_wall = -math.inf
         self.commands_by_sender: dict[str, int] = {}
         self.setpoints_by_sender: dict[str, int] = {}
         self._last_setpoint_ned: tuple[float, float, float, float] | None = None  # any sender: n, e, d, yaw (rad)
@@ -138,6 +171,7 @@ class SitlVehicle:
         self._next_tick_s = 0.0
         self._tick_sent_wall = math.nan
         self._lockstep_ack: dict[str, Any] | None = None
+        self._last_ack_wall = -math.inf
         self._lockstep_released = False
         self._latched_setpoint: tuple[float, float, float, float] | None = None
         self.setpoints_between_ticks = 0  # ignored: arrived between ticks and not the acknowledged setpoint
@@ -349,7 +383,7 @@ class SitlVehicle:
                 if not np.array_equal(arrived, wanted) or abs(last[3] - float(setpoint[3])) > 1e-4:
                     return False
             for command, count in (expect.get("commands") or {}).items():
-                if self._commands_seen.get(int(command), 0) < int(count):
+                if self._commands_seen.get(command, 0) < count:
                     return False
             return True
         source = (ack["sysid"], ack["compid"])
@@ -441,10 +475,26 @@ class SitlVehicle:
     def _poll(self) -> None:
         for link in self.links:
             for msg in link.receive():
-                self._handle_mavlink(link, msg)
+                try:
+                    self._handle_mavlink(link, msg)
+                except Exception as exc:  # a message no check foresaw: drop and count it, never die of it
+                    self._handler_failed(f"MAVLink {msg.get_type()} on {link.name}", exc)
         assert self.control is not None
         for request, addr in self.control.receive():
-            self._handle_control(request, addr)
+            try:
+                self._handle_control(request, addr)
+            except Exception as exc:
+                self._handler_failed(f"control {quote(request.get('cmd'))}", exc)
+                self.control.send({"event": "error", "cmd": "?", "error": "request failed"}, addr)
+
+    def _handler_failed(self, what: str, exc: Exception) -> None:
+        """Count a request whose handling raised; log it at most once per wall second."""
+        self.handler_errors += 1
+        now = time.monotonic()
+        if now - self._last_handler_error_wall >= 1.0:
+            self._last_handler_error_wall = now
+            name = type(exc).__name__
+            logger.error("%s dropped: %s: %s (%d so far)", what, name, quote(str(exc)), self.handler_errors)
 
     def _targets_us(self, msg: Any) -> bool:
         target = getattr(msg, "target_system", 0)
@@ -455,12 +505,12 @@ class SitlVehicle:
         sender = f"{msg.get_srcSystem()}/{msg.get_srcComponent()}"
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             if self._targets_us(msg) and getattr(msg, "target_component", 0) in (0, 1):
-                self.commands_by_sender[sender] = self.commands_by_sender.get(sender, 0) + 1
+                count_capped(self.commands_by_sender, sender)
                 self._commands_seen[int(msg.command)] = self._commands_seen.get(int(msg.command), 0) + 1
                 self._handle_command(link, msg, kind == "COMMAND_INT")
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             if self._targets_us(msg):
-                self.setpoints_by_sender[sender] = self.setpoints_by_sender.get(sender, 0) + 1
+                count_capped(self.setpoints_by_sender, sender)
                 values = (float(msg.x), float(msg.y), float(msg.z), float(msg.yaw))
                 if self._between_ticks() and self._latched_setpoint is not None and values != self._latched_setpoint:
                     # In lockstep, inputs change only at ticks: a late re-send of an older setpoint (MAVSDK re-sends
@@ -493,8 +543,9 @@ class SitlVehicle:
         result = MavResult.UNSUPPORTED
         follow_up: str | None = None
         if c == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = round(p[1]) == FORCE_MAGIC if math.isfinite(p[1]) else False
-            result = cmd.arm(force) if p[0] > 0.5 else cmd.disarm(force)
+            force = whole(p[1], 0, 65535) == FORCE_MAGIC
+            arm = whole(p[0], 0, 1)  # neither 0 (disarm) nor 1 (arm): malformed, do neither
+            result = MavResult.DENIED if arm is None else cmd.arm(force) if arm == 1 else cmd.disarm(force)
         elif c == mavlink.MAV_CMD_NAV_TAKEOFF:
             above_home = math.nan
             if math.isfinite(p7):
@@ -505,25 +556,36 @@ class SitlVehicle:
         elif c == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             result = cmd.return_to_launch()
         elif c == mavlink.MAV_CMD_DO_SET_MODE:
-            mode = FlightMode.from_px4(int(p[1]), int(p[2])) if math.isfinite(p[1]) and math.isfinite(p[2]) else None
-            if mode is None or not (int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED):
+            base, main, sub = whole(p[0], 0, 255), whole(p[1], 0, 255), whole(p[2], 0, 255, nan_is=0)
+            mode = FlightMode.from_px4(main, sub) if main is not None and sub is not None else None
+            if base is None or main is None:
+                result = MavResult.DENIED  # not a mode at all
+            elif mode is None or not base & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 result = MavResult.UNSUPPORTED
             else:
                 result = cmd.set_mode(mode)
         elif c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            name = NAMES_BY_ID.get(int(p[0]))
-            if name is None or name == "AUTOPILOT_VERSION":
-                result = MavResult.UNSUPPORTED if int(p[0]) != mavlink.MAVLINK_MSG_ID_HEARTBEAT else MavResult.ACCEPTED
+            msg_id = whole(p[0], 0, 0xFFFFFF)
+            name = NAMES_BY_ID.get(msg_id) if msg_id is not None else None
+            if msg_id is None or not math.isfinite(p[1]):
+                result = MavResult.DENIED
+            elif name is None or name == "AUTOPILOT_VERSION":
+                result = MavResult.UNSUPPORTED if msg_id != mavlink.MAVLINK_MSG_ID_HEARTBEAT else MavResult.ACCEPTED
             else:
                 self.schedules[id(link)].set_interval(name, float(p[1]))
                 result = MavResult.ACCEPTED
         elif c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = int(p[0]) if c == mavlink.MAV_CMD_REQUEST_MESSAGE else MESSAGE_IDS["AUTOPILOT_VERSION"]
-            name = NAMES_BY_ID.get(msg_id)
-            if name is not None and self.telemetry.can_build(name):
+            capabilities = MESSAGE_IDS["AUTOPILOT_VERSION"]
+            wanted = whole(p[0], 0, 0xFFFFFF) if c == mavlink.MAV_CMD_REQUEST_MESSAGE else capabilities
+            name = NAMES_BY_ID.get(wanted) if wanted is not None else None
+            if wanted is None:
+                result = MavResult.DENIED
+            elif name is not None and self.telemetry.can_build(name):
                 result, follow_up = MavResult.ACCEPTED, name
         elif c == mavlink.MAV_CMD_DO_SET_HOME:
-            if cmd.landed_state is LandedState.ON_GROUND and p[0] > 0.5:
+            if not math.isfinite(p[0]):
+                result = MavResult.DENIED
+            elif cmd.landed_state is LandedState.ON_GROUND and p[0] > 0.5:
                 home = self.dynamics.state().position_ned_m.copy()
                 home[2] = cmd.home_ned_m[2]
                 cmd.home_ned_m = home
@@ -531,8 +593,9 @@ class SitlVehicle:
             else:
                 result = MavResult.TEMPORARILY_REJECTED if p[0] > 0.5 else MavResult.DENIED
         elif c == mavlink.MAV_CMD_DO_CHANGE_SPEED:
-            if math.isfinite(p[1]) and p[1] > 0:
-                self.params.set("MPC_XY_VEL_MAX", min(max(p[1], 0.5), 20.0))
+            spec = self.params.spec("MPC_XY_VEL_MAX")
+            if math.isfinite(p[1]) and spec.minimum <= p[1] <= spec.maximum:
+                self.params.set("MPC_XY_VEL_MAX", p[1])
                 self.controller.limits = self._limits()
                 result = MavResult.ACCEPTED
             else:
@@ -646,23 +709,30 @@ class SitlVehicle:
             elif cmd == "state":
                 reply = self._truth()
             elif cmd == "pilot_mode":
-                reply["result"] = int(
-                    self.commander.set_mode(FlightMode.from_name(str(request["mode"])), ControlSource.PILOT)
-                )
+                mode = request.get("mode")
+                if not isinstance(mode, str):
+                    raise RequestError("mode: expected a mode name")
+                reply["result"] = int(self.commander.set_mode(FlightMode.from_name(mode[:32]), ControlSource.PILOT))
             elif cmd == "pilot_sticks":
-                self.commander.pilot_sticks = np.clip(
-                    [float(request.get(k, 0.0)) for k in ("north", "east", "down")], -1.0, 1.0
+                self.commander.pilot_sticks = np.array(
+                    [number(request, k, -1.0, 1.0, default=0.0) for k in ("north", "east", "down")]
                 )
             elif cmd == "rc_loss":
-                self.commander.set_rc_lost(bool(request["lost"]))
+                self.commander.set_rc_lost(flag(request, "lost"))
             elif cmd == "wind":
-                wind = [float(v) for v in request["ned_mps"]]
-                if len(wind) != 3 or not all(math.isfinite(v) for v in wind):
-                    raise ValueError("ned_mps needs three finite numbers")
-                self.dynamics.set_wind(np.array(wind))
+                wind = request.get("ned_mps")
+                if not isinstance(wind, list) or len(wind) != 3:
+                    raise RequestError("ned_mps: expected three numbers (north, east, down m/s)")
+                components = {f"ned_mps[{i}]": v for i, v in enumerate(wind)}
+                self.dynamics.set_wind(
+                    np.array([number(components, k, -MAX_WIND_MPS, MAX_WIND_MPS) for k in components])
+                )
             elif cmd == "lockstep_subscribe":
                 if not self.config.lockstep:
                     raise ValueError("this SITL does not run in lockstep")
+                current = self._lockstep_client
+                if current is not None and addr != current and time.monotonic() - self._last_ack_wall < 2.0:
+                    raise ValueError("lockstep has a live client (it acknowledged a tick within 2 s)")
                 self._lockstep_client = addr
                 self._lockstep_released = False
                 self._tick_sent_wall = math.nan  # (re)send the pending tick to the new client
@@ -673,14 +743,14 @@ class SitlVehicle:
             elif cmd == "camera_fail":
                 if self.camera is None:
                     raise ValueError("this SITL has no camera")
-                self.camera_failed = bool(request["failed"])
+                self.camera_failed = flag(request, "failed")
             elif cmd == "link_loss":
-                self.links[0].cut = bool(request["lost"])
+                self.links[0].cut = flag(request, "lost")
             elif cmd == "lockstep_ack":
-                if "expect" in request:  # clients that cannot count their messages (MAVSDK re-sends on its own)
-                    self._lockstep_ack = {"seq": int(request["seq"]), "expect": request["expect"]}
-                else:
-                    self._lockstep_ack = {k: int(request[k]) for k in ("seq", "mavlink_sent", "sysid", "compid")}
+                if not self.config.lockstep or addr != self._lockstep_client:
+                    raise ValueError("not this SITL's lockstep client")
+                self._lockstep_ack = lockstep_ack(request)
+                self._last_ack_wall = time.monotonic()
                 return
             elif cmd == "people":
                 if self.camera is None:
@@ -692,8 +762,9 @@ class SitlVehicle:
                 raise ValueError(f"unknown cmd {cmd!r}")
         except (KeyError, ValueError, TypeError) as exc:
             reply = {"event": "error", "cmd": cmd, "error": str(exc)}
-        if "id" in request:
-            reply["id"] = request["id"]  # lets the requester match replies to requests
+        request_id = request.get("id")
+        if isinstance(request_id, (int, str)) and len(str(request_id)) <= 64:
+            reply["id"] = request_id  # lets the requester match replies to requests
         self.control.send(reply, addr)
 
     def _truth(self) -> dict[str, Any]:
@@ -723,7 +794,10 @@ class SitlVehicle:
                 "sent": self.camera.server.stats.sent,
                 "dropped": self.camera.server.stats.dropped,
                 "clients": self.camera.server.stats.clients,
+                "refused": self.camera.server.stats.refused,
             },
+            "handler_errors": self.handler_errors,
+            "control_malformed": self.control.malformed if self.control is not None else 0,
             "commands_by_sender": dict(self.commands_by_sender),
             "setpoints_by_sender": dict(self.setpoints_by_sender),
             "links": {
@@ -732,7 +806,10 @@ class SitlVehicle:
                     "sent": link.stats.sent,
                     "dropped_malformed": link.stats.dropped_malformed,
                     "dropped_unknown": link.stats.dropped_unknown,
-                    "senders": sorted({f"{s_}/{c_}" for s_, c_ in link.stats.per_source}),
+                    "senders": sorted({f"{s_}/{c_}" for s_, c_ in link.stats.per_source})[:MAX_SENDERS_REPORTED],
+                    "dropped_unsigned": link.stats.dropped_unsigned,
+                    "stray_frames": link.stats.stray_frames,
+                    "partner": f"{link.remote[0]}:{link.remote[1]}",
                 }
                 for link in self.links
             },

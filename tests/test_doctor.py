@@ -46,8 +46,10 @@ def mission_config(tmp_path: Path, name: str, **replace: str) -> Path:
 
 
 def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path) -> None:
-    sitl_config = tmp_path / "sitl.yaml"
-    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n")
+    sitl_config = tmp_path / "sitl.yaml"  # offboard loss holds: what deploy/README.md asks of a vehicle over people
+    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_ACT: 1}\n")
+    lands_config = tmp_path / "sitl_lands.yaml"  # PX4's default: offboard loss lands in place
+    lands_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n")
     good = mission_config(tmp_path, "good")
     no_model_no_camera = mission_config(
         tmp_path,
@@ -61,20 +63,26 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path) 
     sitl = SitlProcess(["--config", str(sitl_config)], INSTANCE, tmp_path).start()
     try:
         ok = doctor(good)
-        broken = doctor(no_model_no_camera)
         unlinked = doctor(no_link)
+    finally:
+        sitl.stop()
+    sitl = SitlProcess(["--config", str(lands_config)], INSTANCE, tmp_path).start()
+    try:
+        broken = doctor(no_model_no_camera)
     finally:
         sitl.stop()
 
     # A good board: every check passes, exit 0.
     checks = lines_of(ok)
     assert ok.returncode == 0, ok.stdout + ok.stderr[-2000:]
-    assert set(checks) == {"disk", "model", "link", "clock", "camera"}
+    assert set(checks) == {"disk", "model", "link", "clock", "camera", "failsafe"}
     assert all(line.startswith("PASS") for line in checks.values()), checks
     assert "CPUExecutionProvider" in checks["model"]
     assert "LOCAL_POSITION_NED" in checks["link"]
     assert "ATTITUDE_QUATERNION" in checks["link"]
     assert "5 frames 640x480" in checks["camera"]
+    assert "COM_OF_LOSS_T = 1 s" in checks["failsafe"]
+    assert "COM_OBL_ACT = 1 (hold)" in checks["failsafe"]
     assert ok.stdout.rstrip().endswith("ready to fly")
 
     # No model and no camera: each named, the link still checked and passing, exit 1.
@@ -86,10 +94,15 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path) 
     assert "127.0.0.1:9" in checks["camera"]
     assert checks["link"].startswith("PASS")
     assert "NOT READY: model, camera failed" in broken.stdout
+    # ...and on an autopilot whose offboard-loss action lands in place, the failsafe line warns and names it.
+    assert checks["failsafe"].startswith("WARN failsafe:"), checks["failsafe"]
+    assert "COM_OBL_ACT = 0 (land)" in checks["failsafe"]
+    assert "COM_OBL_ACT lands in place" in checks["failsafe"]
 
     # No autopilot on the configured port: the link fails within its timeout, the clock cannot be checked.
     checks = lines_of(unlinked)
     assert unlinked.returncode == 1
     assert checks["link"] == "FAIL link: udpin://0.0.0.0:14539: no autopilot answered within 3 s"
     assert checks["clock"].startswith("SKIP clock:")
+    assert checks["failsafe"].startswith("SKIP failsafe:")
     assert checks["model"].startswith("PASS")

@@ -9,7 +9,11 @@ The checks use the mission config the flight will use, and the same classes ``sl
   in-air state all stream, position and attitude at a usable rate;
 - **clock**: the vehicle clock is synchronised from the telemetry stamps, and evenly (the spread of the offsets);
 - **camera**: the source opens and delivers frames with increasing capture times that are fresh on the vehicle
-  clock.
+  clock;
+- **failsafe**: what the autopilot does when the companion dies in flight (PX4's ``COM_OF_LOSS_T`` and
+  ``COM_OBL_ACT``/``COM_OBL_RC_ACT``, ArduPilot's ``FS_GCS_ENABLE``). Landing in place is a WARN: over a crowd it
+  lands where the companion had refused to. Hold is what ``deploy/README.md`` asks for: the restarted companion takes
+  over from HOLD.
 
 Nothing is commanded: the doctor never arms, never changes mode and never sends a setpoint.
 """
@@ -239,8 +243,73 @@ async def check_camera(config: MissionConfig, link: MavsdkVehicleLink | None, li
     return CheckResult("camera", Status.PASS, detail)
 
 
+# What each offboard-loss setting does, and whether it lands where the vehicle is (over whatever is below it).
+PX4_OBL_ACT = {0: ("land", True), 1: ("hold", False), 2: ("return", False)}  # PX4 up to v1.13 (and this SITL)
+PX4_OBL_RC_ACT = {  # PX4 v1.14 and later
+    0: ("position mode", False),
+    1: ("altitude mode", False),
+    2: ("manual", False),
+    3: ("return", False),
+    4: ("land", True),
+    5: ("hold", False),
+    6: ("terminate", True),
+    7: ("disarm", True),
+}
+ARDUPILOT_FS_GCS = {  # ArduCopter's GCS failsafe (the companion's heartbeat, when it is SYSID_MYGCS)
+    0: ("disabled: guided mode holds the last target", False),
+    1: ("RTL", False),
+    2: ("continue the mission", False),
+    3: ("SmartRTL or RTL", False),
+    4: ("SmartRTL or land", True),
+    5: ("land", True),
+    6: ("auto DO_LAND_START or RTL", False),
+    7: ("brake or land", True),
+}
+
+
+async def check_failsafe(link: MavsdkVehicleLink) -> CheckResult:
+    """Read the autopilot's offboard-loss parameters and say what it does if the companion dies in flight.
+
+    WARN when the configured action lands (or drops) the vehicle where it is; FAIL when no known parameter answers.
+    """
+    loss_s = await link.read_parameter("COM_OF_LOSS_T")
+    if loss_s is not None:
+        actions: list[tuple[str, float, dict[int, tuple[str, bool]]]] = []
+        for name, table in (("COM_OBL_ACT", PX4_OBL_ACT), ("COM_OBL_RC_ACT", PX4_OBL_RC_ACT)):
+            value = await link.read_parameter(name)
+            if value is not None:
+                actions.append((name, value, table))
+        if not actions:
+            detail = "COM_OF_LOSS_T found, but neither COM_OBL_ACT nor COM_OBL_RC_ACT"
+            return CheckResult("failsafe", Status.FAIL, detail)
+        texts, lands = [], []
+        for name, value, table in actions:
+            what, in_place = table.get(int(value), (f"unknown action {value:g}", True))
+            texts.append(f"{name} = {value:g} ({what})")
+            if in_place:
+                lands.append(name)
+        detail = f"companion lost for COM_OF_LOSS_T = {loss_s:g} s: " + ", ".join(texts)
+    else:
+        value = await link.read_parameter("FS_GCS_ENABLE")
+        if value is None:
+            return CheckResult(
+                "failsafe", Status.FAIL, "no offboard-loss parameter answered (COM_OF_LOSS_T, FS_GCS_ENABLE)"
+            )
+        what, in_place = ARDUPILOT_FS_GCS.get(int(value), (f"unknown action {value:g}", True))
+        detail = f"companion lost: FS_GCS_ENABLE = {value:g} ({what})"
+        lands = ["FS_GCS_ENABLE"] if in_place else []
+    if lands:
+        return CheckResult(
+            "failsafe",
+            Status.WARN,
+            f"{detail}; {' and '.join(lands)} lands in place if the companion dies, over whatever is below "
+            "(set hold: see deploy/README.md)",
+        )
+    return CheckResult("failsafe", Status.PASS, detail)
+
+
 async def diagnose(config: MissionConfig, limits: DoctorLimits | None = None) -> list[CheckResult]:
-    """Run every check in order: disk, model, link, clock, camera."""
+    """Run every check in order: disk, model, link, clock, camera, failsafe."""
     limits = limits or DoctorLimits()
     results = [check_disk(config.recorder.directory, limits.min_free_mb)]
     results.append(
@@ -252,6 +321,10 @@ async def diagnose(config: MissionConfig, limits: DoctorLimits | None = None) ->
         results += link_results
         linked = link_results[0].ok or link.clock.synced
         results.append(await check_camera(config, link if linked else None, limits))
+        if link_results[0].ok:
+            results.append(await check_failsafe(link))
+        else:
+            results.append(CheckResult("failsafe", Status.SKIP, "no link: the autopilot's parameters are unknown"))
     finally:
         await link.close()
     return results

@@ -91,6 +91,8 @@ class FlightOutcome:
     takeoff_refusals: int = 0
     commands_sent: int = 0
     camera_lost: bool = False
+    camera_fault: str | None = None
+    """Why the camera stopped (a :class:`~companion.camera.frames.CameraFault` value), when it did."""
     link_lost: bool = False
     failsafes: list[str] = field(default_factory=list)
     wall_s: float = 0.0
@@ -405,9 +407,10 @@ class FlightApp:
 
     def _camera_lost(self, exc: CameraError) -> None:
         self.outcome.camera_lost = True
-        logger.error("camera lost: %s (the perception-silence failsafe acts)", exc)
+        self.outcome.camera_fault = exc.fault.value
+        logger.error("camera fault %s: %s (the perception-silence failsafe acts)", exc.fault.value, exc)
         t_s = self.link.poses.latest_t_s
-        self.recorder.write("error", t_s, where="camera", error=str(exc))
+        self.recorder.write("error", t_s, where="camera", fault=exc.fault.value, error=str(exc))
 
     async def _frame_of(self, tick: Tick, queue: asyncio.Queue[Frame | None]) -> Frame | None:
         """Lockstep: the frame the simulator sent before ``tick`` (None, counted, if it never comes)."""

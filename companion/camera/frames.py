@@ -12,6 +12,7 @@ A frame carries its sequence number and its capture time on the vehicle's clock 
 from __future__ import annotations
 
 import asyncio
+import enum
 import json
 import math
 import struct
@@ -28,12 +29,32 @@ MAGIC = b"SLZF"
 U8Image = npt.NDArray[np.uint8]
 
 
-class CameraError(Exception):
-    """A frame source failed (what, and which source)."""
+MAX_HEADER_BYTES = 4096
+MAX_PAYLOAD_BYTES = 64 << 20  # 64 MiB: a 4096 x 4096 BGR frame is 48 MiB
 
-    def __init__(self, source: str, what: str) -> None:
+
+class CameraFault(str, enum.Enum):
+    """Why a frame source stopped (the flight log names it)."""
+
+    CONNECT_FAILED = "connect_failed"
+    """The source could not be opened."""
+    CONNECTION_LOST = "connection_lost"
+    """The stream ended or was cut (the camera closed it, or refused us as a second client)."""
+    SILENT = "silent"
+    """No frame within the deadline."""
+    BAD_FRAME = "bad_frame"
+    """The stream carried something that is not a frame."""
+    DEVICE = "device"
+    """A device (OpenCV) source failed."""
+
+
+class CameraError(Exception):
+    """A frame source failed (what, which source, and the kind of fault)."""
+
+    def __init__(self, source: str, what: str, fault: CameraFault = CameraFault.DEVICE) -> None:
         super().__init__(f"{source}: {what}")
         self.source = source
+        self.fault = fault
 
 
 @dataclass(frozen=True)
@@ -91,10 +112,17 @@ class SitlFrameSource:
         try:
             self._connection = await asyncio.wait_for(asyncio.open_connection(self.host, self.port), self.timeout_s)
         except (OSError, asyncio.TimeoutError) as exc:
-            raise CameraError(self.name, f"cannot connect: {exc or 'timed out'}") from None
+            raise CameraError(self.name, f"cannot connect: {exc or 'timed out'}", CameraFault.CONNECT_FAILED) from None
 
     async def frames(self) -> AsyncIterator[Frame]:
-        """Connect (unless :meth:`open` did), then yield frames until the SITL closes the stream."""
+        """Connect (unless :meth:`open` did), then yield frames until the stream ends.
+
+        Raises
+        ------
+        CameraError
+            The stream ended or was cut (``CONNECTION_LOST``: the SITL closes it at its end, or refuses a second
+            client), stayed silent past ``timeout_s`` (``SILENT``), or carried something else (``BAD_FRAME``).
+        """
         await self.open()
         assert self._connection is not None
         reader, writer = self._connection
@@ -103,23 +131,38 @@ class SitlFrameSource:
             while True:
                 try:
                     magic = await asyncio.wait_for(reader.readexactly(4), self.timeout_s)
-                except asyncio.IncompleteReadError:
-                    return  # the SITL ended the stream
+                    frame = await asyncio.wait_for(self._rest_of_frame(reader, magic), self.timeout_s)
+                except (asyncio.IncompleteReadError, ConnectionError) as exc:
+                    what = "the camera closed the connection" if not str(exc) else f"connection lost: {exc}"
+                    raise CameraError(self.name, what, CameraFault.CONNECTION_LOST) from None
                 except asyncio.TimeoutError:
-                    raise CameraError(self.name, f"no frame for {self.timeout_s} s") from None
-                if magic != MAGIC:
-                    raise CameraError(self.name, f"bad frame marker {magic!r}")
-                (header_len,) = struct.unpack("<I", await reader.readexactly(4))
-                header = json.loads(await reader.readexactly(header_len))
-                (payload_len,) = struct.unpack("<I", await reader.readexactly(4))
-                payload = await reader.readexactly(payload_len)
-                h, w = int(header["height"]), int(header["width"])
-                if header.get("encoding") != "bgr8" or payload_len != h * w * 3:
-                    raise CameraError(self.name, f"unsupported frame {header} with {payload_len} bytes")
-                image = np.frombuffer(payload, dtype=np.uint8).reshape(h, w, 3)
-                yield Frame(int(header["seq"]), float(header["t_capture_s"]), image, time.monotonic())
+                    raise CameraError(self.name, f"no frame for {self.timeout_s} s", CameraFault.SILENT) from None
+                yield frame
         finally:
             writer.close()
+
+    async def _rest_of_frame(self, reader: asyncio.StreamReader, magic: bytes) -> Frame:
+        if magic != MAGIC:
+            raise CameraError(self.name, f"bad frame marker {magic!r}", CameraFault.BAD_FRAME)
+        (header_len,) = struct.unpack("<I", await reader.readexactly(4))
+        if header_len > MAX_HEADER_BYTES:
+            raise CameraError(self.name, f"frame header of {header_len} bytes", CameraFault.BAD_FRAME)
+        try:
+            header = json.loads(await reader.readexactly(header_len))
+            h, w = int(header["height"]), int(header["width"])
+            seq, t_capture_s = int(header["seq"]), float(header["t_capture_s"])
+        except (ValueError, KeyError, TypeError, OverflowError):
+            raise CameraError(self.name, "unreadable frame header", CameraFault.BAD_FRAME) from None
+        (payload_len,) = struct.unpack("<I", await reader.readexactly(4))
+        if payload_len > MAX_PAYLOAD_BYTES:
+            raise CameraError(self.name, f"frame payload of {payload_len} bytes", CameraFault.BAD_FRAME)
+        payload = await reader.readexactly(payload_len)
+        if header.get("encoding") != "bgr8" or payload_len != h * w * 3 or not math.isfinite(t_capture_s):
+            raise CameraError(
+                self.name, f"unsupported frame {str(header)[:120]} with {payload_len} bytes", CameraFault.BAD_FRAME
+            )
+        image = np.frombuffer(payload, dtype=np.uint8).reshape(h, w, 3)
+        return Frame(seq, t_capture_s, image, time.monotonic())
 
 
 def open_frame_source(

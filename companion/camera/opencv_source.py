@@ -18,7 +18,7 @@ from urllib.parse import urlparse
 import cv2
 import numpy as np
 
-from companion.camera.frames import CameraError, Frame
+from companion.camera.frames import CameraError, CameraFault, Frame
 
 logger = logging.getLogger(__name__)
 
@@ -69,10 +69,12 @@ class OpenCvFrameSource:
         try:
             capture = await asyncio.wait_for(asyncio.to_thread(open_capture), self.timeout_s)
         except asyncio.TimeoutError:
-            raise CameraError(self.url, f"cannot open within {self.timeout_s:g} s") from None
+            raise CameraError(
+                self.url, f"cannot open within {self.timeout_s:g} s", CameraFault.CONNECT_FAILED
+            ) from None
         if not capture.isOpened():
             capture.release()
-            raise CameraError(self.url, "cannot open")
+            raise CameraError(self.url, "cannot open", CameraFault.CONNECT_FAILED)
         self._capture = capture
 
     async def frames(self) -> AsyncIterator[Frame]:
@@ -87,11 +89,11 @@ class OpenCvFrameSource:
                 try:
                     ok, image = await asyncio.wait_for(asyncio.to_thread(capture.read), self.timeout_s)
                 except asyncio.TimeoutError:
-                    raise CameraError(self.url, f"no frame for {self.timeout_s} s") from None
+                    raise CameraError(self.url, f"no frame for {self.timeout_s} s", CameraFault.SILENT) from None
                 if not ok or image is None:
                     if self.is_file:
                         return
-                    raise CameraError(self.url, "the stream ended or the device was lost")
+                    raise CameraError(self.url, "the stream ended or the device was lost", CameraFault.CONNECTION_LOST)
                 if self.is_file:
                     t_s = start_s + float(capture.get(cv2.CAP_PROP_POS_MSEC)) / 1000.0
                 else:

@@ -36,9 +36,64 @@ class GeofenceConfig(StrictModel):
             raise ValueError(
                 f"max_altitude_m ({self.max_altitude_m}) must exceed min_altitude_m ({self.min_altitude_m})"
             )
+        if not all(math.isfinite(v) for corner in self.polygon_ne_m for v in corner):
+            raise ValueError("polygon_ne_m corners must be finite numbers")
         if abs(polygon_signed_area_m2(self.polygon_ne_m)) < 1.0:
             raise ValueError("polygon_ne_m must enclose at least 1 m^2")
+        crossing = first_self_intersection(self.polygon_ne_m)
+        if crossing is not None:
+            i, j = crossing
+            raise ValueError(
+                f"polygon_ne_m must be a simple polygon: edge {i} (corner {i} to {(i + 1) % len(self.polygon_ne_m)}) "
+                f"touches or crosses edge {j}"
+            )
         return self
+
+
+def _orientation(a: tuple[float, float], b: tuple[float, float], c: tuple[float, float]) -> float:
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+
+def _on_segment(a: tuple[float, float], b: tuple[float, float], p: tuple[float, float]) -> bool:
+    return min(a[0], b[0]) <= p[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= p[1] <= max(a[1], b[1])
+
+
+def _segments_meet(
+    a: tuple[float, float], b: tuple[float, float], c: tuple[float, float], d: tuple[float, float]
+) -> bool:
+    """Closed segments ab and cd share at least one point."""
+    o1, o2, o3, o4 = _orientation(a, b, c), _orientation(a, b, d), _orientation(c, d, a), _orientation(c, d, b)
+    if ((o1 > 0 and o2 < 0) or (o1 < 0 and o2 > 0)) and ((o3 > 0 and o4 < 0) or (o3 < 0 and o4 > 0)):
+        return True
+    return (
+        (o1 == 0 and _on_segment(a, b, c))
+        or (o2 == 0 and _on_segment(a, b, d))
+        or (o3 == 0 and _on_segment(c, d, a))
+        or (o4 == 0 and _on_segment(c, d, b))
+    )
+
+
+def first_self_intersection(polygon_ne_m: list[tuple[float, float]]) -> tuple[int, int] | None:
+    """The first pair of edges (i, j) of a closed polygon that touch or cross, other than neighbours at their shared
+    corner; None for a simple polygon. Edge i runs from corner i to corner i + 1 (the last back to the first)."""
+    n = len(polygon_ne_m)
+    edges = [(polygon_ne_m[i], polygon_ne_m[(i + 1) % n]) for i in range(n)]
+    for i in range(n):
+        for j in range(i + 1, n):
+            neighbours = j == i + 1 or (i == 0 and j == n - 1)
+            if neighbours:
+                # Neighbours share one corner; they must not fold back over each other.
+                shared = edges[i][1] if j == i + 1 else edges[i][0]
+                other_i = edges[i][0] if j == i + 1 else edges[i][1]
+                other_j = edges[j][1] if j == i + 1 else edges[j][0]
+                collinear = _orientation(shared, other_i, other_j) == 0
+                folds = collinear and (_on_segment(shared, other_i, other_j) or _on_segment(shared, other_j, other_i))
+                if folds or other_i == shared or other_j == shared:
+                    return i, j
+                continue
+            if _segments_meet(*edges[i], *edges[j]):
+                return i, j
+    return None
 
 
 def _closest_on_segment(p: F64Array, a: F64Array, b: F64Array) -> F64Array:

@@ -271,6 +271,25 @@ class MavsdkVehicleLink:
         action, _ = self._plugins()
         await self._call("return to launch", action.return_to_launch)
 
+    async def read_parameter(self, name: str, timeout_s: float = 5.0) -> float | None:
+        """The autopilot's parameter ``name`` (an integer parameter as a float), or None when it has none by that name
+        (or does not answer within ``timeout_s``). Reading changes nothing."""
+        if self._system is None:
+            raise VehicleError(self.url, "not connected")
+        from mavsdk.asyncio.plugins.param import ParamAsync
+
+        if not hasattr(self, "_param"):
+            self._param = ParamAsync(self._system)
+        for getter in (self._param.get_param_int, self._param.get_param_float):
+            try:
+                return float(await asyncio.wait_for(getter(name), timeout_s))
+            except asyncio.TimeoutError:
+                return None
+            except Exception as exc:  # ParamError: WRONG_TYPE (try the other getter), or no such parameter
+                if getattr(getattr(exc, "result", None), "name", "") != "WRONG_TYPE":
+                    return None
+        return None
+
     async def status_text(self, text: str) -> None:
         """STATUSTEXT to the ground station (best effort: a refused text is logged, not raised)."""
         if self._system is None:

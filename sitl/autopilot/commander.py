@@ -196,7 +196,10 @@ class Commander:
         return self.set_mode(FlightMode.AUTO_TAKEOFF)
 
     def land(self) -> MavResult:
-        """NAV_LAND: descend at MPC_LAND_SPEED where the vehicle is."""
+        """NAV_LAND: descend at MPC_LAND_SPEED where the vehicle is (refused while disarmed: on the ground it would
+        leave the vehicle in a mode it cannot be armed in)."""
+        if not self.armed:
+            return MavResult.TEMPORARILY_REJECTED
         return self.set_mode(FlightMode.AUTO_LAND)
 
     def return_to_launch(self) -> MavResult:

@@ -1,8 +1,19 @@
 """One MAVLink 2 endpoint over UDP, as PX4 SITL runs them: bound locally, sending to a remote port.
 
-Like PX4, it sends to ``remote`` (loopback by default) until a peer speaks, then answers wherever the peer's packets
-come from. Malformed packets (bad CRC, truncated, unknown ids) are dropped and counted, never raised. Each UDP datagram
-is parsed on its own: a truncated frame is dropped with its datagram and cannot swallow the next one.
+Partner choice follows PX4's ``mavlink_receiver.cpp``: the link sends to ``remote`` (loopback by default) until a
+peer speaks, then locks onto the first peer heard. A later sender at another address is served (its messages are
+handled) but not followed, so a stray or hostile sender cannot steal the link; it is counted in
+``LinkStats.stray_frames``. Two exceptions: the configured remote always takes the link back when it speaks (that is
+where MAVSDK listens, and it hears every heartbeat even while another peer is the partner), and a partner silent for
+:data:`PARTNER_SILENCE_S` of wall time gives way to the next sender (a ground station restarted on another port).
+
+Malformed packets (bad CRC, truncated, unknown ids) are dropped and counted, never raised. Each UDP datagram is parsed
+on its own: a truncated frame is dropped with its datagram and cannot swallow the next one. One :meth:`receive` reads
+at most :data:`MAX_DATAGRAMS_PER_RECEIVE` datagrams, so a flood cannot starve the loop that sends heartbeats.
+
+MAVLink 2 signing: with a 32-byte key, outgoing frames are signed and incoming frames must carry a valid signature
+with a fresh timestamp (replays are refused); unsigned and badly signed frames are dropped and counted in
+``LinkStats.dropped_unsigned``. Without a key, signatures are ignored, as PX4 does with signing off.
 """
 
 from __future__ import annotations
@@ -10,12 +21,19 @@ from __future__ import annotations
 import errno
 import logging
 import socket
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
 logger = logging.getLogger(__name__)
+
+MAX_DATAGRAMS_PER_RECEIVE = 256
+PARTNER_SILENCE_S = 10.0  # wall seconds without a valid frame from the partner before another sender may take over
+MAX_SOURCES_TRACKED = 1024  # distinct (system, component) pairs counted per link; the rest share one counter
+OTHER_SOURCE = (-1, -1)
+SIGNING_EPOCH_UNIX_S = 1420070400  # 2015-01-01T00:00:00Z, MAVLink's signing timestamp origin
 
 
 @dataclass
@@ -26,7 +44,15 @@ class LinkStats:
     sent: int = 0
     dropped_malformed: int = 0
     dropped_unknown: int = 0
+    dropped_unsigned: int = 0  # unsigned, badly signed or replayed, while signing is on
+    stray_frames: int = 0  # valid frames from a sender that is not the link's partner
     per_source: dict[tuple[int, int], int] = field(default_factory=dict)
+
+    def count_source(self, source: tuple[int, int]) -> None:
+        """Count one message from ``source``; beyond MAX_SOURCES_TRACKED pairs they share OTHER_SOURCE."""
+        if source not in self.per_source and len(self.per_source) >= MAX_SOURCES_TRACKED:
+            source = OTHER_SOURCE
+        self.per_source[source] = self.per_source.get(source, 0) + 1
 
 
 class LinkError(Exception):
@@ -52,10 +78,19 @@ class MavlinkLink:
         Where to send before a peer has spoken (on ``bind_address``, or loopback if it binds all interfaces).
     system_id, component_id : int
         This autopilot's MAVLink identity.
+    signing_key : bytes, optional
+        32-byte MAVLink 2 signing key; None: no signing.
     """
 
     def __init__(
-        self, name: str, bind_address: str, local_port: int, remote_port: int, system_id: int, component_id: int = 1
+        self,
+        name: str,
+        bind_address: str,
+        local_port: int,
+        remote_port: int,
+        system_id: int,
+        component_id: int = 1,
+        signing_key: bytes | None = None,
     ) -> None:
         self.name = name
         self.stats = LinkStats()
@@ -69,10 +104,27 @@ class MavlinkLink:
         self._sock.setblocking(False)
         host = "127.0.0.1" if bind_address in ("", "0.0.0.0") else bind_address
         self.remote: tuple[str, int] = (host, remote_port)
+        self._configured_remote = self.remote
         self.peer_seen = False
+        self._partner_heard_wall = -float("inf")
         self.cut = False  # a simulated link loss: nothing goes out, everything coming in is discarded
         self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._mav.robust_parsing = True
+        if signing_key is not None:
+            if len(signing_key) != 32:
+                self._sock.close()
+                raise LinkError(name, f"a signing key has 32 bytes, not {len(signing_key)}")
+            signing = self._mav.signing
+            signing.secret_key = signing_key
+            signing.sign_outgoing = True
+            signing.link_id = 0
+            signing.timestamp = int((time.time() - SIGNING_EPOCH_UNIX_S) * 100_000)  # 10 us units, as MAVLink's
+            signing.allow_unsigned_callback = lambda _mav, _msg_id: False  # counted in reject_count
+
+    @property
+    def signed(self) -> bool:
+        """Signing is on."""
+        return self._mav.signing.secret_key is not None
 
     @property
     def mav(self) -> mavlink.MAVLink:
@@ -84,59 +136,94 @@ class MavlinkLink:
         return self._sock.fileno()
 
     def send(self, msg: Any) -> None:
-        """Pack and send one message to the current remote; network errors are logged, not raised."""
+        """Pack and send one message to the current partner; network errors are logged, not raised.
+
+        A heartbeat also goes to the configured remote while the partner is elsewhere, so a client listening there
+        (MAVSDK's ``udpin``, which speaks only once it has heard the vehicle) can always find it and take the link.
+        """
         buf = msg.pack(self._mav)
         self._mav.seq = (self._mav.seq + 1) % 256
         if self.cut:
             return
-        try:
-            self._sock.sendto(buf, self.remote)
-            self.stats.sent += 1
-        except OSError as exc:
-            if exc.errno not in (errno.ECONNREFUSED, errno.EAGAIN, errno.ENOBUFS):
-                logger.warning("%s: send failed: %s", self.name, exc)
+        destinations = [self.remote]
+        if self.remote != self._configured_remote and msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            destinations.append(self._configured_remote)
+        for destination in destinations:
+            try:
+                self._sock.sendto(buf, destination)
+                self.stats.sent += 1
+            except OSError as exc:
+                if exc.errno not in (errno.ECONNREFUSED, errno.EAGAIN, errno.ENOBUFS):
+                    logger.warning("%s: send failed: %s", self.name, exc)
 
     def receive(self) -> list[Any]:
-        """Every message waiting on the socket, malformed ones dropped and counted."""
+        """The messages waiting on the socket (at most MAX_DATAGRAMS_PER_RECEIVE datagrams' worth), malformed ones
+        dropped and counted."""
         out: list[Any] = []
-        while True:
+        for _ in range(MAX_DATAGRAMS_PER_RECEIVE):
             try:
                 data, addr = self._sock.recvfrom(65535)
             except BlockingIOError:
-                return out
+                break
             except OSError as exc:
                 if exc.errno == errno.ECONNREFUSED:
                     continue
                 raise
             if self.cut:
                 continue
-            parser = mavlink.MAVLink(None)
-            parser.robust_parsing = True
-            try:
-                messages = parser.parse_buffer(data) or []
-            except Exception:  # pymavlink raises assorted errors on garbage; drop and count
-                self.stats.dropped_malformed += 1
-                continue
-            if parser.buf_len() > 0:  # a partial frame left over: the datagram was cut or padded with junk
-                self.stats.dropped_malformed += 1
-            good = 0
-            for msg in messages:
-                kind = msg.get_type()
-                if kind == "BAD_DATA":
-                    self.stats.dropped_malformed += 1
-                elif kind.startswith("UNKNOWN"):
-                    self.stats.dropped_unknown += 1
+            good = self._parse(data, out)
+            if good:
+                self._heard(addr[0], addr[1], good)
+        return out
+
+    def _parse(self, data: bytes, out: list[Any]) -> int:
+        """Parse one datagram into ``out``; returns how many good messages it held."""
+        parser = mavlink.MAVLink(None)
+        parser.robust_parsing = True
+        parser.signing = self._mav.signing  # one signing state: keys, replay timestamps and counts across datagrams
+        rejected_before = self._mav.signing.reject_count
+        try:
+            messages = parser.parse_buffer(data) or []
+        except Exception:  # pymavlink raises assorted errors on garbage; drop and count
+            self.stats.dropped_malformed += 1
+            return 0
+        unsigned = self._mav.signing.reject_count - rejected_before
+        self.stats.dropped_unsigned += unsigned
+        if parser.buf_len() > 0:  # a partial frame left over: the datagram was cut or padded with junk
+            self.stats.dropped_malformed += 1
+        good = 0
+        for msg in messages:
+            kind = msg.get_type()
+            if kind == "BAD_DATA":
+                if unsigned:  # pymavlink reports a refused signature as bad data: counted above
+                    unsigned -= 1
                 else:
-                    out.append(msg)
-                    good += 1
-                    src = (msg.get_srcSystem(), msg.get_srcComponent())
-                    self.stats.per_source[src] = self.stats.per_source.get(src, 0) + 1
-            self.stats.received += good
-            if good and (not self.peer_seen or addr != self.remote):
-                if not self.peer_seen:
-                    logger.info("%s: peer at %s:%d", self.name, addr[0], addr[1])
-                self.peer_seen = True
-                self.remote = (addr[0], addr[1])
+                    self.stats.dropped_malformed += 1
+            elif kind.startswith("UNKNOWN"):
+                self.stats.dropped_unknown += 1
+            else:
+                out.append(msg)
+                good += 1
+                self.stats.count_source((msg.get_srcSystem(), msg.get_srcComponent()))
+        self.stats.received += good
+        return good
+
+    def _heard(self, host: str, port: int, frames: int) -> None:
+        """Valid frames came from ``host:port``: lock onto it, keep the partner, or count a stray sender."""
+        addr = (host, port)
+        now = time.monotonic()
+        if addr == self.remote:
+            self.peer_seen = True
+            self._partner_heard_wall = now
+            return
+        partner_gone = now - self._partner_heard_wall > PARTNER_SILENCE_S
+        if addr == self._configured_remote or not self.peer_seen or partner_gone:
+            logger.info("%s: partner at %s:%d", self.name, host, port)
+            self.peer_seen = True
+            self.remote = addr
+            self._partner_heard_wall = now
+            return
+        self.stats.stray_frames += frames
 
     def close(self) -> None:
         """Close the socket."""

@@ -29,7 +29,7 @@ from typing import Any, TextIO
 import yaml
 
 from companion.app.recorder import open_append, read_log
-from companion.config import ConfigError, validate_config
+from companion.config import ConfigError, read_yaml_file, validate_config
 from sitl.campaign.metrics import mission_metrics, stale
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
@@ -201,7 +201,7 @@ def run_campaign(
     spec_path = out_dir / "spec.yaml"
     spec_json = spec.model_dump(mode="json")
     if spec_path.is_file():
-        saved = yaml.safe_load(spec_path.read_text())
+        saved = read_yaml_file(spec_path)
         if saved != spec_json:
             raise CampaignError(f"{out_dir} holds another campaign's results (its spec.yaml differs); use a new folder")
     else:

@@ -11,11 +11,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from pydantic import Field, model_validator
 
 from companion.app.mission import MissionConfig
-from companion.config import StrictModel, load_yaml_config, validate_config
+from companion.config import StrictModel, load_yaml_config, read_yaml_file, validate_config
 from companion.perception.config import SelectionPolicyName
 from sitl.mission import DEFAULT_MISSION_CONFIG, deep_merge
 from sitl.world.scenario import ScenarioConfig
@@ -148,7 +147,7 @@ class MissionPlan:
 
     def vehicle_radius_m(self, spec: CampaignSpec) -> float:
         """The companion's footprint radius (m, propellers included) in this mission's config."""
-        base = yaml.safe_load(spec.mission_config.read_text()) or {}
+        base = read_yaml_file(spec.mission_config)
         config = validate_config(MissionConfig, deep_merge(base, self.overrides(spec)[1]), source=self.mission_id)
         return config.perception.zones.vehicle_radius_m
 

@@ -1,0 +1,122 @@
+"""Hostile input against a running SITL: it stays up, keeps heartbeating, is not taken over, and still flies.
+
+A ground station holds the GCS link; a stray sender floods both MAVLink links with seeded malformed datagrams
+(``sitl.fuzz``) and the control channel with hostile requests; then a clean MAVSDK client arms, takes off and enters
+OFFBOARD. The 100,000-datagram version is ``bench/sitl_fuzz.py``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import json
+import socket
+import time
+from pathlib import Path
+
+import pytest
+
+from sitl.config import SitlConfig
+from sitl.fuzz import ControlFuzzer, MavlinkFuzzer
+from sitl.process import SitlProcess
+from tests.sitl_tools import MavlinkPeer, wait_until
+from tests.test_sitl_mavsdk import Client
+
+pytestmark = pytest.mark.sitl
+
+INSTANCE = 15
+DATAGRAMS_PER_LINK = 3000
+CONTROL_REQUESTS = 2000
+MAX_HEARTBEAT_GAP_S = 1.5
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_a_fuzzed_sitl_stays_up_keeps_its_partner_and_heartbeat_and_still_flies(tmp_path: Path) -> None:
+    config = SitlConfig(instance=INSTANCE)
+    gcs_port = free_udp_port()
+    sitl_yaml = tmp_path / "sitl.yaml"
+    sitl_yaml.write_text(f"sitl:\n  gcs_port_remote: {gcs_port}\n  seed: 3\n")
+    sitl = SitlProcess(["--config", str(sitl_yaml), "--speed", "1"], INSTANCE, tmp_path).start()
+    gcs = MavlinkPeer(gcs_port)
+    stray = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    stray.bind(("127.0.0.1", 0))
+    stray.setblocking(False)
+    client: Client | None = None
+    try:
+        # The ground station speaks first: it is the GCS link's partner.
+        wait_until(lambda: gcs.latest("HEARTBEAT"), 5.0, "a heartbeat on the GCS link")
+        gcs.send(gcs.mav.heartbeat_encode(6, 8, 0, 0, 4))  # MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID
+        partner = f"127.0.0.1:{gcs_port}"
+        wait_until(lambda: sitl.state()["links"]["gcs"]["partner"] == partner or None, 3.0, "the GCS partner")
+
+        mav_fuzz = MavlinkFuzzer(seed=23, target_system=config.system_id)
+        targets = [("127.0.0.1", config.api_port_local), ("127.0.0.1", config.gcs_port_local)]
+        sent = 0
+        for i, datagram in enumerate(mav_fuzz.datagrams(2 * DATAGRAMS_PER_LINK)):
+            try:
+                stray.sendto(datagram, targets[i % 2])
+                sent += 1
+            except BlockingIOError:  # the socket buffer is full: that datagram is lost, as on a real link
+                pass
+            if i % 200 == 0:
+                gcs.poll()
+        control_fuzz = ControlFuzzer(seed=29)
+        for i, request in enumerate(control_fuzz.requests(CONTROL_REQUESTS)):
+            with contextlib.suppress(OSError):  # a full buffer; a datagram over 64 KiB is refused by the kernel
+                stray.sendto(request, sitl.control_addr)
+            if i % 200 == 0:
+                gcs.poll()
+        fuzz_end = time.monotonic()
+
+        # It answers, counted what it dropped, never failed handling one, and the GCS link did not follow the stray.
+        state = wait_until(
+            lambda: ((s := sitl.state())["control_malformed"] > CONTROL_REQUESTS // 2 and s) or None,
+            10.0,
+            "the control fuzz to be read",
+        )
+        assert sitl.running
+        assert state["handler_errors"] == 0
+        links = state["links"]
+        assert links["gcs"]["partner"] == partner
+        assert links["gcs"]["stray_frames"] > 0
+        for name in ("api", "gcs"):
+            assert links[name]["dropped_malformed"] > DATAGRAMS_PER_LINK // 10, (name, links[name])
+            assert links[name]["dropped_unknown"] > 0, (name, links[name])
+        assert len(json.dumps(state)) < 60_000  # the state reply still fits a datagram
+        assert state["armed"] is False
+        assert state["mode"] == "AUTO.LOITER"
+
+        # Heartbeats kept their rate through the flood, on the ground station's link.
+        def beats_after_fuzz() -> int | None:
+            gcs.poll()
+            count = sum(t > fuzz_end for t in gcs.heartbeat_wall_times)
+            return count if count >= 2 else None
+
+        wait_until(beats_after_fuzz, 5.0, "two heartbeats after the fuzz")
+        beats = gcs.heartbeat_wall_times
+        gaps = [b - a for a, b in itertools.pairwise(beats)]
+        assert len(beats) >= 3
+        assert max(gaps) < MAX_HEARTBEAT_GAP_S, f"heartbeat gap {max(gaps):.2f} s"
+
+        # A clean MAVSDK client on the API link still flies it.
+        client = Client("hover", INSTANCE)
+        client.expect("connected", 20)
+        client.expect("healthy", 20)
+        client.expect("armed", 10)
+        client.expect("took_off", 30)
+        client.expect("offboard", 10)
+        flying = sitl.state()
+        assert flying["mode"] == "OFFBOARD"
+        assert flying["position_ned_m"][2] < -3.0
+        assert flying["handler_errors"] == 0
+    finally:
+        if client is not None:
+            client.kill()
+        stray.close()
+        gcs.close()
+        sitl.stop()
