@@ -45,6 +45,8 @@ bench: $(STAMP)
 	$(BIN)/python bench/render.py
 	$(BIN)/python bench/density.py
 	$(BIN)/python bench/companion_latency.py
+	$(BIN)/python bench/sitl_fuzz.py
+	$(BIN)/python bench/hostile_configs.py
 
 # The paper's Table I at 100 runs per cell (900 missions; resumable: run it again to continue).
 paper-table: $(STAMP)

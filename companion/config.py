@@ -78,7 +78,7 @@ def format_validation_error(error: ValidationError, prefix: str = "") -> list[st
         path = ".".join(str(part) for part in (prefix, *item["loc"]) if part != "")
         got = item.get("input")
         got_text = "" if item["type"] == "missing" or isinstance(got, dict) else f" (got {quote(got)})"
-        lines.append(f"{path or '<root>'}: {cut(item['msg'], 300)}{got_text}")
+        lines.append(f"{cut(path, 200) or '<root>'}: {cut(item['msg'], 300)}{got_text}")
     return lines
 
 
@@ -94,7 +94,10 @@ def validate_config(model: type[ModelT], data: Any, source: str = "<dict>", pref
         raise ConfigError(source, format_validation_error(exc, prefix)) from None
 
 
-class _StrictLoader(yaml.SafeLoader):
+_SafeLoader: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, when built with it
+
+
+class _StrictLoader(_SafeLoader):  # type: ignore[valid-type,misc]
     """PyYAML's safe loader, refusing duplicate keys."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -111,7 +114,8 @@ class _StrictLoader(yaml.SafeLoader):
                 raise yaml.constructor.ConstructorError(
                     None, None, f"duplicate key {quote(key)} (line {mark.line + 1})", None
                 )
-        return super().construct_mapping(node, deep=deep)
+        mapping: dict[Any, Any] = super().construct_mapping(node, deep=deep)
+        return mapping
 
 
 def _yaml_problem(exc: yaml.YAMLError) -> str:
@@ -213,10 +217,14 @@ def parse_yaml(raw: bytes | str, source: str) -> Any:
             data = loader.construct_document(node)
         finally:
             loader.dispose()
+        if data is None:
+            raise ConfigError(source, ["<root>: empty document (null)"])
     except yaml.YAMLError as exc:
         raise ConfigError(source, [_yaml_problem(exc)]) from None
     except RecursionError:
         raise ConfigError(source, [f"<root>: nested deeper than {MAX_YAML_DEPTH} levels"]) from None
+    except ValueError as exc:  # e.g. an integer of more digits than Python converts
+        raise ConfigError(source, [f"<root>: {cut(str(exc), 200)}"]) from None
     bad = _non_finite_path(data)
     if bad is not None:
         raise ConfigError(source, [f"{bad}: must be a finite number (NaN and infinity are not allowed)"])

@@ -39,6 +39,8 @@ class FaultKind(str, enum.Enum):
 
     CAMERA_FAIL = "camera_fail"
     """The camera delivers nothing from then on."""
+    CAMERA_DISCONNECT = "camera_disconnect"
+    """The camera's connection is closed and it delivers nothing from then on (a cable pulled)."""
     LINK_LOSS = "link_loss"
     """The companion's MAVLink link (the API port) goes silent both ways."""
 

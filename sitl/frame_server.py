@@ -91,6 +91,12 @@ class FrameServer:
             logger.info("frame client gone")
             self._drop_client()
 
+    def disconnect(self) -> None:
+        """Close the client's connection (an injected fault); the next client is served."""
+        if self._client is not None:
+            logger.warning("frame client disconnected (injected)")
+        self._drop_client()
+
     def _drop_client(self) -> None:
         if self._client is not None:
             self._client.close()

@@ -397,6 +397,10 @@ class SitlVehicle:
             logger.warning("fault injected at %.3f s: %s", t_s, fault.kind.value)
             if fault.kind is FaultKind.CAMERA_FAIL:
                 self.camera_failed = True
+            elif fault.kind is FaultKind.CAMERA_DISCONNECT:
+                self.camera_failed = True
+                if self.camera is not None:
+                    self.camera.server.disconnect()
             elif fault.kind is FaultKind.LINK_LOSS:
                 self.links[0].cut = True
 

@@ -167,8 +167,9 @@ def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_
 
 
 def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path, demo: Demo) -> None:
-    # The demo's scene and seed, paced at 4x real time instead of full speed, the camera lost at 18 s.
-    fault = {"faults": [{"kind": "camera_fail", "at_s": FAULT_AT_S}], "speed_factor": 4.0}
+    # The demo's scene and seed, paced at 4x real time instead of full speed, the camera's cable pulled at 18 s:
+    # its connection closed, no frame after it.
+    fault = {"faults": [{"kind": "camera_disconnect", "at_s": FAULT_AT_S}], "speed_factor": 4.0}
     r = _fly(tmp_path, "camera", STATIC_SEED, instance=27, sitl_overrides=fault)
     records = _records(r.run_dir)
     # Lockstep: the same seed decides the same at another speed, until the fault makes the flights differ.
@@ -191,6 +192,12 @@ def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Pat
     assert r.companion_exit_code == 3  # the failsafe's exit status: the systemd unit does not restart on it
     assert r.landed  # the autopilot landed where it was
     assert not [x for x in records if x["kind"] == "frame_result" and float(x["t_s"]) > FAULT_AT_S]
+    # The companion named the fault in its log.
+    camera_errors = [x for x in records if x["kind"] == "error" and x.get("where") == "camera"]
+    assert [x["fault"] for x in camera_errors] == ["connection_lost"]
+    assert "closed the connection" in camera_errors[0]["error"]
+    end = next(x for x in records if x["kind"] == "end")
+    assert end["outcome"]["camera_fault"] == "connection_lost"
 
 
 def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path: Path) -> None:

@@ -95,3 +95,21 @@ def test_rotation_deletes_the_oldest_flights_beyond_the_count_and_the_size(tmp_p
     deleted = prune_flights(tmp_path, max_total_mb=0.7)
     assert deleted == [tmp_path / "20261121T000000Z", tmp_path / "20261122T000000Z"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["20261123T000000Z", "20261124T000000Z", "empty", "notes.txt"]
+
+
+@pytest.mark.parametrize(
+    ("content", "error"),
+    [
+        (b'{"kind": "phase"}\n\xff\xfe not text\n', "not UTF-8"),
+        (b'{"kind": "phase"}\n[1, 2]\n{"kind": "phase"}\n', ":2: a list, not a JSON object"),
+        (b'{"kind": "phase"}\n' + b"[" * 100_000 + b"\n{}\n", ":2: not a JSON record"),
+        (b"garbage\n{}\n", ":1: not a JSON record"),
+    ],
+)
+def test_a_hostile_log_read_back_is_refused_by_line_not_with_a_traceback(
+    tmp_path: Path, content: bytes, error: str
+) -> None:
+    log = tmp_path / "flight.jsonl"
+    log.write_bytes(content)
+    with pytest.raises(RecorderError, match=error):
+        read_log(log)

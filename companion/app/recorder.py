@@ -136,20 +136,32 @@ def open_append(path: Path) -> IO[str]:
 
 
 def read_log(path: Path) -> list[dict[str, Any]]:
-    """All complete records of a flight log; a torn last line (crash mid-write) is skipped and logged."""
+    """All complete records of a JSON-lines log; a torn last line (crash mid-write) is skipped and logged.
+
+    Raises
+    ------
+    RecorderError
+        The file is not UTF-8, or a line other than the last is not a JSON object (named by its line number).
+    """
     records: list[dict[str, Any]] = []
-    with path.open(encoding="utf-8") as f:
-        lines = f.read().split("\n")
+    try:
+        with path.open(encoding="utf-8") as f:
+            lines = f.read().split("\n")
+    except UnicodeDecodeError as exc:
+        raise RecorderError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     for number, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
+            record = json.loads(line)
+        except (json.JSONDecodeError, RecursionError):
             if number >= len(lines) - 1:
                 logger.warning("%s: last line %d is incomplete (the app stopped mid-write), skipped", path, number)
-            else:
-                raise RecorderError(f"{path}:{number}: not a JSON record") from None
+                continue
+            raise RecorderError(f"{path}:{number}: not a JSON record") from None
+        if not isinstance(record, dict):
+            raise RecorderError(f"{path}:{number}: a {type(record).__name__}, not a JSON object")
+        records.append(record)
     return records
 
 

@@ -132,9 +132,12 @@ class SitlFrameSource:
                 try:
                     magic = await asyncio.wait_for(reader.readexactly(4), self.timeout_s)
                     frame = await asyncio.wait_for(self._rest_of_frame(reader, magic), self.timeout_s)
-                except (asyncio.IncompleteReadError, ConnectionError) as exc:
-                    what = "the camera closed the connection" if not str(exc) else f"connection lost: {exc}"
+                except asyncio.IncompleteReadError as exc:
+                    where = "mid-frame" if exc.partial else "at a frame boundary"
+                    what = f"the camera closed the connection ({where})"
                     raise CameraError(self.name, what, CameraFault.CONNECTION_LOST) from None
+                except ConnectionError as exc:
+                    raise CameraError(self.name, f"connection lost: {exc}", CameraFault.CONNECTION_LOST) from None
                 except asyncio.TimeoutError:
                     raise CameraError(self.name, f"no frame for {self.timeout_s} s", CameraFault.SILENT) from None
                 yield frame

@@ -1,0 +1,151 @@
+"""Hostile and careless mission config files, each with a piece of the refusal it must get.
+
+Built from ``mission_configs/sitl.yaml`` so each file is wrong in one way only. Used by tests/test_hostile_configs.py
+(every file refused with a message naming the field, no traceback) and bench/hostile_configs.py (each refused within
+a second by ``slz fly --dry-run``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+SHIPPED = REPO_ROOT / "mission_configs" / "sitl.yaml"
+FENCE_LINE = "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]"
+
+
+@dataclass(frozen=True)
+class HostileConfig:
+    """One file: its name, its bytes, and text its refusal must contain."""
+
+    name: str
+    content: bytes
+    expect: str
+
+
+def _with(text: str, old: str, new: str) -> bytes:
+    assert old in text, old
+    return text.replace(old, new, 1).encode()
+
+
+def _laughs(levels: int, kind: str) -> bytes:
+    """The billion-laughs alias bomb: each level is nine aliases of the one below."""
+    lines = ['a0: &a0 ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for i in range(1, levels):
+        refs = ", ".join([f"*a{i - 1}"] * 9)
+        lines.append(f"a{i}: &a{i} [{refs}]" if kind == "list" else f"a{i}: &a{i} {{x0: *a{i - 1}, x1: *a{i - 1}}}")
+    return ("\n".join(lines) + "\n").encode()
+
+
+def hostile_configs() -> list[HostileConfig]:
+    """32 and more files, each refused for its own reason."""
+    base = SHIPPED.read_text()
+    rng = np.random.default_rng(23)
+
+    def fence(corners: str) -> bytes:
+        return _with(base, FENCE_LINE, f"  polygon_ne_m: {corners}")
+
+    def takeoff(value: str) -> bytes:
+        return _with(base, "  takeoff_altitude_m: 20.0", f"  takeoff_altitude_m: {value}")
+
+    deep = 20_000
+    out = [
+        HostileConfig("empty", b"", "empty document"),
+        HostileConfig("comment_only", b"# nothing here\n\n", "empty document"),
+        HostileConfig("null_document", b"null\n", "empty document"),
+        HostileConfig("binary_junk", bytes(rng.integers(0, 256, 4096, dtype=np.uint8)), "<root>"),
+        HostileConfig("latin1_bytes", base.encode() + "\n# caf\xe9\n".encode("latin-1"), "not UTF-8"),
+        HostileConfig("nul_bytes", base.encode() + b"\x00\x00", "NUL"),
+        HostileConfig("deep_flow_sequence", b"vehicle: " + b"[" * deep + b"]" * deep + b"\n", "nested deeper"),
+        HostileConfig(
+            "deep_block_mapping",
+            "".join(f"{' ' * i}k{i}:\n" for i in range(200)).encode() + b" " * 200 + b"v: 1\n",
+            "nested deeper",
+        ),
+        HostileConfig("alias_bomb_lists", _laughs(10, "list"), "aliases expand beyond"),
+        HostileConfig("alias_bomb_mappings", _laughs(24, "map"), "aliases expand beyond"),
+        HostileConfig(
+            "megabyte_value", _with(base, "url: udpin://0.0.0.0:14540", "url: " + "x" * 1_000_000), "vehicle.url"
+        ),
+        HostileConfig("over_a_mebibyte", base.encode() + b"#" + b"x" * (1 << 20) + b"\n", "bytes"),
+        HostileConfig(
+            "geofence_nan_corner",
+            _with(
+                base,
+                "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
+                "  polygon_ne_m: [[.nan, 0], [0, 20], [20, 20], [20, 0]]",
+            ),
+            "geofence.polygon_ne_m",
+        ),
+        HostileConfig(
+            "geofence_inf_corner",
+            _with(
+                base,
+                "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
+                "  polygon_ne_m: [[-.inf, 0], [0, 20], [20, 20], [20, 0]]",
+            ),
+            "geofence.polygon_ne_m",
+        ),
+        HostileConfig(
+            "geofence_bow_tie",
+            _with(
+                base,
+                "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
+                "  polygon_ne_m: [[0, 0], [20, 20], [20, 0], [0, 10]]",
+            ),
+            "simple polygon",
+        ),
+        HostileConfig(
+            "geofence_no_area",
+            _with(
+                base,
+                "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
+                "  polygon_ne_m: [[0, 0], [10, 10], [20, 20]]",
+            ),
+            "enclose",
+        ),
+        HostileConfig(
+            "geofence_folded_edge",
+            _with(
+                base,
+                "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
+                "  polygon_ne_m: [[-30, -30], [-30, 30], [30, 30], [30, -30], [30, 40]]",
+            ),
+            "simple polygon",
+        ),
+        HostileConfig("start_north_nan", _with(base, "start:", "start:\n  start_north_m: .nan"), "start.start_north_m"),
+        HostileConfig(
+            "takeoff_inf",
+            takeoff(".inf"),
+            "start.takeoff_altitude_m",
+        ),
+        HostileConfig(
+            "max_altitude_negative", _with(base, "  max_altitude_m: 40.0", "  max_altitude_m: -5"), "max_altitude_m"
+        ),
+        HostileConfig("duplicate_top_key", base.encode() + b"\nvehicle: {connect_timeout_s: 1.0}\n", "duplicate key"),
+        HostileConfig(
+            "duplicate_nested_key",
+            _with(base, "start:", "start:\n  takeoff_altitude_m: 10.0\n  takeoff_altitude_m: 30.0"),
+            "duplicate key 'takeoff_altitude_m'",
+        ),
+        HostileConfig("unknown_section", base.encode() + b"\nturbo: true\n", "turbo"),
+        HostileConfig("section_not_mapping", _with(base, "geofence:", "geofence: 5\nunused:"), "geofence"),
+        HostileConfig("top_level_list", b"- vehicle\n- camera\n", "expected a mapping"),
+        HostileConfig("top_level_string", b"fly safely\n", "expected a mapping"),
+        HostileConfig("two_documents", base.encode() + b"\n---\nvehicle: {}\n", "single document"),
+        HostileConfig("python_tag", b"vehicle: !!python/object/apply:os.system ['true']\n", "python/object"),
+        HostileConfig("tab_indent", b"vehicle:\n\turl: udpin://0.0.0.0:14540\n", "not valid YAML"),
+        HostileConfig("huge_integer", _with(base, "  frame_every: 10", "  frame_every: " + "9" * 5000), "<root>"),
+        HostileConfig(
+            "altitude_floor_negative",
+            _with(base, "guidance:", "guidance:\n  perception_min_altitude_m: -1"),
+            "guidance.perception_min_altitude_m",
+        ),
+        HostileConfig("complex_key", b"? [a, b]\n: 1\n", "unhashable key"),
+        HostileConfig("string_for_number", takeoff("high"), "takeoff"),
+        HostileConfig("long_key", base.encode() + b"\n" + b"k" * 100_000 + b": 1\n", "not valid YAML"),
+    ]
+    return out
