@@ -9,6 +9,7 @@ Only liveness checks use wall time; flight logic uses these vehicle times.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 
@@ -29,6 +30,8 @@ class VehicleClock:
     def observe(self, stamp_s: float, wall_s: float | None = None) -> None:
         """A telemetry stamp (vehicle seconds) received at ``wall_s`` (monotonic seconds; now if None)."""
         wall = time.monotonic() if wall_s is None else wall_s
+        if not math.isfinite(stamp_s):
+            raise ValueError(f"non-finite vehicle time stamp {stamp_s}")
         if self._latest_stamp_s is not None and stamp_s + 1.0 < self._latest_stamp_s:
             self._offsets.clear()  # the autopilot rebooted: its clock restarted
         self._latest_stamp_s = stamp_s

@@ -129,7 +129,7 @@ class MavsdkVehicleLink:
             t_s = float(f["time_boot_ms"]) / 1000.0
             self.clock.observe(t_s)
             add(t_s, f)
-        except (KeyError, ValueError, PoseBufferError) as exc:
+        except (KeyError, ValueError, TypeError, OverflowError, PoseBufferError) as exc:
             self.dropped_samples += 1
             logger.debug("%s sample dropped: %s", message.message_name, exc)
             return
