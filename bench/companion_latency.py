@@ -24,13 +24,14 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
 from companion.app.recorder import read_log  # noqa: E402
+from sitl.instances import lease_instance  # noqa: E402
 from sitl.mission import MissionSpec, fly  # noqa: E402
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="1,2", help="comma-separated mission seeds")
-    parser.add_argument("--instance", type=int, default=29)
+    parser.add_argument("--instance", type=int, help="SITL instance (default: a free one, leased)")
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "companion_latency.json")
     args = parser.parse_args()
 
@@ -38,14 +39,19 @@ def main() -> int:
     missions = []
     with tempfile.TemporaryDirectory(prefix="slz-latency-") as tmp:
         for seed in (int(s) for s in args.seeds.split(",")):
+            lease = lease_instance() if args.instance is None else None
             spec = MissionSpec(
                 seed=seed,
                 run_dir=Path(tmp) / f"seed{seed}",
-                instance=args.instance,
+                instance=args.instance if lease is None else lease.instance,
                 sitl_overrides={"lockstep": False, "speed_factor": 1.0},
                 timeout_s=300.0,
             )
-            result = fly(spec)
+            try:
+                result = fly(spec)
+            finally:
+                if lease is not None:
+                    lease.release()
             records = read_log(spec.run_dir / "flight" / "flight.jsonl")
             mission_ms = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == "latency"]
             outcome = next(r for r in records if r["kind"] == "end")["outcome"]

@@ -33,11 +33,11 @@ sys.path.insert(0, str(REPO_ROOT))
 from bench.machine import machine_context, save_report  # noqa: E402
 from sitl.config import SitlConfig  # noqa: E402
 from sitl.fuzz import ControlFuzzer, MavlinkFuzzer  # noqa: E402
+from sitl.instances import lease_instance  # noqa: E402
 from sitl.process import SitlProcess  # noqa: E402
 from tests.sitl_tools import MavlinkPeer, wait_until  # noqa: E402
 from tests.test_sitl_mavsdk import Client  # noqa: E402
 
-INSTANCE = 33
 MAX_HEARTBEAT_GAP_S = 1.5
 PACE_PER_S = 4000.0  # paced phase: slow enough that the SITL's socket buffer never overflows
 FLOOD_S = 5.0
@@ -66,8 +66,9 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=23)
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "sitl_fuzz.json")
     args = parser.parse_args()
-    work = Path("/tmp") / f"slz-bench-fuzz-{INSTANCE}"
-    config = SitlConfig(instance=INSTANCE)
+    lease = lease_instance()
+    work = Path("/tmp") / f"slz-bench-fuzz-{lease.instance}"
+    config = SitlConfig(instance=lease.instance)
     gcs_port = free_udp_port()
     sitl_yaml = work / "sitl.yaml"
     sitl_yaml.parent.mkdir(parents=True, exist_ok=True)
@@ -78,7 +79,7 @@ def main() -> int:
     control_fuzz = ControlFuzzer(args.seed + 1)
     requests = list(control_fuzz.requests(args.requests))
 
-    sitl = SitlProcess(["--config", str(sitl_yaml), "--speed", "1"], INSTANCE, work).start()
+    sitl = SitlProcess(["--config", str(sitl_yaml), "--speed", "1"], lease.instance, work).start()
     api = MavlinkPeer(config.api_port_remote)
     gcs = MavlinkPeer(gcs_port)
     peers = {"api": api, "gcs": gcs}
@@ -189,7 +190,7 @@ def main() -> int:
 
         # A clean MAVSDK client flies the offboard square.
         t3 = time.monotonic()
-        client = Client("square", INSTANCE)
+        client = Client("square", lease.instance)
         try:
             for event, timeout_s in (("connected", 20), ("healthy", 20), ("armed", 10), ("took_off", 30)):
                 client.expect(event, timeout_s)
@@ -211,6 +212,7 @@ def main() -> int:
         for peer in peers.values():
             peer.close()
         sitl.stop()
+        lease.release()
     save_report(report, args.out)
     print(f"saved {args.out}")
     return 0

@@ -29,6 +29,7 @@ from companion.camera.frames import SitlFrameSource  # noqa: E402
 from sitl.autopilot.modes import FlightMode  # noqa: E402
 from sitl.config import SitlConfig  # noqa: E402
 from sitl.dynamics.base import DynamicsBackend  # noqa: E402
+from sitl.instances import leased_instance  # noqa: E402
 from sitl.lockstep import LockstepControl  # noqa: E402
 from sitl.process import SitlProcess  # noqa: E402
 from sitl.vehicle import SitlVehicle  # noqa: E402
@@ -138,16 +139,18 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "sitl_speed.json")
     args = parser.parse_args()
     results: dict[str, dict[str, float] | str] = {}
-    for i, backend in enumerate(DynamicsBackend):
+    for backend in DynamicsBackend:
         try:
-            results[backend.value] = measure(backend, args.sim_seconds, instance=22 + i)
+            with leased_instance() as lease:
+                results[backend.value] = measure(backend, args.sim_seconds, instance=lease.instance)
         except Exception as exc:  # a missing optional backend is reported, not fatal
             results[backend.value] = f"not measured: {exc}"
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
         try:
-            results["full_run_camera_lockstep"] = full_run(args.sim_seconds, 33, Path(tmp))
+            with leased_instance() as lease:
+                results["full_run_camera_lockstep"] = full_run(args.sim_seconds, lease.instance, Path(tmp))
         except Exception as exc:
             results["full_run_camera_lockstep"] = f"not measured: {exc}"
     report = {"benchmark": "sitl_speed", "machine": machine_context(), "backends": results}

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from companion.app.mission import MissionConfig, camera_mismatches
 from companion.app.recorder import read_log
 from companion.config import read_yaml_file, validate_config
 from sitl.config import SitlConfig
@@ -188,6 +189,11 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
         },
     )
     mission = deep_merge(mission, spec.mission_overrides)
+    sitl_config = validate_config(SitlConfig, {**sitl_section, "instance": spec.instance}, "mission spec", "sitl")
+    mission_config = validate_config(MissionConfig, mission, source="mission spec")
+    mismatches = camera_mismatches(mission_config.perception, sitl_config.camera)
+    if mismatches:
+        raise MissionError(f"{spec.mission_config}: " + "; ".join(mismatches))
     mission_path = spec.run_dir / "mission.yaml"
     mission_path.write_text(yaml.safe_dump(mission, sort_keys=False))
     return sitl_path, mission_path

@@ -98,7 +98,7 @@ class SitlProcess:
         """Start the process and wait until it answers on its control channel."""
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         log = open(self.log_path, "wb")  # noqa: SIM115 - owned by the child
-        cmd = [sys.executable, "-m", "companion.cli", "sitl", "--instance", str(self.instance), *self.args]
+        cmd = [sys.executable, "-m", "sitl", "--instance", str(self.instance), *self.args]
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         cpu = self.cpu
 

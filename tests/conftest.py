@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -9,6 +10,7 @@ import pytest
 from companion.perception.blob_model import build_blob_density_model, save_model
 from companion.perception.config import PerceptionConfig
 from companion.perception.density import OnnxDensityModel
+from sitl.instances import InstanceLease, lease_instance, leased_instance
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -29,3 +31,31 @@ def blob_model(blob_model_path: Path) -> OnnxDensityModel:
 def config(blob_model_path: Path) -> PerceptionConfig:
     """Default perception config pointing at the test-built model."""
     return PerceptionConfig.model_validate({"model": {"path": str(blob_model_path)}})
+
+
+@pytest.fixture
+def instances() -> Iterator[Callable[[], int]]:
+    """Lease free SITL instances (``sitl.instances``) for this test: call it once per SITL; all are given back after
+    the test. Tests never pick instance numbers, so they pass beside another test run, a campaign or a demo."""
+    leases: list[InstanceLease] = []
+
+    def take() -> int:
+        leases.append(lease_instance())
+        return leases[-1].instance
+
+    yield take
+    for lease in leases:
+        lease.release()
+
+
+@pytest.fixture
+def instance(instances: Callable[[], int]) -> int:
+    """One leased SITL instance for this test."""
+    return instances()
+
+
+@pytest.fixture(scope="module")
+def module_instance() -> Iterator[int]:
+    """One leased SITL instance for a module's shared SITL."""
+    with leased_instance() as lease:
+        yield lease.instance

@@ -29,6 +29,13 @@ def sitl_mission_yaml(instance: int) -> str:
     return text.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + instance}")
 
 
+def free_udp_port() -> int:
+    """A UDP port free now on loopback (for a ground station: every SITL instance would send to 14550)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
 def wait_until(condition: Callable[[], T | None], timeout_s: float, what: str, poll_s: float = 0.05) -> T:
     """Poll ``condition`` until it returns something truthy; fail with ``what`` after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
@@ -132,10 +139,10 @@ class MavlinkPeer:
 
 
 class GroundStation(MavlinkPeer):
-    """A pymavlink ground station on the GCS link (UDP 14550) that listens to one SITL instance's vehicle.
+    """A pymavlink ground station on a SITL's GCS link that listens to that instance's vehicle only.
 
-    Every instance sends to the same GCS port, as PX4's do, so a campaign or another test's SITL may be heard too;
-    their messages are dropped.
+    Every instance sends to the same GCS port (14550), as PX4's do, so tests give their SITL its own
+    ``gcs_port_remote`` (:func:`free_udp_port`); a message from another vehicle is dropped all the same.
     """
 
     def __init__(self, instance: int, port: int = GCS_PORT_REMOTE) -> None:

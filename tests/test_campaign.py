@@ -36,7 +36,7 @@ BASELINE = REPO_ROOT / "mission_configs" / "campaigns" / "baselines" / "smoke.js
 
 def campaign(out: Path, workers: int, *extra: str, **popen: Any) -> subprocess.Popen[str]:
     command = [sys.executable, "-m", "companion.cli", "campaign", "--spec", str(SPEC), "--out", str(out)]
-    command += ["--workers", str(workers), "--instance-base", "18", *extra]
+    command += ["--workers", str(workers), *extra]  # each worker leases a free SITL instance
     return subprocess.Popen(command, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 
@@ -170,8 +170,6 @@ def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_fli
     run = campaign(
         out,
         2,
-        "--instance-base",
-        "3",
         start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
     )
@@ -208,7 +206,7 @@ def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_fli
 @pytest.mark.slow  # 60 s: one mission flown twice; in `make test-slow`
 def test_one_mission_is_re_flown_from_its_seed_with_its_video(one_worker: Path, tmp_path: Path) -> None:
     command = [sys.executable, "-m", "companion.cli", "campaign", "replay", str(one_worker), "static/oldest/0000"]
-    command += ["--out", str(tmp_path / "replay"), "--instance", "15"]
+    command += ["--out", str(tmp_path / "replay")]
     # Twice into the same folder: the second replay starts its own flight log, not a second flight in the first's.
     for _ in range(2):
         done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False)

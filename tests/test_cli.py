@@ -25,20 +25,65 @@ def slz(*args: str, cwd: Path = REPO_ROOT, timeout_s: float = 120.0) -> subproce
     )
 
 
-def test_check_config_accepts_the_shipped_config() -> None:
-    result = slz("check-config", "mission_configs/perception.yaml", "--show")
-    assert result.returncode == 0, result.stderr
-    assert "valid" in result.stdout
-    assert json.loads(result.stdout.split("\n", 1)[1])["zones"]["n_proposals"] == 10
+SHIPPED_MISSIONS = ["sitl.yaml", "px4_serial.yaml", "px4_udp.yaml", "perception.yaml"]
 
 
-def test_check_config_names_the_bad_field(tmp_path: Path) -> None:
-    bad = tmp_path / "bad.yaml"
-    bad.write_text("perception:\n  tracking:\n    iou_threshold: 1.5\n")
-    result = slz("check-config", str(bad))
-    assert result.returncode == 2
-    assert "perception.tracking.iou_threshold: Input should be less than or equal to 1 (got 1.5)" in result.stderr
-    assert "Traceback" not in result.stderr
+@pytest.mark.parametrize("name", SHIPPED_MISSIONS)
+def test_check_config_and_fly_accept_every_shipped_config(name: str, tmp_path: Path) -> None:
+    path = f"mission_configs/{name}"
+    checked = slz("check-config", path, "--show")
+    assert checked.returncode == 0, checked.stderr
+    assert "valid for slz fly" in checked.stdout
+    assert json.loads(checked.stdout.split("\n", 1)[1])["perception"]["zones"]["n_proposals"] == 10
+    # `slz fly` passes the same checks and only then fails, opening a camera that is not there (exit 1, not 2).
+    flown = slz("fly", "--dry-run", "--config", path, "--out", str(tmp_path / "flight"), "--timeout", "5")
+    assert flown.returncode == 1, flown.stderr[-2000:]
+    assert "invalid configuration" not in flown.stderr
+    assert "camera" in flown.stderr or "cannot" in flown.stderr
+
+
+def bad_configs(tmp_path: Path) -> dict[str, tuple[Path, list[str]]]:
+    """Ten bad mission configs (and the extra arguments both commands get)."""
+    from tests.hostile_configs import hostile_configs
+
+    chosen = [
+        "empty",
+        "geofence_bow_tie",
+        "start_north_nan",
+        "max_altitude_negative",
+        "duplicate_nested_key",
+        "unknown_section",
+        "alias_bomb_lists",
+    ]
+    out: dict[str, tuple[Path, list[str]]] = {}
+    for hostile in hostile_configs():
+        if hostile.name in chosen:
+            path = tmp_path / f"{hostile.name}.yaml"
+            path.write_bytes(hostile.content)
+            out[hostile.name] = (path, [])
+    shipped = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
+    missing_model = tmp_path / "missing_model.yaml"
+    missing_model.write_text(shipped + f"\nperception:\n  model:\n    path: {tmp_path / 'none.onnx'}\n")
+    out["missing_model"] = (missing_model, [])
+    iou = tmp_path / "iou.yaml"
+    iou.write_text("perception:\n  tracking:\n    iou_threshold: 1.5\n")
+    out["iou_out_of_range"] = (iou, [])
+    out["arms_under_never_arm"] = (REPO_ROOT / "mission_configs" / "sitl.yaml", ["--never-arm"])
+    assert len(out) == 10
+    return out
+
+
+def test_check_config_gives_the_verdict_and_message_of_fly_on_ten_bad_configs(tmp_path: Path) -> None:
+    for name, (path, extra) in bad_configs(tmp_path).items():
+        checked = slz("check-config", str(path), *extra)
+        flown = slz("fly", "--dry-run", "--config", str(path), *extra, "--out", str(tmp_path / name))
+        assert checked.returncode == flown.returncode, (name, checked.stderr, flown.stderr)
+        assert checked.returncode in (1, 2), (name, checked.stderr)
+        problem = [line for line in checked.stderr.splitlines() if line.strip()][-1]
+        assert problem in flown.stderr, (name, problem, flown.stderr[-2000:])
+        assert "Traceback" not in checked.stderr + flown.stderr
+    iou_message = slz("check-config", str(tmp_path / "iou.yaml")).stderr
+    assert "perception.tracking.iou_threshold: Input should be less than or equal to 1 (got 1.5)" in iou_message
 
 
 def test_demo_with_a_missing_model_fails_clearly(tmp_path: Path) -> None:

@@ -13,17 +13,18 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.app.replay import replay
 from sitl.config import SitlConfig
 from sitl.process import SitlProcess
-from tests.sitl_tools import GroundStation, sitl_mission_yaml, state_when, wait_until
+from tests.sitl_tools import GroundStation, free_udp_port, sitl_mission_yaml, state_when, wait_until
 
 pytestmark = pytest.mark.sitl
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
-def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int) -> SitlProcess:
-    """A SITL instance with its camera, and ``tmp_path/mission.yaml``: mission_configs/sitl.yaml on its ports."""
+def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int, gcs_port: int) -> SitlProcess:
+    """A SITL instance with its camera, its ground-station link on ``gcs_port``, and ``tmp_path/mission.yaml``:
+    mission_configs/sitl.yaml on its ports."""
     sitl_config = tmp_path / "sitl.yaml"
-    sitl_config.write_text(f"sitl:\n  camera:\n    enabled: true\n  seed: {seed}\n")
+    sitl_config.write_text(f"sitl:\n  camera:\n    enabled: true\n  seed: {seed}\n  gcs_port_remote: {gcs_port}\n")
     mission = sitl_mission_yaml(instance)  # the SITL runs free: no lockstep
     mission = mission.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
     (tmp_path / "mission.yaml").write_text(mission)
@@ -53,11 +54,10 @@ def pilot_takes_off(
     )
 
 
-def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> None:
-    instance = 23
-    sitl = start_sitl_with_camera(tmp_path, instance, seed=3)
-    # PX4 style: every instance talks to the GCS on 14550; this pilot listens to its own vehicle only.
-    gcs = GroundStation(instance)
+def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path, instance: int) -> None:
+    gcs_port = free_udp_port()  # its own ground-station port: every instance would send to 14550
+    sitl = start_sitl_with_camera(tmp_path, instance, seed=3, gcs_port=gcs_port)
+    gcs = GroundStation(instance, gcs_port)  # this pilot listens to its own vehicle only
     try:
         pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)
         before = sitl.state()
@@ -118,9 +118,11 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path) -> N
     assert "![top_view](top_view.png)" in page
 
 
-def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_to_the_pilot(tmp_path: Path) -> None:
-    instance = 24
-    sitl = start_sitl_with_camera(tmp_path, instance, seed=4)
+def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_to_the_pilot(
+    tmp_path: Path, instance: int
+) -> None:
+    gcs_port = free_udp_port()
+    sitl = start_sitl_with_camera(tmp_path, instance, seed=4, gcs_port=gcs_port)
     field = (tmp_path / "mission.yaml").read_text().replace("arm_and_takeoff: true", "arm_and_takeoff: false")
     (tmp_path / "field.yaml").write_text(field)
     log = tmp_path / "flight" / "flight.jsonl"
@@ -132,7 +134,7 @@ def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_t
         stderr=subprocess.PIPE,
         text=True,
     )
-    gcs = GroundStation(instance)
+    gcs = GroundStation(instance, gcs_port)
     try:
         # On the ground the companion only waits: it never arms, never takes off, sends nothing.
         wait_until(lambda: log.is_file() and '"kind":"waiting_for_handover"' in log.read_text(), 60, "the wait")

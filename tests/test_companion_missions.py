@@ -21,6 +21,7 @@ import pytest
 
 from companion.app.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
+from sitl.instances import leased_instance
 from sitl.mission import MissionResult, MissionSpec, fly, read_truth, touchdown
 
 pytestmark = pytest.mark.sitl
@@ -32,8 +33,9 @@ WALKING_SEED = 6
 FAULT_AT_S = 18.0  # simulated: the companion is searching or approaching by then (takeoff ends near 13 s)
 
 
-def _fly(tmp_path: Path, name: str, seed: int, instance: int, **spec: object) -> MissionResult:
-    return fly(MissionSpec(seed=seed, run_dir=tmp_path / name, instance=instance, timeout_s=300.0, **spec))  # type: ignore[arg-type]
+def _fly(tmp_path: Path, name: str, seed: int, **spec: object) -> MissionResult:
+    with leased_instance() as lease:  # a free SITL instance: never one another run on the machine flies
+        return fly(MissionSpec(seed=seed, run_dir=tmp_path / name, instance=lease.instance, timeout_s=300.0, **spec))  # type: ignore[arg-type]
 
 
 def _records(run_dir: str | Path) -> list[dict[str, Any]]:
@@ -58,9 +60,7 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Demo:
     """The main job on a static crowd (80-120 people): one mission, every frame saved losslessly."""
     out = tmp_path_factory.mktemp("demo")
     command = [sys.executable, "-m", "companion.cli", "demo", "--seed", str(STATIC_SEED), "--out", str(out)]
-    done = subprocess.run(
-        [*command, "--instance", "25"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False
-    )
+    done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False)
     runs = [p for p in out.iterdir() if p.is_dir()]
     assert len(runs) == 1, done.stderr[-3000:]
     assert done.returncode == 0, done.stdout + done.stderr[-3000:]
@@ -133,7 +133,7 @@ def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_
     roi_half_m = 15.0  # the scenario's 30 m ROI, where the people stand
     area = [[-roi_half_m, -roi_half_m], [-roi_half_m, roi_half_m], [roi_half_m, roi_half_m], [roi_half_m, -roi_half_m]]
     held = {"perception": {"zones": {"landing_area_ne_m": area}}}
-    r = _fly(tmp_path, "walking", WALKING_SEED, instance=26, sitl_overrides=walkers, mission_overrides=held)
+    r = _fly(tmp_path, "walking", WALKING_SEED, sitl_overrides=walkers, mission_overrides=held)
     assert r.companion_exit_code == 0, Path(r.run_dir, "companion.log").read_text()[-3000:]
     assert r.phase == "done"
     assert r.landed
@@ -170,7 +170,7 @@ def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Pat
     # The demo's scene and seed, paced at 4x real time instead of full speed, the camera's cable pulled at 18 s:
     # its connection closed, no frame after it.
     fault = {"faults": [{"kind": "camera_disconnect", "at_s": FAULT_AT_S}], "speed_factor": 4.0}
-    r = _fly(tmp_path, "camera", STATIC_SEED, instance=27, sitl_overrides=fault)
+    r = _fly(tmp_path, "camera", STATIC_SEED, sitl_overrides=fault)
     records = _records(r.run_dir)
     # Lockstep: the same seed decides the same at another speed, until the fault makes the flights differ.
     before = [x["decision"] for x in records if x["kind"] == "decision" and x["t_s"] < FAULT_AT_S]
@@ -202,7 +202,7 @@ def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Pat
 
 def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path: Path) -> None:
     fault = {"faults": [{"kind": "link_loss", "at_s": FAULT_AT_S}]}
-    r = _fly(tmp_path, "link", STATIC_SEED, instance=28, sitl_overrides=fault)
+    r = _fly(tmp_path, "link", STATIC_SEED, sitl_overrides=fault)
     records = _records(r.run_dir)
     failsafes = [x for x in records if x["kind"] == "failsafe"]
     assert failsafes

@@ -14,7 +14,6 @@ from tests.sitl_tools import sitl_mission_yaml
 pytestmark = pytest.mark.sitl
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-INSTANCE = 2
 
 
 def doctor(config: Path) -> subprocess.CompletedProcess[str]:
@@ -32,9 +31,9 @@ def lines_of(run: subprocess.CompletedProcess[str]) -> dict[str, str]:
     return checks
 
 
-def mission_config(tmp_path: Path, name: str, **replace: str) -> Path:
+def mission_config(tmp_path: Path, instance: int, name: str, **replace: str) -> Path:
     """mission_configs/sitl.yaml on this test's SITL instance, free running, with ``replace`` applied."""
-    text = sitl_mission_yaml(INSTANCE)
+    text = sitl_mission_yaml(instance)
     text = text.replace("connect_timeout_s: 20.0", "connect_timeout_s: 3.0")
     text = text.replace("directory: runs/flights", f"directory: {tmp_path / 'flights'}")
     for old, new in replace.items():
@@ -45,28 +44,31 @@ def mission_config(tmp_path: Path, name: str, **replace: str) -> Path:
     return path
 
 
-def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path) -> None:
+def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, instance: int) -> None:
     sitl_config = tmp_path / "sitl.yaml"  # offboard loss holds: what deploy/README.md asks of a vehicle over people
     sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_ACT: 1}\n")
     lands_config = tmp_path / "sitl_lands.yaml"  # PX4's default: offboard loss lands in place
     lands_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n")
-    good = mission_config(tmp_path, "good")
+    good = mission_config(tmp_path, instance, "good")
     no_model_no_camera = mission_config(
         tmp_path,
+        instance,
         "broken",
         **{
-            f"sitl://127.0.0.1:{5600 + INSTANCE}": "sitl://127.0.0.1:9",  # nothing listens on the discard port
+            f"sitl://127.0.0.1:{5600 + instance}": "sitl://127.0.0.1:9",  # nothing listens on the discard port
             "recorder:": "perception:\n  model:\n    path: models/density/missing.onnx\nrecorder:",
         },
     )
-    no_link = mission_config(tmp_path, "no_link", **{f"udpin://0.0.0.0:{14540 + INSTANCE}": "udpin://0.0.0.0:14539"})
-    sitl = SitlProcess(["--config", str(sitl_config)], INSTANCE, tmp_path).start()
+    no_link = mission_config(
+        tmp_path, instance, "no_link", **{f"udpin://0.0.0.0:{14540 + instance}": "udpin://0.0.0.0:14539"}
+    )
+    sitl = SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
     try:
         ok = doctor(good)
         unlinked = doctor(no_link)
     finally:
         sitl.stop()
-    sitl = SitlProcess(["--config", str(lands_config)], INSTANCE, tmp_path).start()
+    sitl = SitlProcess(["--config", str(lands_config)], instance, tmp_path).start()
     try:
         broken = doctor(no_model_no_camera)
     finally:

@@ -6,6 +6,7 @@ import asyncio
 import hashlib
 import itertools
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -56,9 +57,11 @@ async def lockstep_frames(instance: int, count: int, take_off: bool = False) -> 
     return out
 
 
-def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(tmp_path: Path) -> None:
+def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(
+    tmp_path: Path, instances: Callable[[], int]
+) -> None:
     runs: list[Any] = []
-    for instance in (20, 21):
+    for instance in (instances(), instances()):
         sitl = start(
             tmp_path,
             instance,
@@ -79,12 +82,12 @@ def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(tmp_path: Pat
     assert len({h for _, _, h in frames_a}) > 20  # the camera rises over walking people: frames differ
 
 
-def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path) -> None:
-    sitl = start(tmp_path, 22, seed=1, args=["--speed", "1"])
+def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, instance: int) -> None:
+    sitl = start(tmp_path, instance, seed=1, args=["--speed", "1"])
     try:
 
         async def read(n: int) -> list[float]:
-            source = open_frame_source("sitl://127.0.0.1:5622")
+            source = open_frame_source(f"sitl://127.0.0.1:{5600 + instance}")
             times = []
             async for frame in source.frames():
                 times.append(frame.t_capture_s)
@@ -103,9 +106,9 @@ def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path) -> None:
         sitl.stop()
 
 
-def test_in_lockstep_a_frame_client_that_leaves_stops_the_sitl_loudly(tmp_path: Path) -> None:
-    sitl = start(tmp_path, 23, seed=1, args=["--lockstep", "--speed", "0"], extra="  lockstep_timeout_s: 2.0\n")
-    asyncio.run(lockstep_frames(23, 3))  # then the client disconnects without acknowledging more
+def test_in_lockstep_a_frame_client_that_leaves_stops_the_sitl_loudly(tmp_path: Path, instance: int) -> None:
+    sitl = start(tmp_path, instance, seed=1, args=["--lockstep", "--speed", "0"], extra="  lockstep_timeout_s: 2.0\n")
+    asyncio.run(lockstep_frames(instance, 3))  # then the client disconnects without acknowledging more
     assert sitl.wait(timeout_s=15) == 3
     assert "frame client" in sitl.log_tail() or "no acknowledgement" in sitl.log_tail()
     sitl.stop()

@@ -19,29 +19,22 @@ import pytest
 from sitl.config import SitlConfig
 from sitl.fuzz import ControlFuzzer, MavlinkFuzzer
 from sitl.process import SitlProcess
-from tests.sitl_tools import MavlinkPeer, wait_until
+from tests.sitl_tools import MavlinkPeer, free_udp_port, wait_until
 from tests.test_sitl_mavsdk import Client
 
 pytestmark = pytest.mark.sitl
 
-INSTANCE = 15
 DATAGRAMS_PER_LINK = 3000
 CONTROL_REQUESTS = 2000
 MAX_HEARTBEAT_GAP_S = 1.5
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def test_a_fuzzed_sitl_stays_up_keeps_its_partner_and_heartbeat_and_still_flies(tmp_path: Path) -> None:
-    config = SitlConfig(instance=INSTANCE)
+def test_a_fuzzed_sitl_stays_up_keeps_its_partner_and_heartbeat_and_still_flies(tmp_path: Path, instance: int) -> None:
+    config = SitlConfig(instance=instance)
     gcs_port = free_udp_port()
     sitl_yaml = tmp_path / "sitl.yaml"
     sitl_yaml.write_text(f"sitl:\n  gcs_port_remote: {gcs_port}\n  seed: 3\n")
-    sitl = SitlProcess(["--config", str(sitl_yaml), "--speed", "1"], INSTANCE, tmp_path).start()
+    sitl = SitlProcess(["--config", str(sitl_yaml), "--speed", "1"], instance, tmp_path).start()
     gcs = MavlinkPeer(gcs_port)
     stray = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     stray.bind(("127.0.0.1", 0))
@@ -104,7 +97,7 @@ def test_a_fuzzed_sitl_stays_up_keeps_its_partner_and_heartbeat_and_still_flies(
         assert max(gaps) < MAX_HEARTBEAT_GAP_S, f"heartbeat gap {max(gaps):.2f} s"
 
         # A clean MAVSDK client on the API link still flies it.
-        client = Client("hover", INSTANCE)
+        client = Client("hover", instance)
         client.expect("connected", 20)
         client.expect("healthy", 20)
         client.expect("armed", 10)

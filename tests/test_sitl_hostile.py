@@ -24,21 +24,19 @@ from tests.sitl_tools import MavlinkPeer, api_port, wait_until
 
 pytestmark = pytest.mark.sitl
 
-INSTANCE = 16
-SYSID = INSTANCE + 1
 ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED = 0, 1, 2, 3
 NAN, INF = float("nan"), float("inf")
 
 
 @pytest.fixture(scope="module")
-def sitl(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SitlProcess]:
-    with SitlProcess(["--speed", "1"], INSTANCE, tmp_path_factory.mktemp("sitl")) as process:
+def sitl(tmp_path_factory: pytest.TempPathFactory, module_instance: int) -> Iterator[SitlProcess]:
+    with SitlProcess(["--speed", "1"], module_instance, tmp_path_factory.mktemp("sitl")) as process:
         yield process
 
 
 @pytest.fixture
 def api(sitl: SitlProcess) -> Iterator[MavlinkPeer]:
-    peer = MavlinkPeer(api_port(INSTANCE), system_id=245, component_id=190)
+    peer = MavlinkPeer(api_port(sitl.instance), system_id=245, component_id=190)
     wait_until(lambda: peer.latest("HEARTBEAT"), 5, "a heartbeat")
     yield peer
     peer.close()
@@ -76,9 +74,9 @@ def test_a_command_with_a_non_finite_or_meaningless_parameter_is_denied_and_the_
         p = [*params, *([0.0] * (7 - len(params)))]
         api.messages.clear()
         if as_int:
-            api.send(api.mav.command_int_encode(SYSID, 1, 1, command, 0, 0, *p[:4], 0, 0, p[6]))
+            api.send(api.mav.command_int_encode(sitl.instance + 1, 1, 1, command, 0, 0, *p[:4], 0, 0, p[6]))
         else:
-            api.send(api.mav.command_long_encode(SYSID, 1, command, 0, *p))
+            api.send(api.mav.command_long_encode(sitl.instance + 1, 1, command, 0, *p))
 
         def ack() -> Any:
             return next((m for m in api.poll() if m.get_type() == "COMMAND_ACK" and m.command == command), None)
@@ -92,11 +90,11 @@ def test_a_command_with_a_non_finite_or_meaningless_parameter_is_denied_and_the_
 
 def test_a_stray_sender_is_served_but_does_not_take_the_link(sitl: SitlProcess, api: MavlinkPeer) -> None:
     api.send(api.mav.heartbeat_encode(6, 8, 0, 0, 4))
-    partner = f"127.0.0.1:{api_port(INSTANCE)}"
+    partner = f"127.0.0.1:{api_port(sitl.instance)}"
     wait_until(lambda: sitl.state()["links"]["api"]["partner"] == partner or None, 3.0, "the API partner")
     before = sitl.state()["links"]["api"]["stray_frames"]
     stray = MavlinkPeer(0, system_id=66, component_id=1)
-    stray.vehicle_addr = ("127.0.0.1", SitlConfig(instance=INSTANCE).api_port_local)
+    stray.vehicle_addr = ("127.0.0.1", SitlConfig(instance=sitl.instance).api_port_local)
     try:
         for _ in range(20):
             stray.send(stray.mav.heartbeat_encode(6, 8, 0, 0, 4))
@@ -149,7 +147,7 @@ def test_a_state_reply_stays_one_datagram_after_thousands_of_senders(sitl: SitlP
         for compid in range(0, 256, 64):
             mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
             # An unknown message id to the vehicle: counted by its sender, no effect.
-            api.send_raw(mav.command_long_encode(SYSID, 1, 31999, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
+            api.send_raw(mav.command_long_encode(sitl.instance + 1, 1, 31999, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
     state = wait_until(
         lambda: ((s := sitl.state())["commands_by_sender"].get("other", 0) > 0 and s) or None, 3.0, "the senders"
     )
@@ -167,14 +165,13 @@ def signed_frame(mav: Any, key: bytes, msg: Any, timestamp: int) -> bytes:
     return data
 
 
-def test_with_a_signing_key_only_correctly_signed_fresh_frames_are_accepted(tmp_path: Path) -> None:
+def test_with_a_signing_key_only_correctly_signed_fresh_frames_are_accepted(tmp_path: Path, instance: int) -> None:
     key = hashlib.sha256(b"slz lander test passphrase").digest()
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         gcs_port = s.getsockname()[1]
     config = tmp_path / "sitl.yaml"
     config.write_text(f"sitl:\n  gcs_port_remote: {gcs_port}\n  signing:\n    key_hex: {key.hex()}\n    links: [gcs]\n")
-    instance = INSTANCE + 1
     sitl = SitlProcess(["--config", str(config), "--speed", "1"], instance, tmp_path).start()
     gcs = MavlinkPeer(gcs_port, system_id=255, component_id=190)
     gcs.mav.signing.secret_key = key  # the peer, too, takes only frames signed with the key
@@ -207,8 +204,7 @@ def test_with_a_signing_key_only_correctly_signed_fresh_frames_are_accepted(tmp_
         sitl.stop()
 
 
-def test_a_second_frame_client_is_refused_while_the_first_keeps_its_stream(tmp_path: Path) -> None:
-    instance = INSTANCE + 2
+def test_a_second_frame_client_is_refused_while_the_first_keeps_its_stream(tmp_path: Path, instance: int) -> None:
     config = tmp_path / "sitl.yaml"
     config.write_text("sitl:\n  camera:\n    enabled: true\n    width_px: 64\n    height_px: 48\n")
     sitl = SitlProcess(["--config", str(config), "--speed", "1"], instance, tmp_path).start()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -86,9 +87,9 @@ def fly_in_lockstep(
         sitl.stop()
 
 
-def test_same_seed_same_flight_at_different_speeds(tmp_path: Path) -> None:
-    slow_log, slow_seen, slow_wall = fly_in_lockstep(tmp_path, 14, "2")
-    fast_log, fast_seen, fast_wall = fly_in_lockstep(tmp_path, 15, "0")
+def test_same_seed_same_flight_at_different_speeds(tmp_path: Path, instances: Callable[[], int]) -> None:
+    slow_log, slow_seen, slow_wall = fly_in_lockstep(tmp_path, instances(), "2")
+    fast_log, fast_seen, fast_wall = fly_in_lockstep(tmp_path, instances(), "0")
     assert slow_wall > DURATION_S / 2 - 0.5  # paced at twice real time
     assert fast_wall < slow_wall  # as fast as possible
     rows = slow_log.splitlines()
@@ -103,11 +104,13 @@ def test_same_seed_same_flight_at_different_speeds(tmp_path: Path) -> None:
     assert slow_seen == fast_seen
 
 
-def test_both_dynamics_backends_fly_the_same_script_through_the_sitl(tmp_path: Path) -> None:
+def test_both_dynamics_backends_fly_the_same_script_through_the_sitl(
+    tmp_path: Path, instances: Callable[[], int]
+) -> None:
     pytest.importorskip("jsbsim")
     tracks = {}
-    for instance, dynamics in ((16, "rigid_body"), (17, "jsbsim_f450")):
-        log, _, _ = fly_in_lockstep(tmp_path, instance, "0", dynamics)
+    for dynamics in ("rigid_body", "jsbsim_f450"):
+        log, _, _ = fly_in_lockstep(tmp_path, instances(), "0", dynamics)
         rows = [r.split(",") for r in log.splitlines()[1:]]
         tracks[dynamics] = np.array([[float(v) for v in r[:4]] for r in rows])
     rigid, jsb = tracks["rigid_body"], tracks["jsbsim_f450"]
@@ -121,11 +124,11 @@ def test_both_dynamics_backends_fly_the_same_script_through_the_sitl(tmp_path: P
     assert vertical.max() < 0.3
 
 
-def test_time_waits_for_the_acknowledgement(tmp_path: Path) -> None:
+def test_time_waits_for_the_acknowledgement(tmp_path: Path, instance: int) -> None:
     config = tmp_path / "sitl.yaml"
     config.write_text("sitl:\n  lockstep_timeout_s: 3.0\n")
-    sitl = SitlProcess(["--config", str(config), "--lockstep", "--speed", "0"], 12, tmp_path).start()
-    client = LockstepClient(12)
+    sitl = SitlProcess(["--config", str(config), "--lockstep", "--speed", "0"], instance, tmp_path).start()
+    client = LockstepClient(instance)
     try:
         client.subscribe()
         tick = client.next_tick()
@@ -145,9 +148,9 @@ def test_time_waits_for_the_acknowledgement(tmp_path: Path) -> None:
         sitl.stop()
 
 
-def test_an_ack_cannot_overtake_the_setpoints_sent_before_it(tmp_path: Path) -> None:
-    sitl = SitlProcess(["--lockstep", "--speed", "0"], 13, tmp_path).start()
-    client = LockstepClient(13)
+def test_an_ack_cannot_overtake_the_setpoints_sent_before_it(tmp_path: Path, instance: int) -> None:
+    sitl = SitlProcess(["--lockstep", "--speed", "0"], instance, tmp_path).start()
+    client = LockstepClient(instance)
     try:
         client.subscribe()
         client.next_tick()
@@ -167,10 +170,10 @@ def test_an_ack_cannot_overtake_the_setpoints_sent_before_it(tmp_path: Path) -> 
         sitl.stop()
 
 
-def test_an_ack_can_name_the_setpoint_and_commands_it_waits_for(tmp_path: Path) -> None:
+def test_an_ack_can_name_the_setpoint_and_commands_it_waits_for(tmp_path: Path, instance: int) -> None:
     """For clients that cannot count their messages (MAVSDK re-sends setpoints on its own thread)."""
-    sitl = SitlProcess(["--lockstep", "--speed", "0"], 14, tmp_path).start()
-    client = LockstepClient(14)
+    sitl = SitlProcess(["--lockstep", "--speed", "0"], instance, tmp_path).start()
+    client = LockstepClient(instance)
     try:
         client.subscribe()
         client.next_tick()

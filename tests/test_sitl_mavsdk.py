@@ -23,7 +23,7 @@ import pytest
 
 from sitl.autopilot.modes import FlightMode
 from sitl.process import SitlProcess
-from tests.sitl_tools import GroundStation, api_port, state_when, wait_until
+from tests.sitl_tools import GroundStation, api_port, free_udp_port, state_when, wait_until
 
 pytestmark = pytest.mark.sitl
 
@@ -78,10 +78,17 @@ class Client:
 
 
 @pytest.fixture
-def sitl_factory(tmp_path: Path) -> Iterator[Callable[..., SitlProcess]]:
+def sitl_factory(tmp_path: Path, instances: Callable[[], int]) -> Iterator[Callable[..., SitlProcess]]:
+    """Start a SITL on a leased instance; with ``gcs_port`` its ground-station link sends there (not to 14550,
+    which every instance on the machine shares)."""
     started: list[SitlProcess] = []
 
-    def start(instance: int, *args: str) -> SitlProcess:
+    def start(*args: str, gcs_port: int | None = None) -> SitlProcess:
+        instance = instances()
+        if gcs_port is not None:
+            config = tmp_path / f"sitl-{instance}.yaml"
+            config.write_text(f"sitl:\n  gcs_port_remote: {gcs_port}\n")
+            args = ("--config", str(config), *args)
         sitl = SitlProcess(list(args), instance, tmp_path).start()
         started.append(sitl)
         return sitl
@@ -96,18 +103,19 @@ def test_mavsdk_flies_an_offboard_square_while_a_ground_station_watches(
     sitl_factory: Callable[..., SitlProcess], tmp_path: Path
 ) -> None:
     log = tmp_path / "square.csv"
-    sitl = sitl_factory(1, "--speed", "1", "--log", str(log))
-    gcs = GroundStation(1)
+    gcs_port = free_udp_port()
+    sitl = sitl_factory("--speed", "1", "--log", str(log), gcs_port=gcs_port)
+    gcs = GroundStation(sitl.instance, gcs_port)
     modes_seen: set[str] = set()
 
     def watch() -> None:
         for msg in gcs.poll():
-            if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == 2:
+            if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == sitl.instance + 1:
                 mode = FlightMode.from_custom_mode(msg.custom_mode)
                 armed = bool(msg.base_mode & 128)
                 modes_seen.add(f"{mode.px4_name if mode else msg.custom_mode}{'+armed' if armed else ''}")
 
-    client = Client("square", 1)
+    client = Client("square", sitl.instance)
     try:
         client.expect("connected", 20, watch)
         client.expect("healthy", 20, watch)
@@ -121,9 +129,9 @@ def test_mavsdk_flies_an_offboard_square_while_a_ground_station_watches(
         client.expect("done", 10, watch)
     finally:
         client.kill()
-    # The ground station saw the same vehicle (sysid 2 for instance 1) through the flight, on its own link.
+    # The ground station saw the same vehicle (sysid = instance + 1) through the flight, on its own link.
     assert {"AUTO.TAKEOFF+armed", "OFFBOARD+armed", "AUTO.LAND+armed", "AUTO.LAND"} <= modes_seen
-    gcs.send(gcs.mav.param_request_read_encode(2, 1, b"MIS_TAKEOFF_ALT", -1))
+    gcs.send(gcs.mav.param_request_read_encode(sitl.instance + 1, 1, b"MIS_TAKEOFF_ALT", -1))
     value = wait_until(lambda: gcs.latest("PARAM_VALUE"), 3.0, "PARAM_VALUE on the GCS link")
     assert value.param_value == pytest.approx(5.0)  # set by MAVSDK on the other link
     gcs.close()
@@ -154,8 +162,8 @@ def test_mavsdk_flies_an_offboard_square_while_a_ground_station_watches(
 def test_offboard_loss_failsafe_fires_after_com_of_loss_t_when_the_client_dies(
     sitl_factory: Callable[..., SitlProcess],
 ) -> None:
-    sitl = sitl_factory(2, "--speed", "1")
-    client = Client("hover", 2)
+    sitl = sitl_factory("--speed", "1")
+    client = Client("hover", sitl.instance)
     try:
         client.expect("offboard", 60)
         wait_until(lambda: sitl.state()["mode"] == "OFFBOARD", 5, "OFFBOARD")
@@ -175,8 +183,8 @@ def test_offboard_loss_failsafe_fires_after_com_of_loss_t_when_the_client_dies(
 def test_pilot_takeover_leaves_offboard_and_the_vehicle_obeys_the_pilot(
     sitl_factory: Callable[..., SitlProcess],
 ) -> None:
-    sitl = sitl_factory(3, "--speed", "1")
-    client = Client("push_north", 3)
+    sitl = sitl_factory("--speed", "1")
+    client = Client("push_north", sitl.instance)
     try:
         client.expect("offboard", 60)
         wait_until(lambda: sitl.state()["position_ned_m"][0] > 1.0, 10, "the client pushing north")
@@ -204,8 +212,9 @@ def test_pilot_takeover_leaves_offboard_and_the_vehicle_obeys_the_pilot(
 def test_heartbeats_follow_the_wall_clock_at_any_speed(
     sitl_factory: Callable[..., SitlProcess], speed: str, max_sim_s: float | None
 ) -> None:
-    sitl = sitl_factory(4, "--speed", speed)
-    gcs = GroundStation(4)
+    gcs_port = free_udp_port()
+    sitl = sitl_factory("--speed", speed, gcs_port=gcs_port)
+    gcs = GroundStation(sitl.instance, gcs_port)
     try:
         t0_sim = sitl.state()["t_s"]
         start = time.monotonic()

@@ -6,7 +6,7 @@ import functools
 import itertools
 import math
 import struct
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,28 +20,26 @@ from tests.sitl_tools import MavlinkPeer, api_port, position_setpoint, state_whe
 
 pytestmark = pytest.mark.sitl
 
-INSTANCE = 5
-SYSID = INSTANCE + 1
 ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED = 0, 1, 2, 3
 
 
 @pytest.fixture(scope="module")
-def sitl(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SitlProcess]:
-    with SitlProcess(["--speed", "2"], INSTANCE, tmp_path_factory.mktemp("sitl")) as process:
+def sitl(tmp_path_factory: pytest.TempPathFactory, module_instance: int) -> Iterator[SitlProcess]:
+    with SitlProcess(["--speed", "2"], module_instance, tmp_path_factory.mktemp("sitl")) as process:
         yield process
 
 
 @pytest.fixture
 def api(sitl: SitlProcess) -> Iterator[MavlinkPeer]:
-    peer = MavlinkPeer(api_port(INSTANCE), system_id=245, component_id=190)
+    peer = MavlinkPeer(api_port(sitl.instance), system_id=245, component_id=190, only_sysid=sitl.instance + 1)
     wait_until(lambda: peer.latest("HEARTBEAT"), 5, "a heartbeat")
     yield peer
     peer.close()
 
 
-def test_it_looks_like_a_px4_quadrotor(api: MavlinkPeer) -> None:
+def test_it_looks_like_a_px4_quadrotor(api: MavlinkPeer, sitl: SitlProcess) -> None:
     hb = api.latest("HEARTBEAT")
-    assert hb.get_srcSystem() == SYSID
+    assert hb.get_srcSystem() == sitl.instance + 1  # PX4: the instance + 1
     assert hb.get_srcComponent() == 1
     assert hb.type == mavlink.MAV_TYPE_QUADROTOR
     assert hb.autopilot == mavlink.MAV_AUTOPILOT_PX4
@@ -80,7 +78,19 @@ def test_requested_messages_and_intervals(api: MavlinkPeer) -> None:
     api.messages.clear()
     api.send(
         api.mav.command_int_encode(
-            SYSID, 1, 0, mavlink.MAV_CMD_REQUEST_MESSAGE, 0, 0, mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+            api.vehicle_sysid,
+            1,
+            0,
+            mavlink.MAV_CMD_REQUEST_MESSAGE,
+            0,
+            0,
+            mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
         )
     )
     ack = wait_until(lambda: api.latest("COMMAND_ACK"), 2, "the COMMAND_INT ack")
@@ -103,7 +113,7 @@ def test_requested_messages_and_intervals(api: MavlinkPeer) -> None:
 
 def test_parameters_read_set_list(api: MavlinkPeer) -> None:
     api.messages.clear()
-    api.send(api.mav.param_request_list_encode(SYSID, 1))
+    api.send(api.mav.param_request_list_encode(api.vehicle_sysid, 1))
 
     def all_params() -> list[Any] | None:
         api.poll()
@@ -116,22 +126,24 @@ def test_parameters_read_set_list(api: MavlinkPeer) -> None:
 
     def read(name: str) -> Any:
         api.messages.clear()
-        api.send(api.mav.param_request_read_encode(SYSID, 1, name.encode(), -1))
+        api.send(api.mav.param_request_read_encode(api.vehicle_sysid, 1, name.encode(), -1))
         return wait_until(lambda: api.latest("PARAM_VALUE"), 2, f"PARAM_VALUE {name}")
 
     assert read("COM_OF_LOSS_T").param_value == pytest.approx(1.0)
     # INT32 parameters travel bytewise, as PX4 sends them.
     as_float = struct.unpack("<f", struct.pack("<i", 2))[0]
     api.messages.clear()
-    api.send(api.mav.param_set_encode(SYSID, 1, b"COM_OBL_ACT", as_float, ParamType.INT32))
+    api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"COM_OBL_ACT", as_float, ParamType.INT32))
     echoed = wait_until(lambda: api.latest("PARAM_VALUE"), 2, "the PARAM_SET echo")
     assert echoed.param_type == ParamType.INT32
     assert struct.unpack("<i", struct.pack("<f", echoed.param_value))[0] == 2
     # Out of range: refused, the old value echoed back.
     api.messages.clear()
-    api.send(api.mav.param_set_encode(SYSID, 1, b"MPC_XY_VEL_MAX", 500.0, ParamType.REAL32))
+    api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"MPC_XY_VEL_MAX", 500.0, ParamType.REAL32))
     assert wait_until(lambda: api.latest("PARAM_VALUE"), 2, "echo").param_value == pytest.approx(5.0)
-    api.send(api.mav.param_set_encode(SYSID, 1, b"COM_OBL_ACT", struct.unpack("<f", struct.pack("<i", 0))[0], 6))
+    api.send(
+        api.mav.param_set_encode(api.vehicle_sysid, 1, b"COM_OBL_ACT", struct.unpack("<f", struct.pack("<i", 0))[0], 6)
+    )
 
 
 def test_commands_in_the_wrong_state_get_the_right_result(api: MavlinkPeer, sitl: SitlProcess) -> None:
@@ -175,11 +187,11 @@ def test_malformed_and_unknown_mavlink_is_dropped_and_counted(api: MavlinkPeer, 
 
 def test_bad_setpoints_are_rejected(api: MavlinkPeer, sitl: SitlProcess) -> None:
     before = sitl.state()["setpoints_rejected"]
-    api.send(position_setpoint(api.mav, math.nan, 0.0, -5.0, target_system=SYSID))  # NaN in a used field
-    api.send(position_setpoint(api.mav, 1e6, 0.0, -5.0, target_system=SYSID))  # 1000 km away
+    api.send(position_setpoint(api.mav, math.nan, 0.0, -5.0, target_system=api.vehicle_sysid))  # NaN in a used field
+    api.send(position_setpoint(api.mav, 1e6, 0.0, -5.0, target_system=api.vehicle_sysid))  # 1000 km away
     api.send(
         api.mav.set_position_target_local_ned_encode(
-            0, SYSID, 1, 8, 0b0000_1111_1111_1000, 0, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0
+            0, api.vehicle_sysid, 1, 8, 0b0000_1111_1111_1000, 0, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0
         )
     )
     wait_until(lambda: sitl.state()["setpoints_rejected"] >= before + 3, 3, "three rejections")
@@ -196,13 +208,14 @@ def test_control_channel_errors_are_answered(sitl: SitlProcess) -> None:
     assert sitl.request({"cmd": "ping"})["event"] == "pong"
 
 
-def test_two_instances_run_side_by_side(tmp_path: Path) -> None:
-    with SitlProcess(["--speed", "1"], 7, tmp_path) as a, SitlProcess(["--speed", "1"], 8, tmp_path) as b:
-        peer_a, peer_b = MavlinkPeer(api_port(7)), MavlinkPeer(api_port(8))
+def test_two_instances_run_side_by_side(tmp_path: Path, instances: Callable[[], int]) -> None:
+    i, j = instances(), instances()
+    with SitlProcess(["--speed", "1"], i, tmp_path) as a, SitlProcess(["--speed", "1"], j, tmp_path) as b:
+        peer_a, peer_b = MavlinkPeer(api_port(i)), MavlinkPeer(api_port(j))
         try:
-            hb_a = wait_until(lambda: peer_a.latest("HEARTBEAT"), 5, "instance 7")
-            hb_b = wait_until(lambda: peer_b.latest("HEARTBEAT"), 5, "instance 8")
-            assert (hb_a.get_srcSystem(), hb_b.get_srcSystem()) == (8, 9)
+            hb_a = wait_until(lambda: peer_a.latest("HEARTBEAT"), 5, f"instance {i}")
+            hb_b = wait_until(lambda: peer_b.latest("HEARTBEAT"), 5, f"instance {j}")
+            assert (hb_a.get_srcSystem(), hb_b.get_srcSystem()) == (i + 1, j + 1)
             assert a.state()["t_s"] > 0
             assert b.state()["t_s"] > 0
         finally:
@@ -210,20 +223,20 @@ def test_two_instances_run_side_by_side(tmp_path: Path) -> None:
             peer_b.close()
 
 
-def test_a_taken_port_is_a_clear_error(tmp_path: Path) -> None:
-    blocker = MavlinkPeer(14580 + 9)  # the API link's local port of instance 9
+def test_a_taken_port_is_a_clear_error(tmp_path: Path, instance: int) -> None:
+    blocker = MavlinkPeer(14580 + instance)  # the API link's local port of the instance
     try:
-        with pytest.raises(Exception, match=r"cannot bind 127\.0\.0\.1:14589"):
-            SitlProcess([], 9, tmp_path).start(ready_timeout_s=10)
+        with pytest.raises(Exception, match=rf"cannot bind 127\.0\.0\.1:{14580 + instance}"):
+            SitlProcess([], instance, tmp_path).start(ready_timeout_s=10)
     finally:
         blocker.close()
 
 
-def test_rc_loss_in_position_mode_returns_home(tmp_path: Path) -> None:
+def test_rc_loss_in_position_mode_returns_home(tmp_path: Path, instance: int) -> None:
     config = tmp_path / "rtl.yaml"
     config.write_text("sitl:\n  params:\n    RTL_RETURN_ALT: 5.0\n    MPC_LAND_SPEED: 1.5\n")
-    with SitlProcess(["--config", str(config), "--speed", "4"], 6, tmp_path) as sitl:
-        api = MavlinkPeer(api_port(6))
+    with SitlProcess(["--config", str(config), "--speed", "4"], instance, tmp_path) as sitl:
+        api = MavlinkPeer(api_port(instance))
         try:
             wait_until(lambda: api.latest("HEARTBEAT"), 5, "a heartbeat")
             assert api.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == ACCEPTED

@@ -17,8 +17,7 @@ pytestmark = pytest.mark.sitl
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_the_link_takes_off_flies_offboard_and_lands(tmp_path: Path) -> None:
-    instance = 22
+def test_the_link_takes_off_flies_offboard_and_lands(tmp_path: Path, instance: int) -> None:
     sitl = SitlProcess(["--speed", "2"], instance, tmp_path).start()
     try:
         client = subprocess.run(

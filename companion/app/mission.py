@@ -6,16 +6,21 @@ Switching between the SITL and a real drone is a change of ``vehicle.url`` and `
 from __future__ import annotations
 
 import enum
+import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlparse
 
 from pydantic import Field, field_validator, model_validator
 
-from companion.config import StrictModel, load_yaml_config
+from companion.config import ConfigError, StrictModel, load_yaml_config
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import GuidanceConfig
 from companion.perception.config import PerceptionConfig
 from companion.vehicle.link import FlightMode
+
+if TYPE_CHECKING:
+    from companion.perception.pipeline import SlzPipeline
 
 
 class OperatingMode(str, enum.Enum):
@@ -184,3 +189,51 @@ class MissionConfig(StrictModel):
 def load_mission_config(path: str | Path) -> MissionConfig:
     """Load and validate a mission config (raises ``ConfigError`` naming every bad field)."""
     return load_yaml_config(MissionConfig, path)
+
+
+def validate_for_flight(path: str | Path, never_arm: bool = False) -> tuple[MissionConfig, SlzPipeline]:
+    """Everything ``slz fly`` checks before it opens a link, and ``slz check-config`` checks the same way.
+
+    The file (every section and cross-check of :class:`MissionConfig`), ``--never-arm`` (the systemd unit) against
+    ``start.arm_and_takeoff``, and the density model: it loads with the configured providers and its contract agrees
+    with ``perception`` (input size, stride).
+
+    Raises
+    ------
+    ConfigError
+        A field, named with its allowed range.
+    PerceptionError
+        The model does not load or does not fit the config.
+    """
+    from companion.perception.pipeline import SlzPipeline
+
+    config = load_mission_config(path)
+    if never_arm and config.start.arm_and_takeoff:
+        raise ConfigError(
+            str(path),
+            ["start.arm_and_takeoff: must be false with --never-arm (the systemd unit): the pilot takes off"],
+        )
+    return config, SlzPipeline.from_config(config.perception)
+
+
+# What a simulated camera must share with perception.camera, or every projection is silently wrong.
+CAMERA_FIELDS = ("width_px", "height_px", "hfov_deg", "tilt_deg")
+
+
+def camera_mismatches(perception: PerceptionConfig, sim_camera: object, where: str = "sitl.camera") -> list[str]:
+    """One line per field of a simulated camera (any object with ``width_px``, ``height_px``, ``hfov_deg`` and
+    ``tilt_deg``) that differs from ``perception.camera``; empty when they agree. Focal lengths given in pixels
+    (``fx_px``) override the field of view and are compared through it."""
+    cam = perception.camera
+    ours: dict[str, float] = {k: float(getattr(cam, k)) for k in CAMERA_FIELDS}
+    if cam.fx_px is not None:
+        ours["hfov_deg"] = math.degrees(2.0 * math.atan(cam.width_px / (2.0 * cam.fx_px)))
+    problems = []
+    for key in CAMERA_FIELDS:
+        theirs = float(getattr(sim_camera, key))
+        if abs(theirs - ours[key]) > 1e-6 * max(1.0, abs(ours[key])):
+            problems.append(
+                f"perception.camera.{key}: {ours[key]:g} does not match {where}.{key} = {theirs:g} "
+                "(the projection would put people in the wrong place)"
+            )
+    return problems

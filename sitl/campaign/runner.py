@@ -34,13 +34,14 @@ from sitl.campaign.metrics import mission_metrics, stale
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.config import MAX_INSTANCE, SitlConfig
+from sitl.instances import InstanceLease, lease_instance
 from sitl.mission import MissionError, MissionSpec, fly
 from sitl.process import SitlProcessError
 
 logger = logging.getLogger(__name__)
 
-# Worker k flies SITL instance INSTANCE_BASE + k (its own ports). The tests fly instances 1 to 29, so a campaign
-# and the tests can run side by side with up to 10 workers; with more, lower --instance-base.
+# By default each worker leases a free SITL instance for its lifetime (sitl.instances), so campaigns, tests and demos
+# share a machine. With an explicit instance base, worker k flies instance BASE + k.
 INSTANCE_BASE = 30
 
 
@@ -83,11 +84,16 @@ def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance:
 
 
 _worker_instance = INSTANCE_BASE
+_worker_lease: InstanceLease | None = None
 
 
 def _init_worker(instances: Any) -> None:
-    global _worker_instance
-    _worker_instance = int(instances.get())
+    global _worker_instance, _worker_lease
+    if instances is None:  # lease a free instance for this worker's lifetime (released when it exits)
+        _worker_lease = lease_instance()
+        _worker_instance = _worker_lease.instance
+    else:
+        _worker_instance = int(instances.get())
     logging.basicConfig(level=logging.WARNING)
     # SIGTERM ends a worker at once (the default action: the pool would catch an exception and fly the next
     # mission); its SITL and companion get SIGTERM from the kernel as it dies (sitl.process.die_with_parent).
@@ -194,7 +200,7 @@ def run_campaign(
     keep_runs: bool = False,
     on_result: Callable[[dict[str, Any]], None] | None = None,
     progress: bool = True,
-    instance_base: int = INSTANCE_BASE,
+    instance_base: int | None = None,
 ) -> list[dict[str, Any]]:
     """Fly every mission of ``spec`` not yet in ``out_dir/results.jsonl``; returns all results in plan order."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -211,7 +217,7 @@ def run_campaign(
     plans = spec.missions()
     todo = missions_to_fly(plans, done)
     workers = workers or spec.workers
-    worker_ids = worker_instances(instance_base, workers)
+    worker_ids = worker_instances(instance_base, workers) if instance_base is not None else None
 
     policies = {p.mission_id: p.strategy.policy.value for p in plans}
 
@@ -226,9 +232,11 @@ def run_campaign(
         stamp = {"segment": segment, "commit": commit}
         flown_here, interrupted = 0, True
         context = multiprocessing.get_context("spawn")
-        instances = context.Queue()
-        for instance in worker_ids:
-            instances.put(instance)
+        instances = None
+        if worker_ids is not None:
+            instances = context.Queue()
+            for instance in worker_ids:
+                instances.put(instance)
         try:
             with (
                 open_append(results_path) as results,
