@@ -21,8 +21,8 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
+from companion.geometry import Pose  # noqa: E402
 from companion.perception.config import load_perception_config  # noqa: E402
-from companion.perception.geometry import Pose  # noqa: E402
 from companion.perception.pipeline import STAGES, SlzPipeline, camera_from_config  # noqa: E402
 from sitl.flat_scene import FlatScene  # noqa: E402
 

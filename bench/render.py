@@ -18,7 +18,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount  # noqa: E402
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount  # noqa: E402
 from sitl.render.camera import Light, WorldRenderer  # noqa: E402
 from sitl.world.crowd import Crowd  # noqa: E402
 from sitl.world.park import Park  # noqa: E402

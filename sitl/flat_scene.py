@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.perception.geometry import F64Array, PinholeCamera, Pose
+from companion.geometry import F64Array, PinholeCamera, Pose
 from companion.perception.projection import plane_homography
 from sitl.world.park import smooth_noise
 

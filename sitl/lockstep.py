@@ -6,10 +6,10 @@ SITL moves on only when it has received them all, so setpoints cannot be overtak
 
 from __future__ import annotations
 
-import json
 import socket
 from typing import Any
 
+from companion.vehicle.sim_control import Command, Event, ack_counting, decode_event, encode
 from sitl.config import CONTROL_PORT
 
 
@@ -25,27 +25,20 @@ class LockstepControl:
 
     def subscribe(self) -> None:
         """Become the SITL's lockstep client (its next tick comes here)."""
-        self._sock.sendto(json.dumps({"cmd": "lockstep_subscribe"}).encode(), self.address)
+        self._sock.sendto(encode(Command.LOCKSTEP_SUBSCRIBE), self.address)
 
     def next_tick(self, timeout_s: float = 10.0) -> dict[str, Any]:
         """The next ``{"event": "tick", "seq": k, "t_s": ...}`` (``TimeoutError`` after ``timeout_s``)."""
         self._sock.settimeout(timeout_s)
         while True:
             data, _ = self._sock.recvfrom(65535)
-            event: dict[str, Any] = json.loads(data)
-            if event.get("event") == "tick":
+            event = decode_event(data)
+            if event is not None and event["event"] == Event.TICK:
                 return event
 
     def ack(self, seq: int, mavlink_sent: int) -> None:
         """Acknowledge tick ``seq`` after sending ``mavlink_sent`` MAVLink messages in all."""
-        request = {
-            "cmd": "lockstep_ack",
-            "seq": seq,
-            "mavlink_sent": mavlink_sent,
-            "sysid": self.system_id,
-            "compid": self.component_id,
-        }
-        self._sock.sendto(json.dumps(request).encode(), self.address)
+        self._sock.sendto(ack_counting(seq, mavlink_sent, self.system_id, self.component_id), self.address)
 
     def close(self) -> None:
         """Close the socket."""

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from companion.vehicle.sim_control import Command, Event
 from sitl.config import CONTROL_PORT
 
 logger = logging.getLogger(__name__)
@@ -117,10 +118,10 @@ class SitlProcess:
             if self._proc.poll() is not None:
                 raise SitlProcessError(f"SITL exited with {self._proc.returncode} at start:\n{self.log_tail()}")
             try:
-                reply = self.request({"cmd": "ping"}, timeout_s=0.25)
+                reply = self.request({"cmd": Command.PING.value}, timeout_s=0.25)
             except TimeoutError:
                 continue
-            if reply.get("event") == "pong":
+            if reply.get("event") == Event.PONG:
                 if reply.get("pid") not in (None, self._proc.pid):  # another SITL holds this instance's ports
                     self.stop()
                     raise SitlProcessError(
@@ -165,7 +166,7 @@ class SitlProcess:
 
     def state(self) -> dict[str, Any]:
         """Ground truth and counters."""
-        return self.request({"cmd": "state"})
+        return self.request({"cmd": Command.STATE.value})
 
     @property
     def running(self) -> bool:
@@ -184,7 +185,7 @@ class SitlProcess:
             return None
         if proc.poll() is None:
             with contextlib.suppress(TimeoutError, OSError):
-                self.request({"cmd": "shutdown"}, timeout_s=0.5)
+                self.request({"cmd": Command.SHUTDOWN.value}, timeout_s=0.5)
             try:
                 proc.wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from companion.camera.frames import encode_frame
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from sitl.config import SitlConfig
 from sitl.dynamics.base import VehicleState
 from sitl.frame_server import FrameServer

@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park

@@ -22,6 +22,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.config import quote
+from companion.vehicle.sim_control import Command, Event, RequestError, Tick, flag, lockstep_ack, number
 from sitl.autopilot.commander import FORCE_MAGIC, Commander, ControlSource, LandedState, MavResult
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
@@ -39,7 +40,7 @@ from sitl.autopilot.telemetry import (
 )
 from sitl.clock import SimClock
 from sitl.config import MAX_WIND_MPS, FaultKind, LinkName, SitlConfig
-from sitl.control_channel import ControlChannel, RequestError, flag, lockstep_ack, number
+from sitl.control_channel import ControlChannel
 from sitl.dynamics.base import DynamicsError, make_dynamics
 
 logger = logging.getLogger(__name__)
@@ -296,8 +297,8 @@ class SitlVehicle:
                     return False
             self._send_tick_pose()
             self._write_truth()
-            tick = {"event": "tick", "seq": self._tick_seq, "t_s": self.clock.now_s, "frame_seq": frame_seq}
-            self.control.send(tick, self._lockstep_client)
+            tick = Tick(self._tick_seq, self.clock.now_s, frame_seq)
+            self.control.send(tick.to_event(), self._lockstep_client)
             self._tick_sent_wall = time.monotonic()
         ack = self._lockstep_ack
         if ack is not None and ack.get("seq") == self._tick_seq and self._ack_covers_mavlink(ack):
@@ -489,7 +490,7 @@ class SitlVehicle:
                 self._handle_control(request, addr)
             except Exception as exc:
                 self._handler_failed(f"control {quote(request.get('cmd'))}", exc)
-                self.control.send({"event": "error", "cmd": "?", "error": "request failed"}, addr)
+                self.control.send({"event": Event.ERROR.value, "cmd": "?", "error": "request failed"}, addr)
 
     def _handler_failed(self, what: str, exc: Exception) -> None:
         """Count a request whose handling raised; log it at most once per wall second."""
@@ -706,24 +707,24 @@ class SitlVehicle:
     def _handle_control(self, request: dict[str, Any], addr: tuple[str, int]) -> None:
         assert self.control is not None
         cmd = request["cmd"]
-        reply: dict[str, Any] = {"event": "ack", "cmd": cmd}
+        reply: dict[str, Any] = {"event": Event.ACK.value, "cmd": cmd}
         try:
-            if cmd == "ping":
-                reply = {"event": "pong", "t_s": self.clock.now_s, "pid": os.getpid()}
-            elif cmd == "state":
+            if cmd == Command.PING:
+                reply = {"event": Event.PONG.value, "t_s": self.clock.now_s, "pid": os.getpid()}
+            elif cmd == Command.STATE:
                 reply = self._truth()
-            elif cmd == "pilot_mode":
+            elif cmd == Command.PILOT_MODE:
                 mode = request.get("mode")
                 if not isinstance(mode, str):
                     raise RequestError("mode: expected a mode name")
                 reply["result"] = int(self.commander.set_mode(FlightMode.from_name(mode[:32]), ControlSource.PILOT))
-            elif cmd == "pilot_sticks":
+            elif cmd == Command.PILOT_STICKS:
                 self.commander.pilot_sticks = np.array(
                     [number(request, k, -1.0, 1.0, default=0.0) for k in ("north", "east", "down")]
                 )
-            elif cmd == "rc_loss":
+            elif cmd == Command.RC_LOSS:
                 self.commander.set_rc_lost(flag(request, "lost"))
-            elif cmd == "wind":
+            elif cmd == Command.WIND:
                 wind = request.get("ned_mps")
                 if not isinstance(wind, list) or len(wind) != 3:
                     raise RequestError("ned_mps: expected three numbers (north, east, down m/s)")
@@ -731,7 +732,7 @@ class SitlVehicle:
                 self.dynamics.set_wind(
                     np.array([number(components, k, -MAX_WIND_MPS, MAX_WIND_MPS) for k in components])
                 )
-            elif cmd == "lockstep_subscribe":
+            elif cmd == Command.LOCKSTEP_SUBSCRIBE:
                 if not self.config.lockstep:
                     raise ValueError("this SITL does not run in lockstep")
                 current = self._lockstep_client
@@ -741,31 +742,31 @@ class SitlVehicle:
                 self._lockstep_released = False
                 self._tick_sent_wall = math.nan  # (re)send the pending tick to the new client
                 reply["tick_period_s"] = self.config.lockstep_period_s
-            elif cmd == "lockstep_release":  # the client is leaving: run free from here on
+            elif cmd == Command.LOCKSTEP_RELEASE:  # the client is leaving: run free from here on
                 self._lockstep_released = True
                 self.clock.resync()
-            elif cmd == "camera_fail":
+            elif cmd == Command.CAMERA_FAIL:
                 if self.camera is None:
                     raise ValueError("this SITL has no camera")
                 self.camera_failed = flag(request, "failed")
-            elif cmd == "link_loss":
+            elif cmd == Command.LINK_LOSS:
                 self.links[0].cut = flag(request, "lost")
-            elif cmd == "lockstep_ack":
+            elif cmd == Command.LOCKSTEP_ACK:
                 if not self.config.lockstep or addr != self._lockstep_client:
                     raise ValueError("not this SITL's lockstep client")
                 self._lockstep_ack = lockstep_ack(request)
                 self._last_ack_wall = time.monotonic()
                 return
-            elif cmd == "people":
+            elif cmd == Command.PEOPLE:
                 if self.camera is None:
                     raise ValueError("this SITL has no world (camera disabled)")
-                reply = {"event": "people", **self.camera.people()}
-            elif cmd == "shutdown":
+                reply = {"event": Event.PEOPLE.value, **self.camera.people()}
+            elif cmd == Command.SHUTDOWN:
                 self.request_stop()
             else:
                 raise ValueError(f"unknown cmd {cmd!r}")
         except (KeyError, ValueError, TypeError) as exc:
-            reply = {"event": "error", "cmd": cmd, "error": str(exc)}
+            reply = {"event": Event.ERROR.value, "cmd": cmd, "error": str(exc)}
         request_id = request.get("id")
         if isinstance(request_id, (int, str)) and len(str(request_id)) <= 64:
             reply["id"] = request_id  # lets the requester match replies to requests
@@ -775,7 +776,7 @@ class SitlVehicle:
         s = self.dynamics.state()
         cmd = self.commander
         return {
-            "event": "state",
+            "event": Event.STATE.value,
             "t_s": self.clock.now_s,
             "position_ned_m": s.position_ned_m.tolist(),
             "velocity_ned_mps": s.velocity_ned_mps.tolist(),

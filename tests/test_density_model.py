@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import OccupancyConfig, load_perception_config
 from companion.perception.density import OnnxDensityModel
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from models.data.generate import Split, generate
 from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, read_metadata
 from models.eval.evaluate import evaluate_model

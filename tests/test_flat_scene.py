@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import ProjectionConfig
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.projection import HeadPlaneProjector
 from sitl.flat_scene import FlatScene, SceneError
 

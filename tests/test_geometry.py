@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.perception.errors import PerceptionError
-from companion.perception.geometry import (
+from companion.geometry import (
+    GeometryError,
     PinholeCamera,
     Pose,
     R_world_body_from_euler,
@@ -57,7 +57,7 @@ def test_positive_pitch_raises_the_nose() -> None:
 
 
 def test_zero_quaternion_is_rejected() -> None:
-    with pytest.raises(PerceptionError, match=r"geometry\.quaternion"):
+    with pytest.raises(GeometryError, match=r"geometry\.quaternion"):
         R_world_body_from_quaternion([0.0, 0.0, 0.0, 0.0])
 
 

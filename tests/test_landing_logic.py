@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from companion.config import ConfigError, validate_config
+from companion.geometry import Pose
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import (
     CommandKind,
@@ -22,7 +23,6 @@ from companion.guidance.landing import (
     footprint_view,
 )
 from companion.perception.density import DensityMap
-from companion.perception.geometry import Pose
 from companion.perception.occupancy import OccupancyImage
 from companion.perception.pipeline import FrameResult
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy

@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
+from companion.geometry import Pose
 from companion.perception.config import PerceptionConfig
 from companion.perception.density import DensityMap, DensityModel, OnnxDensityModel, downscaled_size
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import Pose
 from companion.perception.pipeline import STAGES, FrameResult, SlzPipeline, camera_from_config
 from sitl.flat_scene import FlatScene, RenderedFrame
 

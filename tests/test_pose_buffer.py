@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.perception.geometry import R_world_body_from_euler
+from companion.geometry import R_world_body_from_euler
 from companion.vehicle.pose_buffer import PoseBuffer, PoseBufferError, slerp
 
 pytestmark = pytest.mark.unit

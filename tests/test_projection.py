@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import ProjectionConfig
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.projection import FREE, OCCUPIED, HeadPlaneProjector
 
 pytestmark = pytest.mark.unit

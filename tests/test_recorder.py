@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from companion.app.recorder import FlightRecorder, RecorderError, open_append, read_log
-from companion.guidance.landing import LandingPhase, Setpoint
+from companion.guidance.landing import LandingPhase
+from companion.vehicle.link import Setpoint
 
 pytestmark = pytest.mark.unit
 

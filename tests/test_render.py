@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import ProjectionConfig
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd

@@ -40,13 +40,14 @@ from typing import Any
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.recorder import FlightRecorder
 from companion.camera.frames import CameraError, Frame, FrameSource
+from companion.geometry import GeometryError, Pose, polygon_centroid_ne_m
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase, VehicleState
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import Pose, polygon_centroid_ne_m
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.vehicle.link import FlightMode, VehicleError, VehicleLink
-from companion.vehicle.lockstep import LockstepClient, Tick
+from companion.vehicle.lockstep import LockstepClient
+from companion.vehicle.sim_control import Tick
 
 logger = logging.getLogger(__name__)
 
@@ -248,7 +249,7 @@ class FlightApp:
                 frame.t_capture_s,
                 self._area_centre_ne_m,
             )
-        except PerceptionError as exc:  # one bad frame or pose; a lasting failure trips the silence failsafe
+        except (PerceptionError, GeometryError) as exc:  # one bad frame or pose; a lasting failure: silence failsafe
             self.outcome.frames_failed += 1
             self.recorder.write("frame_error", frame.t_capture_s, seq=frame.seq, error=str(exc))
             return

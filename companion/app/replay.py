@@ -22,10 +22,10 @@ import numpy as np
 
 from companion.app.mission import MissionConfig
 from companion.app.recorder import plain, read_log
+from companion.geometry import GeometryError, Pose
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import Decision, LandingGuidance, VehicleState
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import Pose
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.visualize import draw_camera_overlay
 
@@ -147,7 +147,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
                 pose = Pose(np.asarray(record["T_world_body"], dtype=np.float64))
                 try:
                     result = pipeline.process(image, pose, float(record["t_s"]))
-                except PerceptionError as exc:
+                except (PerceptionError, GeometryError) as exc:
                     report.frame_mismatches += 1
                     report.note(f"frame {seq}: the pipeline failed in replay: {exc}")
                     continue

@@ -31,7 +31,7 @@ import numpy as np
 from companion.app.mission import MissionConfig
 from companion.app.recorder import read_log
 from companion.app.replay import VideoWriter
-from companion.perception.geometry import Pose
+from companion.geometry import Pose
 from companion.perception.pipeline import camera_from_config
 from companion.perception.projection import HeadPlaneProjector
 from companion.perception.visualize import draw_circles_overlay

@@ -14,7 +14,7 @@ import numpy.typing as npt
 from pydantic import Field, model_validator
 
 from companion.config import StrictModel
-from companion.perception.geometry import polygon_signed_area_m2
+from companion.geometry import polygon_signed_area_m2
 
 F64Array = npt.NDArray[np.float64]
 

@@ -45,6 +45,7 @@ from companion.guidance.geofence import Geofence
 from companion.perception.pipeline import FrameResult
 from companion.perception.projection import HeadPlaneOccupancy
 from companion.perception.selection import Target
+from companion.vehicle.link import Setpoint
 
 
 class FailsafeAction(str, enum.Enum):
@@ -158,16 +159,6 @@ class CommandKind(str, enum.Enum):
     LAND = "land"
     HOLD = "hold"
     RETURN = "return"
-
-
-@dataclass(frozen=True)
-class Setpoint:
-    """A local position setpoint: NED metres, yaw in degrees (MAVSDK's ``PositionNedYaw``)."""
-
-    north_m: float
-    east_m: float
-    down_m: float
-    yaw_deg: float
 
 
 @dataclass(frozen=True)

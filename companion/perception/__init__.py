@@ -12,9 +12,9 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from companion.geometry import PinholeCamera, Pose
     from companion.perception.config import PerceptionConfig, SelectionPolicyName, load_perception_config
     from companion.perception.errors import PerceptionError
-    from companion.perception.geometry import PinholeCamera, Pose
     from companion.perception.pipeline import FrameResult, SlzPipeline, camera_from_config
 
 # Loaded on first use: the SITL imports the geometry module only, without the pipeline's scipy and onnxruntime.

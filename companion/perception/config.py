@@ -13,7 +13,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from companion.config import StrictModel, load_yaml_config
-from companion.perception.geometry import polygon_signed_area_m2
+from companion.geometry import polygon_signed_area_m2
 
 
 class SelectionPolicyName(str, enum.Enum):

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
+from companion.geometry import F64Array, PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import CameraConfig, PerceptionConfig
 from companion.perception.density import (
     DensityMap,
@@ -23,7 +24,6 @@ from companion.perception.density import (
     predict_downscaled,
 )
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import F64Array, PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.occupancy import OccupancyImage, OccupancyMapper
 from companion.perception.projection import HeadPlaneOccupancy, HeadPlaneProjector
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target, make_policy

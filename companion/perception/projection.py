@@ -20,9 +20,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.geometry import F64Array, PinholeCamera, Pose, invert_transform
 from companion.perception.config import ProjectionConfig
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import F64Array, PinholeCamera, Pose, invert_transform
 
 BoolArray = npt.NDArray[np.bool_]
 U8Array = npt.NDArray[np.uint8]

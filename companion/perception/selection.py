@@ -14,8 +14,8 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from companion.geometry import inside_polygon
 from companion.perception.config import SelectionConfig, SelectionPolicyName
-from companion.perception.geometry import inside_polygon
 from companion.perception.tracking import TrackedZone
 
 

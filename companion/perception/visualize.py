@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.perception.geometry import F64Array, Pose
+from companion.geometry import F64Array, Pose
 from companion.perception.pipeline import FrameResult
 from companion.perception.projection import HeadPlaneProjector
 from companion.perception.selection import Target

@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.geometry import inside_polygon
 from companion.perception.config import ZoneConfig
-from companion.perception.geometry import inside_polygon
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
 
 

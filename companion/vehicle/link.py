@@ -10,9 +10,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
-from companion.guidance.landing import Setpoint
 from companion.vehicle.clock import VehicleClock
 from companion.vehicle.pose_buffer import PoseBuffer
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """A local position setpoint: NED metres, yaw in degrees (MAVSDK's ``PositionNedYaw``); what the landing logic
+    asks of the vehicle and the link sends."""
+
+    north_m: float
+    east_m: float
+    down_m: float
+    yaw_deg: float
 
 
 class VehicleError(Exception):

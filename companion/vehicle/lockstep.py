@@ -8,19 +8,27 @@ while handling the tick): MAVSDK re-sends setpoints on its own thread, so the co
 and an acknowledgement must never overtake them. The result: the same seed gives the same flight at any speed.
 
 On a real vehicle there is no lockstep and nothing here runs; the protocol is JSON over UDP on the simulator's
-control port (``udp://127.0.0.1:4560``).
+control port (``udp://127.0.0.1:4560``), spoken through :mod:`companion.vehicle.sim_control`.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
-from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlparse
+
+from companion.vehicle.sim_control import (
+    Command,
+    Event,
+    RequestError,
+    Tick,
+    ack_expecting,
+    decode_event,
+    encode,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -33,30 +41,17 @@ class LockstepError(Exception):
         self.url = url
 
 
-@dataclass(frozen=True)
-class Tick:
-    """One lockstep tick: its number, the simulated time (s) and the frame sent before it (None: no frame)."""
-
-    seq: int
-    t_s: float
-    frame_seq: int | None
-
-
 class _Protocol(asyncio.DatagramProtocol):
     def __init__(self, queue: asyncio.Queue[dict[str, Any]]) -> None:
         self.queue = queue
         self.malformed = 0
 
     def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
-        try:
-            event = json.loads(data)
-        except (json.JSONDecodeError, UnicodeDecodeError):
+        event = decode_event(data)
+        if event is None:
             self.malformed += 1  # dropped and counted, never raised
             return
-        if isinstance(event, dict):
-            self.queue.put_nowait(event)
-        else:
-            self.malformed += 1
+        self.queue.put_nowait(event)
 
 
 class LockstepClient:
@@ -92,9 +87,9 @@ class LockstepClient:
         except OSError as exc:
             raise LockstepError(self.url, f"cannot open a socket: {exc}") from None
         self._transport, self._protocol = transport, protocol
-        self._send({"cmd": "lockstep_subscribe", "id": 1})
+        self._send(encode(Command.LOCKSTEP_SUBSCRIBE, id=1))
         reply = await self._next(lambda e: e.get("id") == 1, "the reply to lockstep_subscribe")
-        if reply.get("event") == "error":
+        if reply.get("event") == Event.ERROR:
             logger.info("%s runs free (%s): no lockstep", self.url, reply.get("error"))
             self.close()
             return False
@@ -102,10 +97,10 @@ class LockstepClient:
         logger.info("lockstep with %s, tick %.3f s", self.url, self.period_s)
         return True
 
-    def _send(self, request: dict[str, Any]) -> None:
+    def _send(self, request: bytes) -> None:
         if self._transport is None:
             raise LockstepError(self.url, "not open")
-        self._transport.sendto(json.dumps(request).encode(), self.address)
+        self._transport.sendto(request, self.address)
 
     async def _next(self, wanted: Any, what: str) -> dict[str, Any]:
         loop = asyncio.get_running_loop()
@@ -123,23 +118,22 @@ class LockstepClient:
 
     async def next_tick(self) -> Tick:
         """The next tick (raises :class:`LockstepError` after ``tick_timeout_s`` of silence)."""
-        event = await self._next(lambda e: e.get("event") == "tick", "tick")
-        frame_seq = event.get("frame_seq")
-        return Tick(int(event["seq"]), float(event["t_s"]), None if frame_seq is None else int(frame_seq))
+        event = await self._next(lambda e: e.get("event") == Event.TICK, "tick")
+        try:
+            return Tick.from_event(event)
+        except RequestError as exc:
+            raise LockstepError(self.url, f"malformed tick: {exc}") from None
 
     def ack(self, tick: Tick, setpoint_ned_yaw_rad: tuple[float, float, float, float] | None = None) -> None:
         """Let the simulator pass ``tick`` once it has received ``setpoint_ned_yaw_rad`` (north, east, down m; yaw rad),
         the position setpoint sent while handling the tick (None: nothing to wait for)."""
-        expect: dict[str, Any] = {}
-        if setpoint_ned_yaw_rad is not None:
-            expect["setpoint"] = [float(v) for v in setpoint_ned_yaw_rad]
-        self._send({"cmd": "lockstep_ack", "seq": tick.seq, "expect": expect})
+        self._send(ack_expecting(tick, setpoint_ned_yaw_rad))
 
     def release(self) -> None:
         """Leave the lockstep: the simulator runs free from here (its own failsafes act without us)."""
         if self._transport is not None:
             with contextlib.suppress(OSError):
-                self._send({"cmd": "lockstep_release"})
+                self._send(encode(Command.LOCKSTEP_RELEASE))
 
     @property
     def malformed(self) -> int:

@@ -18,9 +18,8 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
-from companion.guidance.landing import Setpoint
 from companion.vehicle.clock import VehicleClock
-from companion.vehicle.link import FlightMode, VehicleError, VehicleStatus
+from companion.vehicle.link import FlightMode, Setpoint, VehicleError, VehicleStatus
 from companion.vehicle.pose_buffer import PoseBuffer, PoseBufferError
 
 logger = logging.getLogger(__name__)

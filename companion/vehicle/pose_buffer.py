@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from companion.perception.geometry import Pose
+from companion.geometry import Pose
 
 F64Array = npt.NDArray[np.float64]
 

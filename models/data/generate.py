@@ -38,8 +38,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import ProjectionConfig
-from companion.perception.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
 from sitl.render.meshes import head_height_m

@@ -25,10 +25,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
+from companion.geometry import PinholeCamera, Pose
 from companion.perception.config import OccupancyConfig, ProjectionConfig
 from companion.perception.density import DensityMap
 from companion.perception.errors import PerceptionError
-from companion.perception.geometry import PinholeCamera, Pose
 from companion.perception.occupancy import OccupancyMapper
 from companion.perception.projection import OCCUPIED, HeadPlaneProjector
 

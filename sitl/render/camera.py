@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 import trimesh
 
-from companion.perception.geometry import F64Array, PinholeCamera, Pose
+from companion.geometry import F64Array, PinholeCamera, Pose
 from sitl.render.meshes import bake_lighting, object_mesh, person_mesh, shadow_mesh
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park

@@ -13,8 +13,7 @@ import sys
 import time
 from typing import Any
 
-from companion.guidance.landing import Setpoint
-from companion.vehicle.link import FlightMode
+from companion.vehicle.link import FlightMode, Setpoint
 from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 
 

@@ -1,5 +1,8 @@
 """Rigid transforms, attitudes, the pinhole camera, and polygons on the ground (north/east).
 
+The shared geometry at the bottom of ``companion``: the vehicle link (poses), perception (projection), guidance
+(polygons) and the lab's renderer use it; it imports nothing else of the project.
+
 Frames (all right-handed)
 -------------------------
 world
@@ -23,9 +26,16 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from companion.perception.errors import PerceptionError
-
 F64Array = npt.NDArray[np.float64]
+
+
+class GeometryError(ValueError):
+    """A geometric input is not what it claims (a zero quaternion, a degenerate camera): where, and what."""
+
+    def __init__(self, where: str, what: str) -> None:
+        super().__init__(f"{where}: {what}")
+        self.where = where
+        self.what = what
 
 
 def rot_x(angle_rad: float) -> F64Array:
@@ -59,12 +69,12 @@ def R_world_body_from_quaternion(q_wxyz: npt.ArrayLike) -> F64Array:
     """Attitude as a rotation matrix (3, 3) from a unit quaternion ``[w, x, y, z]`` (MAVLink order).
 
     The quaternion rotates body FRD to world NED, as in ``ATTITUDE_QUATERNION``. It is normalized here;
-    a zero or non-finite quaternion raises :class:`PerceptionError`.
+    a zero or non-finite quaternion raises :class:`GeometryError`.
     """
     q = np.asarray(q_wxyz, dtype=np.float64).reshape(4)
     norm = float(np.linalg.norm(q))
     if not math.isfinite(norm) or norm < 1e-9:
-        raise PerceptionError("geometry.quaternion", f"not a rotation quaternion: {q.tolist()}")
+        raise GeometryError("geometry.quaternion", f"not a rotation quaternion: {q.tolist()}")
     w, x, y, z = q / norm
     return np.array(
         [

@@ -1,0 +1,221 @@
+"""The SITL control channel's vocabulary: one protocol module for the simulator and all of its clients.
+
+The control channel is JSON over UDP beside MAVLink, for what MAVLink does not carry: lockstep ticks and their
+acknowledgements, a simulated pilot (mode switch, sticks, RC loss), injected faults, wind, ground truth and shutdown.
+A request is ``{"cmd": <Command>, ...fields}`` (with an optional ``"id"`` the reply echoes); a reply or an
+unsolicited event is ``{"event": <Event>, ...}``. The SITL (``sitl.control_channel``, ``sitl.vehicle``), its process
+wrapper and lockstep client (``sitl.process``, ``sitl.lockstep``) and the companion's lockstep client
+(``companion.vehicle.lockstep``) all speak it through this module, which lives in ``companion`` because the companion
+is one of its clients and must not import the lab.
+
+Requests are checked here before use: at most :data:`MAX_REQUEST_BYTES` bytes, nesting at most
+:data:`MAX_REQUEST_DEPTH` deep, strict JSON (no ``NaN`` or ``Infinity``, no number that overflows to infinity), an
+object with a string ``cmd``; each field with :func:`number`, :func:`flag`, :func:`whole_number` and
+:func:`lockstep_ack`, which raise :class:`RequestError` naming the field.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+
+class Command(str, enum.Enum):
+    """Requests the SITL answers."""
+
+    PING = "ping"
+    STATE = "state"
+    PILOT_MODE = "pilot_mode"
+    PILOT_STICKS = "pilot_sticks"
+    RC_LOSS = "rc_loss"
+    WIND = "wind"
+    LOCKSTEP_SUBSCRIBE = "lockstep_subscribe"
+    LOCKSTEP_ACK = "lockstep_ack"
+    LOCKSTEP_RELEASE = "lockstep_release"
+    CAMERA_FAIL = "camera_fail"
+    LINK_LOSS = "link_loss"
+    PEOPLE = "people"
+    SHUTDOWN = "shutdown"
+
+
+class Event(str, enum.Enum):
+    """What the SITL sends: replies and the lockstep tick."""
+
+    ACK = "ack"
+    ERROR = "error"
+    PONG = "pong"
+    STATE = "state"
+    PEOPLE = "people"
+    TICK = "tick"
+
+
+def encode(command: Command, **fields: Any) -> bytes:
+    """One request datagram."""
+    return json.dumps({"cmd": command.value, **fields}).encode("utf-8")
+
+
+def decode_event(data: bytes) -> dict[str, Any] | None:
+    """A reply or event datagram as a mapping with a string ``event``; None for anything else (to be counted)."""
+    try:
+        event = json.loads(data)
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        return None
+    return event if isinstance(event, dict) and isinstance(event.get("event"), str) else None
+
+
+@dataclass(frozen=True)
+class Tick:
+    """One lockstep tick: its number, the simulated time (s) and the frame sent before it (None: no frame)."""
+
+    seq: int
+    t_s: float
+    frame_seq: int | None
+
+    @classmethod
+    def from_event(cls, event: dict[str, Any]) -> Tick:
+        """Parse a ``tick`` event (raises :class:`RequestError` naming a bad field)."""
+        frame_seq = event.get("frame_seq")
+        return cls(
+            whole_number(event, "seq", 0, 1 << 53),
+            number(event, "t_s", 0.0, 1e9),
+            None if frame_seq is None else whole_number(event, "frame_seq", 0, 1 << 53),
+        )
+
+    def to_event(self) -> dict[str, Any]:
+        """The ``tick`` event."""
+        return {"event": Event.TICK.value, "seq": self.seq, "t_s": self.t_s, "frame_seq": self.frame_seq}
+
+
+def ack_expecting(tick: Tick, setpoint_ned_yaw_rad: tuple[float, float, float, float] | None) -> bytes:
+    """``lockstep_ack`` of a client that cannot count its MAVLink messages (MAVSDK re-sends on its own thread): the
+    SITL moves on once the position setpoint it names has arrived (or at once, with None)."""
+    expect: dict[str, Any] = {}
+    if setpoint_ned_yaw_rad is not None:
+        expect["setpoint"] = [float(v) for v in setpoint_ned_yaw_rad]
+    return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect)
+
+
+def ack_counting(seq: int, mavlink_sent: int, system_id: int, component_id: int) -> bytes:
+    """``lockstep_ack`` of a client that counts its MAVLink messages: the SITL moves on once it has received
+    ``mavlink_sent`` from ``system_id``/``component_id``."""
+    return encode(Command.LOCKSTEP_ACK, seq=seq, mavlink_sent=mavlink_sent, sysid=system_id, compid=component_id)
+
+
+MAX_REQUEST_BYTES = 8192
+MAX_REQUEST_DEPTH = 8
+
+
+class RequestError(ValueError):
+    """A control request's field is missing or out of range (answered as an error event)."""
+
+
+def _depth(data: bytes) -> int:
+    """The deepest nesting of JSON arrays and objects in ``data`` (strings skipped), without parsing it."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in data:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:  # quote
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):  # [ {
+            depth += 1
+            deepest = max(deepest, depth)
+        elif byte in (0x5D, 0x7D):
+            depth -= 1
+    return deepest
+
+
+def _no_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number here")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text[:20]} overflows")
+    return value
+
+
+def parse_request(data: bytes) -> dict[str, Any]:
+    """One datagram as a request; raises ValueError (with a short reason) when it is not one."""
+    if len(data) > MAX_REQUEST_BYTES:
+        raise ValueError(f"request of {len(data)} bytes, more than {MAX_REQUEST_BYTES}")
+    if _depth(data) > MAX_REQUEST_DEPTH:
+        raise ValueError(f"nested deeper than {MAX_REQUEST_DEPTH}")
+    request = json.loads(data.decode("utf-8"), parse_constant=_no_constant, parse_float=_finite_float)
+    if not isinstance(request, dict) or not isinstance(request.get("cmd"), str) or len(request["cmd"]) > 64:
+        raise ValueError("expected an object with a string 'cmd'")
+    return request
+
+
+def number(request: dict[str, Any], key: str, low: float, high: float, default: float | None = None) -> float:
+    """``request[key]`` as a finite number in [low, high] (``default`` when absent, if given)."""
+    value = request.get(key, default)
+    if value is None:
+        raise RequestError(f"{key}: missing")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise RequestError(f"{key}: expected a number, got {type(value).__name__}")
+    if not math.isfinite(value) or not low <= value <= high:
+        raise RequestError(f"{key}: must lie in [{low:g}, {high:g}]")
+    return float(value)
+
+
+def whole_number(request: dict[str, Any], key: str, low: int, high: int) -> int:
+    """``request[key]`` as an integer in [low, high]."""
+    value = request.get(key)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise RequestError(f"{key}: expected an integer")
+    if not low <= value <= high:
+        raise RequestError(f"{key}: must lie in [{low}, {high}]")
+    return value
+
+
+def flag(request: dict[str, Any], key: str) -> bool:
+    """``request[key]`` as a JSON boolean (a string such as ``"false"`` is refused, not taken as true)."""
+    value = request.get(key)
+    if not isinstance(value, bool):
+        raise RequestError(f"{key}: expected true or false")
+    return value
+
+
+def lockstep_ack(request: dict[str, Any]) -> dict[str, Any]:
+    """A checked ``lockstep_ack``: ``seq`` and either ``expect`` (a setpoint of four numbers and/or command counts)
+    or the client's own count of MAVLink messages (``mavlink_sent`` from ``sysid``/``compid``)."""
+    seq = whole_number(request, "seq", 0, 1 << 53)
+    expect = request.get("expect")
+    if expect is None:
+        return {
+            "seq": seq,
+            "mavlink_sent": whole_number(request, "mavlink_sent", 0, 1 << 53),
+            "sysid": whole_number(request, "sysid", 0, 255),
+            "compid": whole_number(request, "compid", 0, 255),
+        }
+    if not isinstance(expect, dict) or not set(expect) <= {"setpoint", "commands"}:
+        raise RequestError("expect: expected an object with 'setpoint' and/or 'commands'")
+    checked: dict[str, Any] = {}
+    setpoint = expect.get("setpoint")
+    if setpoint is not None:
+        if not isinstance(setpoint, list) or len(setpoint) != 4:
+            raise RequestError("expect.setpoint: expected [north_m, east_m, down_m, yaw_rad]")
+        values = {f"expect.setpoint[{i}]": v for i, v in enumerate(setpoint)}
+        checked["setpoint"] = [number(values, key, -1e7, 1e7) for key in values]
+    commands = expect.get("commands")
+    if commands is not None:
+        if not isinstance(commands, dict) or len(commands) > 16:
+            raise RequestError("expect.commands: expected an object of at most 16 command counts")
+        counts: dict[int, int] = {}
+        for key in commands:
+            if not key.isdigit() or int(key) > 65535:
+                raise RequestError("expect.commands: keys are MAV_CMD ids")
+            counts[int(key)] = whole_number(commands, key, 0, 1 << 31)
+        checked["commands"] = counts
+    return {"seq": seq, "expect": checked}
