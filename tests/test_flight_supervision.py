@@ -1,0 +1,216 @@
+"""FlightApp's supervision with a fake vehicle link and camera, in milliseconds: the pilot's takeover, a lost link,
+a silent camera and a stalled decision loop. The same behaviours flown end to end are in
+tests/test_companion_missions.py and tests/test_companion_fly.py."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from companion.app.flight import FlightApp
+from companion.app.mission import MissionConfig
+from companion.app.recorder import FlightRecorder, read_log
+from companion.camera.frames import Frame
+from companion.guidance.landing import LandingPhase
+from companion.perception.config import PerceptionConfig
+from companion.perception.pipeline import SlzPipeline
+from companion.vehicle.clock import VehicleClock
+from companion.vehicle.link import FlightMode, Setpoint, VehicleError, VehicleStatus
+from companion.vehicle.pose_buffer import PoseBuffer
+
+pytestmark = pytest.mark.unit
+
+ALTITUDE_M = 20.0
+
+
+class FakeLink:
+    """A VehicleLink that records every command; the test moves the vehicle and sets its mode."""
+
+    name = "fake"
+
+    def __init__(self) -> None:
+        self.poses = PoseBuffer()
+        self.clock = VehicleClock()
+        self.status = VehicleStatus(mode=FlightMode.HOLD, armed=True, in_air=True, last_telemetry_wall_s=None)
+        self.commands: list[tuple[str, Any]] = []
+        self.stopped_from_thread = threading.Event()
+
+    def at(self, t_s: float, north_m: float = 0.0, east_m: float = 0.0, altitude_m: float = ALTITUDE_M) -> None:
+        """A pose sample at vehicle time ``t_s`` (level, facing north) and fresh telemetry."""
+        self.poses.add_position(t_s, north_m, east_m, -altitude_m)
+        self.poses.add_attitude(t_s, [1.0, 0.0, 0.0, 0.0])
+        self.clock.observe(t_s)
+        self.status.last_telemetry_wall_s = time.monotonic()
+
+    async def connect(self, timeout_s: float) -> None:
+        pass
+
+    async def wait_for(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
+        if not condition():
+            raise VehicleError(self.name, f"{what} did not happen")
+
+    async def arm_and_takeoff(self, altitude_m: float, timeout_s: float) -> None:
+        self.commands.append(("arm_and_takeoff", altitude_m))
+
+    async def take_off(self, altitude_m: float) -> None:
+        self.commands.append(("take_off", altitude_m))
+
+    async def start_offboard(self, setpoint: Setpoint) -> None:
+        self.commands.append(("start_offboard", setpoint))
+        self.status.mode = FlightMode.OFFBOARD  # the autopilot accepts
+
+    async def set_setpoint(self, setpoint: Setpoint) -> None:
+        self.commands.append(("setpoint", setpoint))
+
+    async def stop_offboard(self) -> None:
+        self.commands.append(("stop_offboard", None))
+
+    def stop_offboard_blocking(self) -> None:
+        self.stopped_from_thread.set()
+
+    async def land(self) -> None:
+        self.commands.append(("land", None))
+        self.status.mode = FlightMode.LAND
+
+    async def hold(self) -> None:
+        self.commands.append(("hold", None))
+        self.status.mode = FlightMode.HOLD
+
+    async def return_to_launch(self) -> None:
+        self.commands.append(("return", None))
+
+    async def status_text(self, text: str) -> None:
+        pass
+
+    async def close(self) -> None:
+        pass
+
+
+class NoFrames:
+    """A camera that opens and then delivers nothing."""
+
+    async def open(self) -> None:
+        pass
+
+    async def frames(self) -> AsyncIterator[Frame]:
+        await asyncio.Event().wait()
+        yield  # type: ignore[misc]  # never reached: an async generator that waits for ever
+
+
+@pytest.fixture
+def app_and_link(tmp_path: Path, config: PerceptionConfig) -> tuple[FlightApp, FakeLink]:
+    """A field flight (the pilot hands over in HOLD at 20 m) with the blob model."""
+    mission = MissionConfig.model_validate(
+        {
+            "start": {"arm_and_takeoff": False},
+            "perception": config.model_dump(mode="json"),
+            "recorder": {"directory": str(tmp_path), "frame_every": 0},
+        }
+    )
+    link = FakeLink()
+    app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
+    return app, link
+
+
+async def hand_over(app: FlightApp, link: FakeLink, t_s: float = 1.0) -> None:
+    """The pilot hovers in HOLD: the companion takes over and starts its search in OFFBOARD."""
+    link.at(t_s)
+    state = app.vehicle_state()
+    assert state is not None
+    await app.on_tick(state)
+    assert link.commands[0][0] == "start_offboard"
+    assert app.guidance.phase is LandingPhase.SEARCH
+
+
+async def tick(app: FlightApp, link: FakeLink, t_s: float) -> None:
+    link.at(t_s)
+    state = app.vehicle_state()
+    assert state is not None
+    await app.on_tick(state)
+
+
+def test_the_pilot_switching_mode_ends_commanding_at_once_and_for_good(app_and_link: Any) -> None:
+    app, link = app_and_link
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        link.status.mode = FlightMode.POSCTL  # the pilot's switch
+        sent = len(link.commands)
+        await tick(app, link, 1.1)
+        assert app.guidance.phase is LandingPhase.YIELDED
+        for k in range(20):  # whatever happens next, nothing more goes out
+            link.status.mode = FlightMode.HOLD if k % 2 else FlightMode.OFFBOARD
+            await tick(app, link, 1.2 + 0.1 * k)
+        assert len(link.commands) == sent
+
+    asyncio.run(flight())
+    assert app.outcome.phase == "yielded"
+    assert "pilot took over (mode POSCTL)" in app.outcome.reason
+
+
+def test_a_silent_camera_holds_after_t1_and_lands_after_t2(app_and_link: Any, tmp_path: Path) -> None:
+    app, link = app_and_link
+    t1 = app.config.guidance.hold_after_silence_s
+    t2 = app.config.guidance.failsafe_after_silence_s
+    start_s, period_s = 10.0, 0.1
+
+    async def flight() -> tuple[float, Any, float]:
+        await hand_over(app, link, t_s=start_s)
+        hold: tuple[float, Any] | None = None
+        t_s = start_s
+        while app.guidance.phase is not LandingPhase.FAILSAFE and t_s < start_s + t2 + 2.0:
+            t_s = round(t_s + period_s, 3)
+            await tick(app, link, t_s)
+            if hold is None and app.guidance.phase is LandingPhase.HOLD:
+                hold = (t_s, link.commands[-1])
+        assert hold is not None, "never held"
+        return hold[0], hold[1], t_s
+
+    hold_at, hold_command, failsafe_at = asyncio.run(flight())
+    # T1: hold where it is (a setpoint on the spot, still in OFFBOARD); T2: the configured failsafe, land.
+    assert start_s + t1 <= hold_at <= start_s + t1 + period_s + 1e-9
+    kind, setpoint = hold_command
+    assert kind == "setpoint"
+    assert (setpoint.north_m, setpoint.east_m, setpoint.down_m) == pytest.approx((0.0, 0.0, -ALTITUDE_M), abs=1e-6)
+    assert start_s + t2 <= failsafe_at <= start_s + t2 + period_s + 1e-9
+    assert link.commands[-1] == ("land", None)
+    assert app.outcome.failsafes
+    phases = [r["phase"] for r in read_log(tmp_path / "flight.jsonl") if r["kind"] == "phase"]
+    assert phases[-2:] == ["hold", "failsafe"]
+
+
+def test_telemetry_silent_past_its_limit_is_a_lost_link_and_nothing_more_is_sent(app_and_link: Any) -> None:
+    app, link = app_and_link
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        sent = len(link.commands)
+        link.status.last_telemetry_wall_s = time.monotonic() - 2 * app.config.vehicle.link_lost_after_s
+        await asyncio.wait_for(app._free_ticks(), 5.0)
+        assert len(link.commands) == sent
+
+    asyncio.run(flight())
+    assert app.outcome.link_lost
+    assert app._done.is_set()
+
+
+def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and_link: Any) -> None:
+    app, link = app_and_link
+    asyncio.run(hand_over(app, link))
+    assert app._offboard
+    app._beat_wall = time.monotonic() - 10.0  # the event loop has not beaten for 10 s
+    watchdog = threading.Thread(target=app._stall_watchdog, daemon=True)
+    watchdog.start()
+    try:
+        assert link.stopped_from_thread.wait(timeout=5.0)  # within a quarter of the limit, on a free machine
+    finally:
+        app._stop.set()
+        watchdog.join(timeout=5.0)
+    assert not app._offboard
+    assert not app._commanding
