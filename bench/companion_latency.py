@@ -23,7 +23,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
-from companion.app.recorder import read_log  # noqa: E402
+from companion.app.flight_log import FlightLog, RecordKind  # noqa: E402
 from sitl.instances import lease_instance  # noqa: E402
 from sitl.mission import MissionSpec, fly  # noqa: E402
 
@@ -52,9 +52,9 @@ def main() -> int:
             finally:
                 if lease is not None:
                     lease.release()
-            records = read_log(spec.run_dir / "flight" / "flight.jsonl")
-            mission_ms = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == "latency"]
-            outcome = next(r for r in records if r["kind"] == "end")["outcome"]
+            records = FlightLog.read(spec.run_dir / "flight").records
+            mission_ms = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == RecordKind.LATENCY]
+            outcome = next(r for r in records if r["kind"] == RecordKind.END)["outcome"]
             share = outcome["cpu_s"] / outcome["wall_s"] if outcome["wall_s"] > 0 else float("nan")
             latencies += mission_ms
             missions.append(

@@ -47,6 +47,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     import hashlib
 
     from companion.app.flight import FlightApp
+    from companion.app.flight_log import SCHEMA_VERSION, RecordKind
     from companion.app.mission import FrameFormat, OperatingMode, validate_for_flight
     from companion.app.recorder import FlightRecorder, prune_flights
     from companion.camera.frames import CameraError, open_frame_source
@@ -85,8 +86,9 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         model_path = config.perception.model.path
         model_sha256 = hashlib.sha256(model_path.read_bytes()).hexdigest() if model_path.is_file() else None
         recorder.write(
-            "header",
+            RecordKind.HEADER,
             None,
+            schema_version=SCHEMA_VERSION,
             config=config.model_dump(mode="json"),
             model=str(model_path),
             model_sha256=model_sha256,
@@ -94,7 +96,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         )
         return asyncio.run(fly())
     except (VehicleError, CameraError, LockstepError) as exc:
-        recorder.write("error", None, where="fly", error=str(exc))
+        recorder.write(RecordKind.ERROR, None, where="fly", error=str(exc))
         sys.stderr.write(f"slz fly: {exc}\n")
         return 1
     finally:

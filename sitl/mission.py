@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig, camera_mismatches
-from companion.app.recorder import read_log
 from companion.config import read_yaml_file, validate_config
 from sitl.config import SitlConfig
 from sitl.process import SitlProcess, die_with_parent, log_tail, terminate_then_kill
@@ -236,11 +236,11 @@ def touchdown(records: list[dict[str, Any]]) -> dict[str, Any] | None:
 def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
     """The mission's result from its flight log and ground truth."""
     header, records = read_truth(spec.run_dir / "truth.jsonl")
-    flight = read_log(spec.run_dir / "flight" / "flight.jsonl")
-    end = next((r for r in reversed(flight) if r["kind"] == "end"), None)
+    flight = _flight_records(spec.run_dir / "flight")
+    end = next((r for r in reversed(flight) if r["kind"] == RecordKind.END), None)
     outcome = end["outcome"] if end else {}
     land = next(
-        (r for r in reversed(flight) if r["kind"] == "decision" and r["decision"]["kind"] == "land"),
+        (r for r in reversed(flight) if r["kind"] == RecordKind.DECISION and r["decision"]["kind"] == "land"),
         None,
     )
     target = land["decision"]["target"] if land else None
@@ -272,15 +272,23 @@ def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
     )
 
 
+def _flight_records(path: Path) -> list[dict[str, Any]]:
+    """The companion's flight log, checked against its schema (a broken one is the mission's error)."""
+    try:
+        return FlightLog.read(path).records
+    except FlightLogError as exc:
+        raise MissionError(str(exc)) from None
+
+
 def _autopilot_lands(spec: MissionSpec) -> bool:
     """Whether the vehicle comes down without the companion: it asked for a landing or a return, or it stopped
     commanding in OFFBOARD (the autopilot's offboard-loss failsafe lands); not after a hold or a pilot takeover."""
     path = spec.run_dir / "flight" / "flight.jsonl"
     if not path.is_file():
         return True
-    records = read_log(path)
-    commands = [r for r in records if r["kind"] == "command"]
-    if any(r["kind"] == "phase" and r["phase"] == "yielded" for r in records):
+    records = _flight_records(path)
+    commands = [r for r in records if r["kind"] == RecordKind.COMMAND]
+    if any(r["kind"] == RecordKind.PHASE and r["phase"] == "yielded" for r in records):
         return False
     return not commands or commands[-1]["command"] != "hold"
 

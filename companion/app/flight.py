@@ -37,6 +37,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.recorder import FlightRecorder
 from companion.camera.frames import CameraError, Frame, FrameSource
@@ -183,13 +184,17 @@ class FlightApp:
         previous = self.outcome.phase
         self.outcome.phase = decision.phase.value
         self.outcome.reason = decision.reason
-        self.recorder.write("decision", decision.t_s, decision=decision, source=source, state=state, inputs=inputs)
+        self.recorder.write(
+            RecordKind.DECISION, decision.t_s, decision=decision, source=source, state=state, inputs=inputs
+        )
         if decision.phase.value != previous:
-            self.recorder.write("phase", decision.t_s, phase=decision.phase, previous=previous, reason=decision.reason)
+            self.recorder.write(
+                RecordKind.PHASE, decision.t_s, phase=decision.phase, previous=previous, reason=decision.reason
+            )
             await self.link.status_text(f"SLZ {decision.phase.value}: {decision.reason}")
         if decision.phase is LandingPhase.FAILSAFE:
             self.outcome.failsafes.append(decision.reason)
-            self.recorder.write("failsafe", decision.t_s, reason=decision.reason, action=decision.kind)
+            self.recorder.write(RecordKind.FAILSAFE, decision.t_s, reason=decision.reason, action=decision.kind)
         try:
             await self._send(decision)
         finally:
@@ -220,10 +225,10 @@ class FlightApp:
             elif decision.kind is CommandKind.RETURN:
                 await self.link.return_to_launch()
         except VehicleError as exc:
-            self.recorder.write("error", decision.t_s, where="command", error=str(exc))
+            self.recorder.write(RecordKind.ERROR, decision.t_s, where="command", error=str(exc))
             raise
         self.outcome.commands_sent += 1
-        self.recorder.write("command", decision.t_s, command=decision.kind, setpoint=decision.setpoint)
+        self.recorder.write(RecordKind.COMMAND, decision.t_s, command=decision.kind, setpoint=decision.setpoint)
         if decision.kind is not CommandKind.SETPOINT:
             self._offboard = False  # the autopilot's own mode now
 
@@ -251,13 +256,13 @@ class FlightApp:
             )
         except (PerceptionError, GeometryError) as exc:  # one bad frame or pose; a lasting failure: silence failsafe
             self.outcome.frames_failed += 1
-            self.recorder.write("frame_error", frame.t_capture_s, seq=frame.seq, error=str(exc))
+            self.recorder.write(RecordKind.FRAME_ERROR, frame.t_capture_s, seq=frame.seq, error=str(exc))
             return
         self._last_frame_t_s = max(self._last_frame_t_s, t_pose_s)
         self.outcome.frames_processed += 1
         self.recorder.frame(frame.seq, frame.t_capture_s, frame.image_bgr)
         self.recorder.write(
-            "frame_result",
+            RecordKind.FRAME_RESULT,
             frame.t_capture_s,
             seq=frame.seq,
             T_world_body=pose.T_world_body,
@@ -275,7 +280,7 @@ class FlightApp:
         await self.apply(decision, "frame", state, seq=frame.seq)
         if self._commanding and decision.kind is not CommandKind.NONE and math.isfinite(frame.arrival_wall_s):
             latency_ms = 1000.0 * (time.monotonic() - frame.arrival_wall_s)
-            self.recorder.write("latency", frame.t_capture_s, seq=frame.seq, frame_to_command_ms=latency_ms)
+            self.recorder.write(RecordKind.LATENCY, frame.t_capture_s, seq=frame.seq, frame_to_command_ms=latency_ms)
 
     def _pose_reaches(self, t_s: float) -> bool:
         """The pose buffer holds a pose stamped at ``t_s`` or later (to the vehicle clock's resolution)."""
@@ -358,9 +363,9 @@ class FlightApp:
                     self._waiting_logged = True
                     modes = ", ".join(m.value for m in start.handover_modes)
                     logger.info("waiting for the pilot's handover: armed, in the air and in %s", modes)
-                    self.recorder.write("waiting_for_handover", state.t_s, modes=modes)
+                    self.recorder.write(RecordKind.WAITING_FOR_HANDOVER, state.t_s, modes=modes)
                 return
-            self.recorder.write("handover", state.t_s, mode=status.mode.value, altitude_m=state.altitude_m)
+            self.recorder.write(RecordKind.HANDOVER, state.t_s, mode=status.mode.value, altitude_m=state.altitude_m)
             self._start_stage = StartStage.CLIMBING  # past the wait; nothing to climb
         if takeoff and self._start_stage is StartStage.WAITING:
             if state.t_s - self._last_takeoff_try_t_s < TAKEOFF_RETRY_S:
@@ -373,7 +378,7 @@ class FlightApp:
                 logger.info("takeoff not accepted yet: %s", exc)
                 return
             self._start_stage = StartStage.CLIMBING
-            self.recorder.write("takeoff", state.t_s, altitude_m=start.takeoff_altitude_m)
+            self.recorder.write(RecordKind.TAKEOFF, state.t_s, altitude_m=start.takeoff_altitude_m)
             return
         if takeoff and state.altitude_m < start.takeoff_altitude_m - 0.5:
             return
@@ -411,7 +416,7 @@ class FlightApp:
         self.outcome.camera_fault = exc.fault.value
         logger.error("camera fault %s: %s (the perception-silence failsafe acts)", exc.fault.value, exc)
         t_s = self.link.poses.latest_t_s
-        self.recorder.write("error", t_s, where="camera", fault=exc.fault.value, error=str(exc))
+        self.recorder.write(RecordKind.ERROR, t_s, where="camera", fault=exc.fault.value, error=str(exc))
 
     async def _frame_of(self, tick: Tick, queue: asyncio.Queue[Frame | None]) -> Frame | None:
         """Lockstep: the frame the simulator sent before ``tick`` (None, counted, if it never comes)."""
@@ -499,7 +504,7 @@ class FlightApp:
         self._commanding = False
         self._offboard = False
         state = self.vehicle_state()
-        self.recorder.write("failsafe", state.t_s if state else None, reason="link lost: stop commanding")
+        self.recorder.write(RecordKind.FAILSAFE, state.t_s if state else None, reason="link lost: stop commanding")
         logger.error("link lost: no telemetry for %.1f s; the autopilot's failsafe acts", silent_s)
         if self.lockstep is not None:
             self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act
@@ -526,13 +531,13 @@ class FlightApp:
         """Connect, (take off,) land safely or end in a defined failsafe, within ``timeout_s`` of wall time."""
         cfg = self.config
         wall0, cpu0 = time.monotonic(), time.process_time()
-        self.recorder.write("start", None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
+        self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
         await self.source.open()  # a missing camera fails the start, before the vehicle is touched
         await self.link.connect(cfg.vehicle.connect_timeout_s)
         if self.lockstep is not None and not await self.lockstep.open():
             self.lockstep = None
         self.outcome.lockstep = self.lockstep is not None
-        self.recorder.write("clock", None, lockstep=self.outcome.lockstep)
+        self.recorder.write(RecordKind.CLOCK, None, lockstep=self.outcome.lockstep)
         watchdog = threading.Thread(target=self._stall_watchdog, name="stall-watchdog", daemon=True)
         if self.lockstep is None:
             watchdog.start()
@@ -568,5 +573,5 @@ class FlightApp:
                 self.lockstep.close()
             self.outcome.wall_s = time.monotonic() - wall0
             self.outcome.cpu_s = time.process_time() - cpu0
-            self.recorder.write("end", None, outcome=self.outcome)
+            self.recorder.write(RecordKind.END, None, outcome=self.outcome)
         return self.outcome

@@ -20,8 +20,9 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig
-from companion.app.recorder import plain, read_log
+from companion.app.recorder import plain
 from companion.geometry import GeometryError, Pose
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import Decision, LandingGuidance, VehicleState
@@ -116,12 +117,15 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     ReplayError
         No header, or a processed frame that was not saved losslessly.
     """
-    records = read_log(log_dir / "flight.jsonl")
-    header = next((r for r in records if r["kind"] == "header"), None)
+    try:
+        records = FlightLog.read(log_dir).records
+    except FlightLogError as exc:
+        raise ReplayError(str(exc)) from None
+    header = next((r for r in records if r["kind"] == RecordKind.HEADER), None)
     if header is None:
         raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
     config = config_from_header(header["config"])
-    frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in records if r["kind"] == "frame"}
+    frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in records if r["kind"] == RecordKind.FRAME}
     pipeline = SlzPipeline.from_config(config.perception)
     zones = config.perception.zones
     guidance = LandingGuidance(config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m)
@@ -132,7 +136,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     try:
         for record in records:
             kind = record["kind"]
-            if kind == "frame_result":
+            if kind == RecordKind.FRAME_RESULT:
                 seq = int(record["seq"])
                 path = frame_paths.get(seq)
                 if path is None or path.suffix != ".png":
@@ -162,7 +166,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
                     altitude = -float(pose.position_ned_m[2])
                     caption = f"t {record['t_s']:6.1f} s  alt {altitude:5.1f} m  {phase}"
                     video.add(draw_camera_overlay(image, result, pipeline.projector), caption)
-            elif kind == "decision":
+            elif kind == RecordKind.DECISION:
                 decision = _decide(guidance, record, results)
                 report.decisions += 1
                 phase = f"{record['decision']['phase']}: {record['decision']['reason']}"[:70]

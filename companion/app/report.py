@@ -28,8 +28,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig
-from companion.app.recorder import read_log
 from companion.app.replay import VideoWriter
 from companion.geometry import Pose
 from companion.perception.pipeline import camera_from_config
@@ -68,7 +68,7 @@ class FlightReport:
 def _phase_spans(records: list[dict[str, Any]], end_s: float) -> list[tuple[float, float, str]]:
     spans: list[tuple[float, float, str]] = []
     for r in records:
-        if r["kind"] == "phase" and r["t_s"] is not None:
+        if r["kind"] == RecordKind.PHASE and r["t_s"] is not None:
             if spans:
                 spans[-1] = (spans[-1][0], r["t_s"], spans[-1][2])
             spans.append((r["t_s"], end_s, r["phase"]))
@@ -81,21 +81,21 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
 
 def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
     """The outcome, counters, latency and the decision timeline (phase changes, failsafes, commands) of a log."""
-    header = next((r for r in records if r["kind"] == "header"), None)
-    start = next((r for r in records if r["kind"] == "start"), {})
-    end = next((r for r in records if r["kind"] == "end"), None)
-    decisions = [r for r in records if r["kind"] == "decision"]
-    latencies = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == "latency"]
+    header = next((r for r in records if r["kind"] == RecordKind.HEADER), None)
+    start = next((r for r in records if r["kind"] == RecordKind.START), {})
+    end = next((r for r in records if r["kind"] == RecordKind.END), None)
+    decisions = [r for r in records if r["kind"] == RecordKind.DECISION]
+    latencies = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == RecordKind.LATENCY]
     land = next((r for r in decisions if r["decision"]["kind"] == "land" and r["state"]), None)
     events = []
     for r in records:
-        if r["kind"] == "phase":
+        if r["kind"] == RecordKind.PHASE:
             events.append({"t_s": r["t_s"], "event": f"phase {r['previous']} -> {r['phase']}", "reason": r["reason"]})
-        elif r["kind"] == "failsafe":
+        elif r["kind"] == RecordKind.FAILSAFE:
             events.append({"t_s": r["t_s"], "event": f"failsafe ({r['action']})", "reason": r["reason"]})
-        elif r["kind"] == "error":
+        elif r["kind"] == RecordKind.ERROR:
             events.append({"t_s": r["t_s"], "event": f"error in {r['where']}", "reason": r["error"]})
-        elif r["kind"] in ("handover", "takeoff", "waiting_for_handover"):
+        elif r["kind"] in (RecordKind.HANDOVER, RecordKind.TAKEOFF, RecordKind.WAITING_FOR_HANDOVER):
             events.append({"t_s": r["t_s"], "event": r["kind"].replace("_", " "), "reason": ""})
     outcome = end["outcome"] if end else None
     return {
@@ -107,10 +107,10 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
         "camera": start.get("camera"),
         "complete": end is not None,
         "outcome": outcome,
-        "frames_processed": sum(1 for r in records if r["kind"] == "frame_result"),
-        "frame_errors": sum(1 for r in records if r["kind"] == "frame_error"),
+        "frames_processed": sum(1 for r in records if r["kind"] == RecordKind.FRAME_RESULT),
+        "frame_errors": sum(1 for r in records if r["kind"] == RecordKind.FRAME_ERROR),
         "decisions": len(decisions),
-        "commands_sent": sum(1 for r in records if r["kind"] == "command"),
+        "commands_sent": sum(1 for r in records if r["kind"] == RecordKind.COMMAND),
         "land_command": None
         if land is None
         else {"t_s": land["t_s"], "north_m": land["state"]["north_m"], "east_m": land["state"]["east_m"]},
@@ -132,9 +132,9 @@ def tracks_at_landing(records: list[dict[str, Any]]) -> tuple[list[dict[str, Any
     target = None
     previous_phase = ""
     for record in records:
-        if record["kind"] == "frame_result":
+        if record["kind"] == RecordKind.FRAME_RESULT:
             tracks = record["tracks"] or []
-        elif record["kind"] == "decision":
+        elif record["kind"] == RecordKind.DECISION:
             decision = record["decision"]
             if decision["target"] is not None:
                 target = decision["target"]
@@ -153,7 +153,7 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Polygon
 
-    decisions = [r for r in records if r["kind"] == "decision"]
+    decisions = [r for r in records if r["kind"] == RecordKind.DECISION]
     fig, ax = plt.subplots(figsize=(9.5, 7.0), dpi=100)
     fence = np.asarray(config.geofence.polygon_ne_m, dtype=float)
     ax.add_patch(Polygon(fence[:, ::-1], closed=True, fill=False, edgecolor="red", lw=1.2, label="geofence"))
@@ -175,7 +175,9 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
         ]
     )
     if len(setpoints):
-        label = "setpoints " + ("sent" if any(r["kind"] == "command" for r in records) else "decided (not sent)")
+        label = "setpoints " + (
+            "sent" if any(r["kind"] == RecordKind.COMMAND for r in records) else "decided (not sent)"
+        )
         ax.plot(setpoints[:, 1], setpoints[:, 0], ".", color="tab:blue", ms=3, alpha=0.5, label=label)
     for i, track in enumerate(tracks_at_landing(records)[0]):
         ax.add_patch(
@@ -220,8 +222,8 @@ def _plot_timeline(records: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    decisions = [r for r in records if r["kind"] == "decision" and r["state"]]
-    frames = [r for r in records if r["kind"] == "frame_result"]
+    decisions = [r for r in records if r["kind"] == RecordKind.DECISION and r["state"]]
+    frames = [r for r in records if r["kind"] == RecordKind.FRAME_RESULT]
     times = [r["t_s"] for r in decisions] + [r["t_s"] for r in frames]
     if not times:
         raise ReportError("the log holds no decision and no processed frame: nothing to plot")
@@ -232,7 +234,7 @@ def _plot_timeline(records: list[dict[str, Any]], path: Path) -> None:
         top.text((a + b) / 2, 0.98, phase, transform=top.get_xaxis_transform(), ha="center", va="top", fontsize=8)
     top.plot([r["t_s"] for r in decisions], [-r["state"]["down_m"] for r in decisions], color="k", lw=1.2)
     for r in records:
-        if r["kind"] == "failsafe" and r["t_s"] is not None:
+        if r["kind"] == RecordKind.FAILSAFE and r["t_s"] is not None:
             top.axvline(r["t_s"], color="red", ls="--", lw=1)
     top.set_ylabel("altitude (m)")
     top.set_title("Altitude and phases (failsafes dashed red)")
@@ -255,13 +257,13 @@ def _camera_views(
     """Every saved frame with the logged zones and target drawn on it, and its caption."""
     camera, T_body_camera = camera_from_config(config.perception.camera)
     projector = HeadPlaneProjector(camera, T_body_camera, config.perception.projection)
-    paths = {int(r["seq"]): flight_dir / str(r["path"]) for r in records if r["kind"] == "frame"}
+    paths = {int(r["seq"]): flight_dir / str(r["path"]) for r in records if r["kind"] == RecordKind.FRAME}
     views = []
     decision = "idle"
     for r in records:
-        if r["kind"] == "decision":
+        if r["kind"] == RecordKind.DECISION:
             decision = f"{r['decision']['phase']}: {r['decision']['reason']}"[:60]
-        if r["kind"] != "frame_result" or int(r["seq"]) not in paths:
+        if r["kind"] != RecordKind.FRAME_RESULT or int(r["seq"]) not in paths:
             continue
         raw = cv2.imread(str(paths[int(r["seq"])]), cv2.IMREAD_COLOR)
         if raw is None:
@@ -355,8 +357,11 @@ def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bo
     log = flight_dir / "flight.jsonl"
     if not log.is_file():
         raise ReportError(f"no flight log at {log}")
-    records = read_log(log)
-    header = next((r for r in records if r["kind"] == "header"), None)
+    try:
+        records = FlightLog.read(log).records
+    except FlightLogError as exc:
+        raise ReportError(str(exc)) from None
+    header = next((r for r in records if r["kind"] == RecordKind.HEADER), None)
     if header is None:
         raise ReportError(f"{log}: no header record (the config the flight ran with)")
     config = MissionConfig.model_validate(header["config"])

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.app.recorder import read_log
+from companion.app.flight_log import FlightLog, RecordKind
 from companion.config import load_yaml_config
 from sitl.config import SitlConfig
 from sitl.mission import body_edges_m, people_at, read_truth, touchdown
@@ -118,9 +118,9 @@ def _final_descent(flight: list[dict[str, Any]]) -> tuple[float | None, dict[str
     previous = ""
     last_command_t: float | None = None
     for record in flight:
-        if record["kind"] == "command":
+        if record["kind"] == RecordKind.COMMAND:
             last_command_t = float(record["t_s"])
-        if record["kind"] != "decision":
+        if record["kind"] != RecordKind.DECISION:
             continue
         decision = record["decision"]
         if decision["phase"] == "descent" and previous != "descent":
@@ -136,12 +136,12 @@ def mission_metrics(
 ) -> MissionMetrics:
     """The metrics of the mission flown in ``run_dir`` (``truth.jsonl`` and ``flight/flight.jsonl``)."""
     header, truth = read_truth(run_dir / "truth.jsonl")
-    flight = read_log(run_dir / "flight" / "flight.jsonl")
-    config = next(r for r in flight if r["kind"] == "header")["config"]
+    flight = FlightLog.read(run_dir / "flight").records
+    config = next(r for r in flight if r["kind"] == RecordKind.HEADER)["config"]
     vehicle_radius_m = float(config["perception"]["zones"]["vehicle_radius_m"])
     sitl = load_yaml_config(SitlConfig, run_dir / "sitl.yaml", section="sitl")
-    end: dict[str, Any] = next((r["outcome"] for r in reversed(flight) if r["kind"] == "end"), {})
-    decisions = [r for r in flight if r["kind"] == "decision"]
+    end: dict[str, Any] = next((r["outcome"] for r in reversed(flight) if r["kind"] == RecordKind.END), {})
+    decisions = [r for r in flight if r["kind"] == RecordKind.DECISION]
     started = next((float(r["t_s"]) for r in decisions if r.get("source") == "start"), math.nan)
     down = touchdown(truth)
     # Without a touchdown the mission ends where the companion's log does (a hold, a yield, its time limit): an instant

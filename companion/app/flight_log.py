@@ -1,0 +1,162 @@
+"""The flight log's schema: one vocabulary for the writer (``FlightApp``, ``slz fly``) and every reader (``slz replay``,
+``slz report``, the campaign's metrics, the SITL's mission scoring).
+
+A flight log is ``flight.jsonl``: one JSON object per line, ``{"t_s": <vehicle time or null>, "kind": <RecordKind>,
+...fields}``. The header carries :data:`SCHEMA_VERSION`; a log written before the schema had none and reads as
+version 1 (the same records: the schema named what was already there). :meth:`FlightLog.read` checks every record
+against :data:`REQUIRED_FIELDS` and names the line and the field that is missing, so a reader never meets a
+``KeyError`` deep inside a plot.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from companion.app.recorder import RecorderError, read_log
+
+SCHEMA_VERSION = 2
+"""1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version."""
+
+
+class RecordKind(str, enum.Enum):
+    """Every kind of record a flight log holds."""
+
+    HEADER = "header"
+    """The full mission config, the model and its hash, the software version, the schema version."""
+    START = "start"
+    """The mode, vehicle and camera URLs."""
+    CLOCK = "clock"
+    """Whether the flight runs in lockstep."""
+    WAITING_FOR_HANDOVER = "waiting_for_handover"
+    HANDOVER = "handover"
+    TAKEOFF = "takeoff"
+    FRAME = "frame"
+    """A saved camera frame: its sequence number and file."""
+    FRAME_RESULT = "frame_result"
+    """A processed frame: its pose, tracks, target and stage timings."""
+    FRAME_ERROR = "frame_error"
+    DECISION = "decision"
+    """One decision of the landing logic, with its source and inputs."""
+    PHASE = "phase"
+    """A phase change."""
+    COMMAND = "command"
+    """A command sent to the vehicle."""
+    FAILSAFE = "failsafe"
+    ERROR = "error"
+    LATENCY = "latency"
+    """Frame arrival to command sent, ms."""
+    END = "end"
+    """The flight's outcome."""
+
+
+REQUIRED_FIELDS: dict[RecordKind, tuple[str, ...]] = {
+    RecordKind.HEADER: ("config",),
+    RecordKind.START: ("mode",),
+    RecordKind.FRAME: ("seq", "path"),
+    RecordKind.FRAME_RESULT: ("seq", "T_world_body", "tracks", "target"),
+    RecordKind.FRAME_ERROR: ("seq", "error"),
+    RecordKind.DECISION: ("decision", "source", "state"),
+    RecordKind.PHASE: ("phase",),
+    RecordKind.COMMAND: ("command",),
+    RecordKind.FAILSAFE: ("reason",),
+    RecordKind.ERROR: ("error",),
+    RecordKind.LATENCY: ("frame_to_command_ms",),
+    RecordKind.END: ("outcome",),
+}
+
+
+class FlightLogError(Exception):
+    """A flight log does not follow its schema (which file, which line, which field)."""
+
+
+@dataclass(frozen=True)
+class FlightLog:
+    """The records of one flight log, checked, with typed access.
+
+    Attributes
+    ----------
+    path : Path
+        The ``flight.jsonl`` it was read from.
+    records : list of dict
+        Every record in order (unknown kinds of a newer writer included, unchecked).
+    version : int
+        The schema version the header states (1 when it states none).
+    """
+
+    path: Path
+    records: list[dict[str, Any]]
+    version: int
+
+    @classmethod
+    def read(cls, path: Path) -> FlightLog:
+        """Read and check ``path`` (a ``flight.jsonl``, or the flight folder holding it).
+
+        Raises
+        ------
+        FlightLogError
+            Not readable as JSON lines, a newer schema than this reader's, or a record missing a required field.
+        """
+        path = Path(path)
+        if path.is_dir():
+            path = path / "flight.jsonl"
+        try:
+            records = read_log(path)
+        except (OSError, RecorderError) as exc:
+            raise FlightLogError(f"{path}: {exc}") from None
+        version = 1
+        known = {k.value: k for k in RecordKind}
+        for number, record in enumerate(records, start=1):
+            kind = known.get(str(record.get("kind")))
+            if kind is None:
+                continue
+            missing = [f for f in REQUIRED_FIELDS.get(kind, ()) if f not in record]
+            if missing:
+                raise FlightLogError(f"{path}: record {number} ({kind.value}) lacks {', '.join(missing)}")
+            if kind is RecordKind.HEADER:
+                version = int(record.get("schema_version", 1))
+        if version > SCHEMA_VERSION:
+            raise FlightLogError(f"{path}: schema version {version}; this reader knows up to {SCHEMA_VERSION}")
+        return cls(path, records, version)
+
+    def of(self, kind: RecordKind) -> list[dict[str, Any]]:
+        """Every record of ``kind``, in order."""
+        return [r for r in self.records if r.get("kind") == kind.value]
+
+    def first(self, kind: RecordKind) -> dict[str, Any] | None:
+        """The first record of ``kind``, or None."""
+        return next((r for r in self.records if r.get("kind") == kind.value), None)
+
+    def last(self, kind: RecordKind) -> dict[str, Any] | None:
+        """The last record of ``kind``, or None."""
+        return next((r for r in reversed(self.records) if r.get("kind") == kind.value), None)
+
+    def count(self, kind: RecordKind) -> int:
+        """How many records of ``kind``."""
+        return sum(1 for r in self.records if r.get("kind") == kind.value)
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """The header's full mission config (raises :class:`FlightLogError` when there is no header)."""
+        header = self.first(RecordKind.HEADER)
+        if header is None:
+            raise FlightLogError(f"{self.path}: no header record (config)")
+        config: dict[str, Any] = header["config"]
+        return config
+
+    @property
+    def outcome(self) -> dict[str, Any]:
+        """The end record's outcome ({} when the flight did not end cleanly)."""
+        end = self.last(RecordKind.END)
+        return {} if end is None else dict(end["outcome"])
+
+    def phases(self) -> list[tuple[float, str]]:
+        """(vehicle time, phase) of every phase change with a time."""
+        return [(float(r["t_s"]), str(r["phase"])) for r in self.of(RecordKind.PHASE) if r["t_s"] is not None]
+
+    def frame_paths(self) -> dict[int, Path]:
+        """Saved frames by sequence number."""
+        folder = self.path.parent
+        return {int(r["seq"]): folder / str(r["path"]) for r in self.of(RecordKind.FRAME)}
