@@ -227,9 +227,8 @@ def _plugins() -> list[Callable[[Any], None]]:
     return found
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``slz``; returns the process exit code."""
-    args = build_parser().parse_args(argv)
+def run_command(args: argparse.Namespace, prog: str = "slz") -> int:
+    """Set up logging and run a parsed command: a bad config exits 2 and a perception error 1, each in one line."""
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
@@ -239,12 +238,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         code: int = args.func(args)
     except ConfigError as exc:
-        sys.stderr.write(f"slz: {exc}\n")
+        sys.stderr.write(f"{prog}: {exc}\n")
         return 2
     except PerceptionError as exc:
-        sys.stderr.write(f"slz: perception error in {exc}\n")
+        sys.stderr.write(f"{prog}: perception error in {exc}\n")
         return 1
     return code
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``slz``; returns the process exit code."""
+    return run_command(build_parser().parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -11,15 +11,14 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import logging
 import signal
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from companion.cli import DEFAULT_MISSION_CONFIG
-from companion.config import ConfigError, read_yaml_file
+from companion.cli import DEFAULT_MISSION_CONFIG, run_command
+from companion.config import read_yaml_file
 
 
 @contextlib.contextmanager
@@ -271,14 +270,4 @@ def sitl_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="slz-sitl", description="The SLZ Lander SITL vehicle.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     _sitl_arguments(parser)
-    args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.INFO,
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
-    try:
-        code: int = args.func(args)
-    except ConfigError as exc:
-        sys.stderr.write(f"slz-sitl: {exc}\n")
-        return 2
-    return code
+    return run_command(parser.parse_args(argv), prog="slz-sitl")
