@@ -42,6 +42,7 @@ from sitl.clock import SimClock
 from sitl.config import MAX_WIND_MPS, FaultKind, LinkName, SitlConfig
 from sitl.control_channel import ControlChannel
 from sitl.dynamics.base import DynamicsError, make_dynamics
+from sitl.lockstep_gate import LockstepGate
 
 logger = logging.getLogger(__name__)
 
@@ -125,7 +126,6 @@ class SitlVehicle:
         self.control: ControlChannel | None = None
         self.camera: Any = None
         self._next_frame_s = 0.0
-        self._frame_client_lost_wall = math.nan
         try:
             sysid, bind = config.system_id, config.bind_address
             signing = config.signing
@@ -166,16 +166,7 @@ class SitlVehicle:
         self._last_setpoint_ned: tuple[float, float, float, float] | None = None  # any sender: n, e, d, yaw (rad)
         self._commands_seen: dict[int, int] = {}  # command id -> how many received
         self._last_reject_text_s = -math.inf
-        # Lockstep
-        self._lockstep_client: tuple[str, int] | None = None
-        self._tick_seq = 0
-        self._next_tick_s = 0.0
-        self._tick_sent_wall = math.nan
-        self._lockstep_ack: dict[str, Any] | None = None
-        self._last_ack_wall = -math.inf
-        self._lockstep_released = False
-        self._latched_setpoint: tuple[float, float, float, float] | None = None
-        self.setpoints_between_ticks = 0  # ignored: arrived between ticks and not the acknowledged setpoint
+        self.lockstep = LockstepGate(config.lockstep, config.lockstep_period_s, config.lockstep_timeout_s)
         self._faults = sorted(config.faults, key=lambda f: f.at_s)
         self.camera_failed = False  # injected: the camera delivers nothing (ticks go on without frames)
         # Ground truth and trajectory logs
@@ -242,7 +233,7 @@ class SitlVehicle:
                 if self.config.duration_s is not None and self.clock.now_s >= self.config.duration_s - 1e-9:
                     logger.info("duration reached at %.3f s simulated", self.clock.now_s)
                     break
-                free_running = not self.config.lockstep or self._lockstep_released
+                free_running = self.lockstep.free_running
                 if self.camera is not None and free_running:
                     if self.clock.now_s >= self._next_frame_s - 1e-9:  # free-running: frames go out, or are dropped
                         self._write_truth()
@@ -251,8 +242,7 @@ class SitlVehicle:
                         self._next_frame_s += self.camera.period_s
                     else:
                         self.camera.server.poll()
-                at_tick = not free_running and self.clock.now_s >= self._next_tick_s - 1e-9
-                if at_tick and not self._lockstep_gate(sockets):
+                if self.lockstep.at_tick(self.clock.now_s) and not self._lockstep_gate(sockets):
                     continue
                 wait = self.clock.wall_time_until_next_step()
                 if wait > 0:
@@ -265,62 +255,56 @@ class SitlVehicle:
 
     # -- lockstep ------------------------------------------------------------------------------------------------
     def _lockstep_gate(self, sockets: list[Any]) -> bool:
-        """True when simulated time may pass the current tick."""
-        if self._lockstep_client is None:
+        """At a tick: send its frame, pose and event once, then True when it is acknowledged (time may pass it)."""
+        gate = self.lockstep
+        if gate.client is None:
             select.select(sockets, [], [], 0.05)  # nobody to step with yet
             self.clock.resync()
             return False
-        if math.isnan(self._tick_sent_wall):
+        if not gate.tick_out:
             assert self.control is not None
             frame_seq: int | None = None
             if self.camera is not None and not self.camera_failed:
                 # Every tick is a frame: it goes out whole before the tick, so the client has it to acknowledge.
                 self.camera.server.poll()
-                if not self.camera.server.connected:
-                    if self._tick_seq > 0:  # it was there: it left; do not wait for ever
-                        if math.isnan(self._frame_client_lost_wall):
-                            self._frame_client_lost_wall = time.monotonic()
-                        elif time.monotonic() - self._frame_client_lost_wall > self.config.lockstep_timeout_s:
-                            logger.error("lockstep: the frame client left at tick %d; stopping", self._tick_seq)
-                            self._exit_code = 3
-                            self._running = False
+                connected = self.camera.server.connected
+                if gate.frame_client_gone_too_long(connected):
+                    logger.error("lockstep: the frame client left at tick %d; stopping", gate.seq)
+                    self._stop_with(3)
+                if not connected:
                     select.select(sockets, [], [], 0.05)  # waiting for the frame client
                     self.clock.resync()
                     return False
-                self._frame_client_lost_wall = math.nan
                 self.camera.capture(self.clock.now_s, self.dynamics.state())
                 frame_seq = self.camera.seq - 1
-                if not self.camera.server.flush(time.monotonic() + self.config.lockstep_timeout_s):
-                    logger.error("lockstep: the frame client did not take frame %d; stopping", self.camera.seq - 1)
-                    self._exit_code = 3
-                    self._running = False
+                if not self.camera.server.flush(time.monotonic() + gate.timeout_s):
+                    logger.error("lockstep: the frame client did not take frame %d; stopping", frame_seq)
+                    self._stop_with(3)
                     return False
             self._send_tick_pose()
             self._write_truth()
-            tick = Tick(self._tick_seq, self.clock.now_s, frame_seq)
-            self.control.send(tick.to_event(), self._lockstep_client)
-            self._tick_sent_wall = time.monotonic()
-        ack = self._lockstep_ack
-        if ack is not None and ack.get("seq") == self._tick_seq and self._ack_covers_mavlink(ack):
-            self._lockstep_ack = None
-            self._tick_seq += 1
-            self._next_tick_s += self.config.lockstep_period_s
-            self._tick_sent_wall = math.nan
-            self._latched_setpoint = self._last_setpoint_ned  # until the next tick, this one or none
+            self.control.send(Tick(gate.seq, self.clock.now_s, frame_seq).to_event(), gate.client)
+            gate.sent()
+        ack = gate.pending_ack()
+        if ack is not None and self._ack_covers_mavlink(ack):
+            gate.passed(self._last_setpoint_ned)
             self.clock.resync()
             return True
-        if time.monotonic() - self._tick_sent_wall > self.config.lockstep_timeout_s:
+        if gate.ack_overdue():
             logger.error(
                 "lockstep: no acknowledgement of tick %d (t = %.3f s) within %.1f s wall; stopping",
-                self._tick_seq,
+                gate.seq,
                 self.clock.now_s,
-                self.config.lockstep_timeout_s,
+                gate.timeout_s,
             )
-            self._exit_code = 3
-            self._running = False
+            self._stop_with(3)
             return False
         select.select(sockets, [], [], 0.02)
         return False
+
+    def _stop_with(self, exit_code: int) -> None:
+        self._exit_code = exit_code
+        self._running = False
 
     def _write_truth(self) -> None:
         """One ground-truth record at this instant (people positions only when some walk)."""
@@ -355,11 +339,6 @@ class SitlVehicle:
         state = self.dynamics.state()
         for name in ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION"):
             api.send(self.telemetry.build(name, api.mav, self.clock.now_s, state, self.commander, self.battery))
-
-    def _between_ticks(self) -> bool:
-        """In lockstep and stepping (an acknowledged tick behind, the next not yet reached)."""
-        stepping = math.isnan(self._tick_sent_wall) and self.clock.now_s < self._next_tick_s - 1e-9
-        return self.config.lockstep and not self._lockstep_released and self._tick_seq > 0 and stepping
 
     def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
         """The client's MAVLink messages sent before its ack have all been received (no overtaking).
@@ -517,10 +496,12 @@ class SitlVehicle:
             if self._targets_us(msg):
                 count_capped(self.setpoints_by_sender, sender)
                 values = (float(msg.x), float(msg.y), float(msg.z), float(msg.yaw))
-                if self._between_ticks() and self._latched_setpoint is not None and values != self._latched_setpoint:
+                gate = self.lockstep
+                latched = gate.latched_setpoint
+                if gate.between_ticks(self.clock.now_s) and latched is not None and values != latched:
                     # In lockstep, inputs change only at ticks: a late re-send of an older setpoint (MAVSDK re-sends
                     # on its own thread) must not act at a wall-clock-dependent instant.
-                    self.setpoints_between_ticks += 1
+                    gate.setpoints_between_ticks += 1
                     return
                 self._last_setpoint_ned = values
                 self._handle_setpoint(msg)
@@ -733,17 +714,10 @@ class SitlVehicle:
                     np.array([number(components, k, -MAX_WIND_MPS, MAX_WIND_MPS) for k in components])
                 )
             elif cmd == Command.LOCKSTEP_SUBSCRIBE:
-                if not self.config.lockstep:
-                    raise ValueError("this SITL does not run in lockstep")
-                current = self._lockstep_client
-                if current is not None and addr != current and time.monotonic() - self._last_ack_wall < 2.0:
-                    raise ValueError("lockstep has a live client (it acknowledged a tick within 2 s)")
-                self._lockstep_client = addr
-                self._lockstep_released = False
-                self._tick_sent_wall = math.nan  # (re)send the pending tick to the new client
+                self.lockstep.subscribe(addr)  # the pending tick goes (again) to this client
                 reply["tick_period_s"] = self.config.lockstep_period_s
             elif cmd == Command.LOCKSTEP_RELEASE:  # the client is leaving: run free from here on
-                self._lockstep_released = True
+                self.lockstep.release()
                 self.clock.resync()
             elif cmd == Command.CAMERA_FAIL:
                 if self.camera is None:
@@ -752,10 +726,7 @@ class SitlVehicle:
             elif cmd == Command.LINK_LOSS:
                 self.links[0].cut = flag(request, "lost")
             elif cmd == Command.LOCKSTEP_ACK:
-                if not self.config.lockstep or addr != self._lockstep_client:
-                    raise ValueError("not this SITL's lockstep client")
-                self._lockstep_ack = lockstep_ack(request)
-                self._last_ack_wall = time.monotonic()
+                self.lockstep.acknowledge(addr, lockstep_ack(request))
                 return
             elif cmd == Command.PEOPLE:
                 if self.camera is None:
@@ -790,9 +761,9 @@ class SitlVehicle:
             "rc_lost": cmd.rc_lost,
             "camera_failed": self.camera_failed,
             "api_link_cut": self.links[0].cut,
-            "lockstep_tick": self._tick_seq,
+            "lockstep_tick": self.lockstep.seq,
             "setpoints_rejected": self.setpoints_rejected,
-            "setpoints_between_ticks": self.setpoints_between_ticks,
+            "setpoints_between_ticks": self.lockstep.setpoints_between_ticks,
             "frames": None
             if self.camera is None
             else {
