@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import select
 import signal
 import time
@@ -22,8 +21,8 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.config import quote
-from companion.vehicle.sim_control import Command, Event, RequestError, Tick, flag, lockstep_ack, number
-from sitl.autopilot.commander import FORCE_MAGIC, Commander, ControlSource, LandedState, MavResult
+from companion.vehicle.sim_control import Event, Tick
+from sitl.autopilot.commander import FORCE_MAGIC, Commander, LandedState, MavResult
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.modes import FlightMode
@@ -39,8 +38,9 @@ from sitl.autopilot.telemetry import (
     TelemetryBuilder,
 )
 from sitl.clock import SimClock
-from sitl.config import MAX_WIND_MPS, FaultKind, LinkName, SitlConfig
+from sitl.config import FaultKind, LinkName, SitlConfig
 from sitl.control_channel import ControlChannel
+from sitl.control_requests import ControlRequests, count_capped
 from sitl.dynamics.base import DynamicsError, make_dynamics
 from sitl.lockstep_gate import LockstepGate
 
@@ -67,16 +67,6 @@ def whole(value: float, low: int, high: int, nan_is: int | None = None) -> int |
     if not math.isfinite(value) or value != round(value) or not low <= value <= high:
         return None
     return int(value)
-
-
-MAX_SENDERS_REPORTED = 32  # per counter in the `state` reply, which must fit one datagram
-
-
-def count_capped(counts: dict[str, int], key: str) -> None:
-    """Count one for ``key``; past MAX_SENDERS_REPORTED keys, new ones share the key ``"other"``."""
-    if key not in counts and len(counts) >= MAX_SENDERS_REPORTED:
-        key = "other"
-    counts[key] = counts.get(key, 0) + 1
 
 
 class SitlError(Exception):
@@ -167,6 +157,7 @@ class SitlVehicle:
         self._commands_seen: dict[int, int] = {}  # command id -> how many received
         self._last_reject_text_s = -math.inf
         self.lockstep = LockstepGate(config.lockstep, config.lockstep_period_s, config.lockstep_timeout_s)
+        self.requests = ControlRequests(self)
         self._faults = sorted(config.faults, key=lambda f: f.at_s)
         self.camera_failed = False  # injected: the camera delivers nothing (ticks go on without frames)
         # Ground truth and trajectory logs
@@ -466,7 +457,7 @@ class SitlVehicle:
         assert self.control is not None
         for request, addr in self.control.receive():
             try:
-                self._handle_control(request, addr)
+                self.requests.handle(request, addr)
             except Exception as exc:
                 self._handler_failed(f"control {quote(request.get('cmd'))}", exc)
                 self.control.send({"event": Event.ERROR.value, "cmd": "?", "error": "request failed"}, addr)
@@ -684,112 +675,6 @@ class SitlVehicle:
                 self.params.index(name),
             )
         )
-
-    def _handle_control(self, request: dict[str, Any], addr: tuple[str, int]) -> None:
-        assert self.control is not None
-        cmd = request["cmd"]
-        reply: dict[str, Any] = {"event": Event.ACK.value, "cmd": cmd}
-        try:
-            if cmd == Command.PING:
-                reply = {"event": Event.PONG.value, "t_s": self.clock.now_s, "pid": os.getpid()}
-            elif cmd == Command.STATE:
-                reply = self._truth()
-            elif cmd == Command.PILOT_MODE:
-                mode = request.get("mode")
-                if not isinstance(mode, str):
-                    raise RequestError("mode: expected a mode name")
-                reply["result"] = int(self.commander.set_mode(FlightMode.from_name(mode[:32]), ControlSource.PILOT))
-            elif cmd == Command.PILOT_STICKS:
-                self.commander.pilot_sticks = np.array(
-                    [number(request, k, -1.0, 1.0, default=0.0) for k in ("north", "east", "down")]
-                )
-            elif cmd == Command.RC_LOSS:
-                self.commander.set_rc_lost(flag(request, "lost"))
-            elif cmd == Command.WIND:
-                wind = request.get("ned_mps")
-                if not isinstance(wind, list) or len(wind) != 3:
-                    raise RequestError("ned_mps: expected three numbers (north, east, down m/s)")
-                components = {f"ned_mps[{i}]": v for i, v in enumerate(wind)}
-                self.dynamics.set_wind(
-                    np.array([number(components, k, -MAX_WIND_MPS, MAX_WIND_MPS) for k in components])
-                )
-            elif cmd == Command.LOCKSTEP_SUBSCRIBE:
-                self.lockstep.subscribe(addr)  # the pending tick goes (again) to this client
-                reply["tick_period_s"] = self.config.lockstep_period_s
-            elif cmd == Command.LOCKSTEP_RELEASE:  # the client is leaving: run free from here on
-                self.lockstep.release()
-                self.clock.resync()
-            elif cmd == Command.CAMERA_FAIL:
-                if self.camera is None:
-                    raise ValueError("this SITL has no camera")
-                self.camera_failed = flag(request, "failed")
-            elif cmd == Command.LINK_LOSS:
-                self.links[0].cut = flag(request, "lost")
-            elif cmd == Command.LOCKSTEP_ACK:
-                self.lockstep.acknowledge(addr, lockstep_ack(request))
-                return
-            elif cmd == Command.PEOPLE:
-                if self.camera is None:
-                    raise ValueError("this SITL has no world (camera disabled)")
-                reply = {"event": Event.PEOPLE.value, **self.camera.people()}
-            elif cmd == Command.SHUTDOWN:
-                self.request_stop()
-            else:
-                raise ValueError(f"unknown cmd {cmd!r}")
-        except (KeyError, ValueError, TypeError) as exc:
-            reply = {"event": Event.ERROR.value, "cmd": cmd, "error": str(exc)}
-        request_id = request.get("id")
-        if isinstance(request_id, (int, str)) and len(str(request_id)) <= 64:
-            reply["id"] = request_id  # lets the requester match replies to requests
-        self.control.send(reply, addr)
-
-    def _truth(self) -> dict[str, Any]:
-        s = self.dynamics.state()
-        cmd = self.commander
-        return {
-            "event": Event.STATE.value,
-            "t_s": self.clock.now_s,
-            "position_ned_m": s.position_ned_m.tolist(),
-            "velocity_ned_mps": s.velocity_ned_mps.tolist(),
-            "quaternion_wxyz": s.quaternion_wxyz.tolist(),
-            "on_ground": s.on_ground,
-            "armed": cmd.armed,
-            "mode": cmd.mode.px4_name,
-            "landed_state": cmd.landed_state.name,
-            "failsafe": cmd.failsafe,
-            "failsafe_since_s": None if math.isnan(cmd.failsafe_since_s) else cmd.failsafe_since_s,
-            "rc_lost": cmd.rc_lost,
-            "camera_failed": self.camera_failed,
-            "api_link_cut": self.links[0].cut,
-            "lockstep_tick": self.lockstep.seq,
-            "setpoints_rejected": self.setpoints_rejected,
-            "setpoints_between_ticks": self.lockstep.setpoints_between_ticks,
-            "frames": None
-            if self.camera is None
-            else {
-                "sent": self.camera.server.stats.sent,
-                "dropped": self.camera.server.stats.dropped,
-                "clients": self.camera.server.stats.clients,
-                "refused": self.camera.server.stats.refused,
-            },
-            "handler_errors": self.handler_errors,
-            "control_malformed": self.control.malformed if self.control is not None else 0,
-            "commands_by_sender": dict(self.commands_by_sender),
-            "setpoints_by_sender": dict(self.setpoints_by_sender),
-            "links": {
-                link.name: {
-                    "received": link.stats.received,
-                    "sent": link.stats.sent,
-                    "dropped_malformed": link.stats.dropped_malformed,
-                    "dropped_unknown": link.stats.dropped_unknown,
-                    "senders": sorted({f"{s_}/{c_}" for s_, c_ in link.stats.per_source})[:MAX_SENDERS_REPORTED],
-                    "dropped_unsigned": link.stats.dropped_unsigned,
-                    "stray_frames": link.stats.stray_frames,
-                    "partner": f"{link.remote[0]}:{link.remote[1]}",
-                }
-                for link in self.links
-            },
-        }
 
 
 def install_signal_handlers(vehicle: SitlVehicle) -> None:

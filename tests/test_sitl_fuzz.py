@@ -56,19 +56,23 @@ def test_a_fuzzed_sitl_stays_up_keeps_its_partner_and_heartbeat_and_still_flies(
                 sent += 1
             except BlockingIOError:  # the socket buffer is full: that datagram is lost, as on a real link
                 pass
-            if i % 200 == 0:
+            if i % 200 == 199:
+                sitl.state()  # paces the sender to the SITL's loop (its links are read in the same turn)
                 gcs.poll()
         control_fuzz = ControlFuzzer(seed=29)
         for i, request in enumerate(control_fuzz.requests(CONTROL_REQUESTS)):
             with contextlib.suppress(OSError):  # a full buffer; a datagram over 64 KiB is refused by the kernel
                 stray.sendto(request, sitl.control_addr)
-            if i % 200 == 0:
+            if i % 20 == 19:
+                # A state round trip queues behind the requests sent so far: when it is answered, they were read,
+                # so the socket buffer never overflows on a loaded machine (a dropped request would test nothing).
+                sitl.state()
                 gcs.poll()
         fuzz_end = time.monotonic()
 
         # It answers, counted what it dropped, never failed handling one, and the GCS link did not follow the stray.
         state = wait_until(
-            lambda: ((s := sitl.state())["control_malformed"] > CONTROL_REQUESTS // 2 and s) or None,
+            lambda: ((s := sitl.state())["control_malformed"] > 0.4 * CONTROL_REQUESTS and s) or None,
             10.0,
             "the control fuzz to be read",
         )

@@ -1,0 +1,144 @@
+"""The SITL's control-channel requests, answered against one vehicle: the simulated pilot, faults, wind, lockstep
+subscription and acknowledgement, ground truth and shutdown. The vocabulary and the checks of every field are
+``companion.vehicle.sim_control``; the socket is ``sitl.control_channel``; this is what each request does.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from companion.vehicle.sim_control import Command, Event, RequestError, flag, lockstep_ack, number
+from sitl.autopilot.commander import ControlSource
+from sitl.autopilot.modes import FlightMode
+from sitl.config import MAX_WIND_MPS
+
+if TYPE_CHECKING:
+    from sitl.vehicle import SitlVehicle
+
+MAX_SENDERS_REPORTED = 32  # per counter in the `state` reply, which must fit one datagram
+
+
+def count_capped(counts: dict[str, int], key: str) -> None:
+    """Count one for ``key``; past MAX_SENDERS_REPORTED keys, new ones share the key ``"other"``."""
+    if key not in counts and len(counts) >= MAX_SENDERS_REPORTED:
+        key = "other"
+    counts[key] = counts.get(key, 0) + 1
+
+
+class ControlRequests:
+    """The control channel's requests for ``vehicle``."""
+
+    def __init__(self, vehicle: SitlVehicle) -> None:
+        self.vehicle = vehicle
+
+    def handle(self, request: dict[str, Any], addr: tuple[str, int]) -> None:
+        """Answer one checked request from ``addr`` (an error event naming the field when a field is bad)."""
+        v = self.vehicle
+        assert v.control is not None
+        cmd = request["cmd"]
+        reply: dict[str, Any] = {"event": Event.ACK.value, "cmd": cmd}
+        try:
+            if cmd == Command.PING:
+                reply = {"event": Event.PONG.value, "t_s": v.clock.now_s, "pid": os.getpid()}
+            elif cmd == Command.STATE:
+                reply = self.state()
+            elif cmd == Command.PILOT_MODE:
+                mode = request.get("mode")
+                if not isinstance(mode, str):
+                    raise RequestError("mode: expected a mode name")
+                reply["result"] = int(v.commander.set_mode(FlightMode.from_name(mode[:32]), ControlSource.PILOT))
+            elif cmd == Command.PILOT_STICKS:
+                v.commander.pilot_sticks = np.array(
+                    [number(request, k, -1.0, 1.0, default=0.0) for k in ("north", "east", "down")]
+                )
+            elif cmd == Command.RC_LOSS:
+                v.commander.set_rc_lost(flag(request, "lost"))
+            elif cmd == Command.WIND:
+                wind = request.get("ned_mps")
+                if not isinstance(wind, list) or len(wind) != 3:
+                    raise RequestError("ned_mps: expected three numbers (north, east, down m/s)")
+                components = {f"ned_mps[{i}]": v for i, v in enumerate(wind)}
+                v.dynamics.set_wind(np.array([number(components, k, -MAX_WIND_MPS, MAX_WIND_MPS) for k in components]))
+            elif cmd == Command.LOCKSTEP_SUBSCRIBE:
+                v.lockstep.subscribe(addr)  # the pending tick goes (again) to this client
+                reply["tick_period_s"] = v.config.lockstep_period_s
+            elif cmd == Command.LOCKSTEP_RELEASE:  # the client is leaving: run free from here on
+                v.lockstep.release()
+                v.clock.resync()
+            elif cmd == Command.CAMERA_FAIL:
+                if v.camera is None:
+                    raise ValueError("this SITL has no camera")
+                v.camera_failed = flag(request, "failed")
+            elif cmd == Command.LINK_LOSS:
+                v.links[0].cut = flag(request, "lost")
+            elif cmd == Command.LOCKSTEP_ACK:
+                v.lockstep.acknowledge(addr, lockstep_ack(request))
+                return
+            elif cmd == Command.PEOPLE:
+                if v.camera is None:
+                    raise ValueError("this SITL has no world (camera disabled)")
+                reply = {"event": Event.PEOPLE.value, **v.camera.people()}
+            elif cmd == Command.SHUTDOWN:
+                v.request_stop()
+            else:
+                raise ValueError(f"unknown cmd {cmd!r}")
+        except (KeyError, ValueError, TypeError) as exc:
+            reply = {"event": Event.ERROR.value, "cmd": cmd, "error": str(exc)}
+        request_id = request.get("id")
+        if isinstance(request_id, (int, str)) and len(str(request_id)) <= 64:
+            reply["id"] = request_id  # lets the requester match replies to requests
+        v.control.send(reply, addr)
+
+    def state(self) -> dict[str, Any]:
+        """The ``state`` reply: ground truth, modes, faults and every counter (it always fits one datagram)."""
+        v = self.vehicle
+        s = v.dynamics.state()
+        cmd = v.commander
+        return {
+            "event": Event.STATE.value,
+            "t_s": v.clock.now_s,
+            "position_ned_m": s.position_ned_m.tolist(),
+            "velocity_ned_mps": s.velocity_ned_mps.tolist(),
+            "quaternion_wxyz": s.quaternion_wxyz.tolist(),
+            "on_ground": s.on_ground,
+            "armed": cmd.armed,
+            "mode": cmd.mode.px4_name,
+            "landed_state": cmd.landed_state.name,
+            "failsafe": cmd.failsafe,
+            "failsafe_since_s": None if math.isnan(cmd.failsafe_since_s) else cmd.failsafe_since_s,
+            "rc_lost": cmd.rc_lost,
+            "camera_failed": v.camera_failed,
+            "api_link_cut": v.links[0].cut,
+            "lockstep_tick": v.lockstep.seq,
+            "setpoints_rejected": v.setpoints_rejected,
+            "setpoints_between_ticks": v.lockstep.setpoints_between_ticks,
+            "frames": None
+            if v.camera is None
+            else {
+                "sent": v.camera.server.stats.sent,
+                "dropped": v.camera.server.stats.dropped,
+                "clients": v.camera.server.stats.clients,
+                "refused": v.camera.server.stats.refused,
+            },
+            "handler_errors": v.handler_errors,
+            "control_malformed": v.control.malformed if v.control is not None else 0,
+            "commands_by_sender": dict(v.commands_by_sender),
+            "setpoints_by_sender": dict(v.setpoints_by_sender),
+            "links": {
+                link.name: {
+                    "received": link.stats.received,
+                    "sent": link.stats.sent,
+                    "dropped_malformed": link.stats.dropped_malformed,
+                    "dropped_unknown": link.stats.dropped_unknown,
+                    "senders": sorted({f"{s_}/{c_}" for s_, c_ in link.stats.per_source})[:MAX_SENDERS_REPORTED],
+                    "dropped_unsigned": link.stats.dropped_unsigned,
+                    "stray_frames": link.stats.stray_frames,
+                    "partner": f"{link.remote[0]}:{link.remote[1]}",
+                }
+                for link in v.links
+            },
+        }
