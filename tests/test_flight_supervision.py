@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from companion.app.drivers import FreeRunningDriver
 from companion.app.flight import FlightApp
 from companion.app.mission import MissionConfig
 from companion.app.recorder import FlightRecorder, read_log
@@ -192,12 +193,12 @@ def test_telemetry_silent_past_its_limit_is_a_lost_link_and_nothing_more_is_sent
         await hand_over(app, link)
         sent = len(link.commands)
         link.status.last_telemetry_wall_s = time.monotonic() - 2 * app.config.vehicle.link_lost_after_s
-        await asyncio.wait_for(app._free_ticks(), 5.0)
+        await asyncio.wait_for(FreeRunningDriver(app).ticks(), 5.0)
         assert len(link.commands) == sent
 
     asyncio.run(flight())
     assert app.outcome.link_lost
-    assert app._done.is_set()
+    assert app.done.is_set()
 
 
 def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and_link: Any) -> None:

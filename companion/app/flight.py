@@ -37,6 +37,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from companion.app.drivers import FreeRunningDriver, LockstepDriver
 from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.recorder import FlightRecorder
@@ -48,13 +49,11 @@ from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.vehicle.link import FlightMode, VehicleError, VehicleLink
 from companion.vehicle.lockstep import LockstepClient
-from companion.vehicle.sim_control import Tick
 
 logger = logging.getLogger(__name__)
 
 TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAILSAFE})
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
-TICK_PERIOD_S = 0.1  # free running: the wall-clock tick of the supervision
 TAKEOFF_RETRY_S = 1.0  # vehicle time between arming attempts while the autopilot refuses
 START_TIMEOUT_S = 120.0  # vehicle time from the first tick to the start of the search
 START_TOLERANCE_M = 1.0  # horizontal distance to the start pose at which the search begins
@@ -161,13 +160,12 @@ class FlightApp:
         self._offboard = False
         self._commanding = not self.dry_run
         self._stop = threading.Event()
-        self._done = asyncio.Event()
+        self.done = asyncio.Event()
         self._start_stage = StartStage.WAITING
         self._first_tick_t_s: float | None = None
         self._last_takeoff_try_t_s = -math.inf
         self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
-        self._tick_setpoint: tuple[float, float, float, float] | None = None  # sent during this lockstep tick
-        self._early_frame: Frame | None = None
+        self.tick_setpoint: tuple[float, float, float, float] | None = None  # sent during this lockstep tick
         self._transit_yaw_deg: float | None = None
         self._waiting_logged = False
 
@@ -199,7 +197,7 @@ class FlightApp:
             await self._send(decision)
         finally:
             if decision.phase in TERMINAL:
-                self._done.set()  # after its command went out: ending cancels the tasks
+                self.done.set()  # after its command went out: ending cancels the tasks
 
     async def _send(self, decision: Decision) -> None:
         if not self._commanding or decision.kind is CommandKind.NONE:
@@ -217,7 +215,7 @@ class FlightApp:
                     self._offboard = True
                 else:
                     await self.link.set_setpoint(sp)
-                self._tick_setpoint = (sp.north_m, sp.east_m, sp.down_m, math.radians(sp.yaw_deg))
+                self.tick_setpoint = (sp.north_m, sp.east_m, sp.down_m, math.radians(sp.yaw_deg))
             elif decision.kind is CommandKind.LAND:
                 await self.link.land()
             elif decision.kind is CommandKind.HOLD:
@@ -282,7 +280,7 @@ class FlightApp:
             latency_ms = 1000.0 * (time.monotonic() - frame.arrival_wall_s)
             self.recorder.write(RecordKind.LATENCY, frame.t_capture_s, seq=frame.seq, frame_to_command_ms=latency_ms)
 
-    def _pose_reaches(self, t_s: float) -> bool:
+    def pose_reaches(self, t_s: float) -> bool:
         """The pose buffer holds a pose stamped at ``t_s`` or later (to the vehicle clock's resolution)."""
         latest = self.link.poses.latest_t_s
         return latest is not None and latest >= t_s - CLOCK_RESOLUTION_S
@@ -294,7 +292,7 @@ class FlightApp:
         t_s = frame.t_capture_s
         try:
             await self.link.wait_for(
-                functools.partial(self._pose_reaches, t_s),
+                functools.partial(self.pose_reaches, t_s),
                 time.monotonic() + max_age,
                 "telemetry at the frame's capture time",
             )
@@ -318,7 +316,7 @@ class FlightApp:
         """The start sequence, then pilot takeover, touchdown and perception silence, at vehicle time ``state.t_s``."""
         self.outcome.ticks += 1
         if self.guidance.phase in TERMINAL:
-            self._done.set()
+            self.done.set()
             return
         status = self.link.status
         if self._offboard and status.mode not in (FlightMode.OFFBOARD, FlightMode.UNKNOWN) and not self.dry_run:
@@ -399,107 +397,14 @@ class FlightApp:
         await self.apply(self.guidance.start(state), "start", state)
 
     # -- drivers -------------------------------------------------------------------------------------------------------
-    async def _read_frames(self, queue: asyncio.Queue[Frame | None]) -> None:
-        """Lockstep: frames into ``queue`` (None once the camera is gone)."""
-        frames = self.source.frames()
-        try:
-            async for frame in frames:
-                queue.put_nowait(frame)
-        except CameraError as exc:
-            self._camera_lost(exc)
-        finally:
-            queue.put_nowait(None)
-            await frames.aclose()  # type: ignore[attr-defined]
-
-    def _camera_lost(self, exc: CameraError) -> None:
+    def camera_lost(self, exc: CameraError) -> None:
         self.outcome.camera_lost = True
         self.outcome.camera_fault = exc.fault.value
         logger.error("camera fault %s: %s (the perception-silence failsafe acts)", exc.fault.value, exc)
         t_s = self.link.poses.latest_t_s
         self.recorder.write(RecordKind.ERROR, t_s, where="camera", fault=exc.fault.value, error=str(exc))
 
-    async def _frame_of(self, tick: Tick, queue: asyncio.Queue[Frame | None]) -> Frame | None:
-        """Lockstep: the frame the simulator sent before ``tick`` (None, counted, if it never comes)."""
-        assert self.lockstep is not None
-        assert tick.frame_seq is not None
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + self.lockstep.tick_timeout_s
-        while True:
-            frame, self._early_frame = self._early_frame, None
-            if frame is None:
-                try:
-                    frame = await asyncio.wait_for(queue.get(), max(0.0, deadline - loop.time()))
-                except asyncio.TimeoutError:
-                    frame = None
-                if frame is None:  # the camera is gone (or silent past the deadline)
-                    if not self.outcome.camera_lost:
-                        queue.put_nowait(None)
-                    self.outcome.frames_missing += 1
-                    return None
-            if frame.seq == tick.frame_seq:
-                return frame
-            if frame.seq > tick.frame_seq:  # ours never came
-                self._early_frame = frame
-                self.outcome.frames_missing += 1
-                return None
-
-    async def _lockstep_loop(self) -> None:
-        assert self.lockstep is not None
-        queue: asyncio.Queue[Frame | None] = asyncio.Queue()
-        reader = asyncio.create_task(self._read_frames(queue), name="frames")
-        link_lost_after_s = self.config.vehicle.link_lost_after_s
-        try:
-            while not self._done.is_set():
-                tick = await self.lockstep.next_tick()
-                try:
-                    await self.link.wait_for(
-                        functools.partial(self._pose_reaches, tick.t_s),
-                        time.monotonic() + link_lost_after_s,
-                        "the tick's pose",
-                    )
-                except VehicleError:
-                    self._link_lost(link_lost_after_s)
-                    return
-                if tick.frame_seq is not None and not self.outcome.camera_lost:
-                    frame = await self._frame_of(tick, queue)
-                    if frame is not None:
-                        await self.on_frame(frame)
-                state = self.vehicle_state()
-                if state is not None and not self._done.is_set():
-                    await self.on_tick(state)
-                self.lockstep.ack(tick, self._tick_setpoint)
-                self._tick_setpoint = None
-        finally:
-            reader.cancel()
-            await asyncio.gather(reader, return_exceptions=True)
-
-    async def _free_frames(self) -> None:
-        frames = self.source.frames()
-        try:
-            async for frame in frames:
-                if self._done.is_set():
-                    break
-                await self.on_frame(frame)
-        except CameraError as exc:
-            self._camera_lost(exc)
-        finally:
-            await frames.aclose()  # type: ignore[attr-defined]
-        await self._done.wait()  # no more frames: the silence failsafe decides from here
-
-    async def _free_ticks(self) -> None:
-        link_lost_after_s = self.config.vehicle.link_lost_after_s
-        while not self._done.is_set():
-            last_telemetry = self.link.status.last_telemetry_wall_s
-            if last_telemetry is not None and time.monotonic() - last_telemetry > link_lost_after_s:
-                self._link_lost(time.monotonic() - last_telemetry)
-                return
-            state = self.vehicle_state()
-            if state is not None:
-                await self.on_tick(state)
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(self._done.wait(), TICK_PERIOD_S)
-
-    def _link_lost(self, silent_s: float) -> None:
+    def link_lost(self, silent_s: float) -> None:
         self.outcome.link_lost = True
         self._commanding = False
         self._offboard = False
@@ -508,14 +413,14 @@ class FlightApp:
         logger.error("link lost: no telemetry for %.1f s; the autopilot's failsafe acts", silent_s)
         if self.lockstep is not None:
             self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act
-        self._done.set()
+        self.done.set()
 
     async def _beat(self) -> None:
         """The event loop's heartbeat for the stall watchdog."""
-        while not self._done.is_set():
+        while not self.done.is_set():
             self._beat_wall = time.monotonic()
             with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(self._done.wait(), self.config.vehicle.decision_watchdog_s / 5)
+                await asyncio.wait_for(self.done.wait(), self.config.vehicle.decision_watchdog_s / 5)
 
     def _stall_watchdog(self) -> None:
         limit = self.config.vehicle.decision_watchdog_s
@@ -541,11 +446,15 @@ class FlightApp:
         watchdog = threading.Thread(target=self._stall_watchdog, name="stall-watchdog", daemon=True)
         if self.lockstep is None:
             watchdog.start()
-        drivers = [self._lockstep_loop()] if self.lockstep is not None else [self._free_frames(), self._free_ticks()]
+        if self.lockstep is not None:
+            drivers = [LockstepDriver(self, self.lockstep).run()]
+        else:
+            free = FreeRunningDriver(self)
+            drivers = [free.frames(), free.ticks()]
         tasks: list[asyncio.Task[Any]] = [
             *(asyncio.create_task(driver) for driver in drivers),
             asyncio.create_task(self._beat(), name="beat"),
-            asyncio.create_task(self._done.wait(), name="done"),
+            asyncio.create_task(self.done.wait(), name="done"),
         ]
         try:
             done, _ = await asyncio.wait(tasks, timeout=timeout_s, return_when=asyncio.FIRST_COMPLETED)
@@ -555,10 +464,10 @@ class FlightApp:
                 if not task.cancelled() and task.exception() is not None:
                     raise task.exception()  # type: ignore[misc]
         finally:
-            # The flight is over for every loop. Each one also ends by itself on `_done`, because on Python 3.10
+            # The flight is over for every loop. Each one also ends by itself on `done`, because on Python 3.10
             # and 3.11 `asyncio.wait_for` can lose a cancellation that arrives as its timeout fires (gh-86296, seen
             # here under load: a dry run went on deciding after its mission timeout). Then cancel, within a bound.
-            self._done.set()
+            self.done.set()
             for task in tasks:
                 task.cancel()
             _, pending = await asyncio.wait(tasks, timeout=CANCEL_GRACE_S)
