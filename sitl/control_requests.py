@@ -114,7 +114,7 @@ class ControlRequests:
             "camera_failed": v.camera_failed,
             "api_link_cut": v.links[0].cut,
             "lockstep_tick": v.lockstep.seq,
-            "setpoints_rejected": v.setpoints_rejected,
+            "setpoints_rejected": v.mavlink.setpoints_rejected,
             "setpoints_between_ticks": v.lockstep.setpoints_between_ticks,
             "frames": None
             if v.camera is None
@@ -126,8 +126,8 @@ class ControlRequests:
             },
             "handler_errors": v.handler_errors,
             "control_malformed": v.control.malformed if v.control is not None else 0,
-            "commands_by_sender": dict(v.commands_by_sender),
-            "setpoints_by_sender": dict(v.setpoints_by_sender),
+            "commands_by_sender": dict(v.mavlink.commands_by_sender),
+            "setpoints_by_sender": dict(v.mavlink.setpoints_by_sender),
             "links": {
                 link.name: {
                     "received": link.stats.received,
