@@ -144,18 +144,21 @@ def _write_mission(run_dir: Path, walker_ne: list[tuple[float, float]]) -> None:
             "t_s": 0.0,
             "kind": "decision",
             "source": "start",
+            "state": None,
             "decision": {"phase": "search", "kind": "setpoint", "target": None, "reason": "mission start"},
         },
         {
             "t_s": 1.0,
             "kind": "decision",
             "source": "frame",
+            "state": None,
             "decision": {"phase": "descent", "kind": "setpoint", "target": target, "reason": "descend"},
         },
         {
             "t_s": 2.5,
             "kind": "decision",
             "source": "frame",
+            "state": None,
             "decision": {"phase": "land", "kind": "land", "target": target, "reason": "land"},
         },
         {"t_s": None, "kind": "end", "outcome": {"phase": "done", "reason": "landed", "failsafes": []}},
@@ -280,13 +283,14 @@ def _write_hold(run_dir: Path, truth_until_s: float) -> None:
     search = {"phase": "search", "kind": "setpoint", "target": None, "reason": "search"}
     flight = [
         {"t_s": None, "kind": "header", "config": config},
-        {"t_s": 0.0, "kind": "decision", "source": "start", "decision": search},
+        {"t_s": 0.0, "kind": "decision", "source": "start", "state": None, "decision": search},
         {"t_s": 0.0, "kind": "command", "command": "setpoint"},
         {"t_s": 2.0, "kind": "command", "command": "setpoint"},
         {
             "t_s": 3.0,
             "kind": "decision",
             "source": "time",
+            "state": None,
             "decision": {"phase": "failsafe", "kind": "hold", "target": None, "reason": "no landing: hold"},
         },
         {"t_s": 3.0, "kind": "command", "command": "hold"},
