@@ -37,6 +37,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from companion.app.mission import load_mission_config
     from companion.perception.pipeline import SlzPipeline
     from sitl import demo
+    from sitl.instances import InstanceError
     from sitl.mission import MissionError
 
     config = load_mission_config(args.config)  # a bad config or a model that does not load fails before any process
@@ -44,7 +45,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     try:
         with _instance(args.instance) as instance:
             outcome = demo.run(Path(args.out), seed=args.seed, mission_config=args.config, instance=instance)
-    except MissionError as exc:
+    except (MissionError, InstanceError) as exc:
         sys.stderr.write(f"slz demo: {exc}\n")
         return 1
     sys.stdout.write(demo.describe(outcome) + "\n")
@@ -122,6 +123,7 @@ def _campaign_replay(args: argparse.Namespace) -> int:
     from sitl.campaign.report import completed
     from sitl.campaign.runner import mission_spec, read_results
     from sitl.campaign.spec import CampaignSpec
+    from sitl.instances import InstanceError
     from sitl.mission import fly
 
     folder = Path(args.spec_or_folder or "")
@@ -135,8 +137,12 @@ def _campaign_replay(args: argparse.Namespace) -> int:
         sys.stderr.write(f"slz campaign replay: no mission {args.mission!r} in {folder}\n")
         return 2
     out = Path(args.out) if args.out else folder / "replays" / args.mission
-    with _instance(args.instance) as instance:
-        fly(mission_spec(spec, plan, out, instance, record_frames=True))
+    try:
+        with _instance(args.instance) as instance:
+            fly(mission_spec(spec, plan, out, instance, record_frames=True))
+    except InstanceError as exc:
+        sys.stderr.write(f"slz campaign replay: {exc}\n")
+        return 1
     report = replay(out / "flight", video_path=out / "camera.mp4")
     again = mission_metrics(out, plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
     logged = next((r for r in read_results(folder / "results.jsonl") if r["mission_id"] == args.mission), None)
