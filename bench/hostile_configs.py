@@ -9,7 +9,6 @@ context.
 
 from __future__ import annotations
 
-import subprocess
 import sys
 import tempfile
 import time
@@ -22,7 +21,7 @@ sys.path.insert(0, str(REPO_ROOT))
 from bench.machine import machine_context, save_report  # noqa: E402
 from companion.app.mission import load_mission_config  # noqa: E402
 from companion.config import ConfigError  # noqa: E402
-from tests.hostile_configs import hostile_configs  # noqa: E402
+from tests.hostile_configs import fly_dry_run, hostile_configs  # noqa: E402
 
 MAX_LOAD_S = 1.0
 
@@ -41,13 +40,7 @@ def main() -> int:
                 message = str(exc)
             load_s = time.perf_counter() - t0
             t1 = time.perf_counter()
-            run = subprocess.run(
-                [sys.executable, "-m", "companion.cli", "fly", "--dry-run", "--config", str(path)],
-                cwd=REPO_ROOT,
-                capture_output=True,
-                text=True,
-                timeout=60,
-            )
+            run = fly_dry_run(path)
             process_s = time.perf_counter() - t1
             row = {
                 "file": hostile.name,

@@ -7,6 +7,8 @@ a second by ``slz fly --dry-run``).
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +26,17 @@ class HostileConfig:
     name: str
     content: bytes
     expect: str
+
+
+def fly_dry_run(config: Path) -> subprocess.CompletedProcess[str]:
+    """``slz fly --dry-run --config CONFIG`` as a user runs it (its own process, output captured)."""
+    return subprocess.run(
+        [sys.executable, "-m", "companion.cli", "fly", "--dry-run", "--config", str(config)],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
 
 
 def _with(text: str, old: str, new: str) -> bytes:

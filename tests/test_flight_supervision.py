@@ -50,7 +50,7 @@ class FakeLink:
         self.status.last_telemetry_wall_s = time.monotonic()
 
     async def connect(self, timeout_s: float) -> None:
-        pass
+        """Connected at once: the fake is its own autopilot."""
 
     async def wait_for(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
         if not condition():
@@ -87,17 +87,17 @@ class FakeLink:
         self.commands.append(("return", None))
 
     async def status_text(self, text: str) -> None:
-        pass
+        """Status texts go nowhere: no ground station listens in these tests."""
 
     async def close(self) -> None:
-        pass
+        """Nothing to release."""
 
 
 class NoFrames:
     """A camera that opens and then delivers nothing."""
 
     async def open(self) -> None:
-        pass
+        """Opens at once."""
 
     async def frames(self) -> AsyncIterator[Frame]:
         await asyncio.Event().wait()

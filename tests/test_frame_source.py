@@ -19,14 +19,14 @@ async def frames_then_fault(
     stream: bytes, close: bool = True, timeout_s: float = 2.0
 ) -> tuple[list[Frame], CameraError]:
     """Serve ``stream`` on a loopback port (then close, or stay silent); the frames read and the error raised."""
+    read_done = asyncio.Event()
 
     async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         writer.write(stream)
         await writer.drain()
-        if close:
-            writer.close()
-        else:
-            await asyncio.sleep(3 * timeout_s)  # a camera that stops sending but keeps the connection
+        if not close:
+            await read_done.wait()  # a camera that stops sending but keeps the connection until the reader gives up
+        writer.close()
 
     server = await asyncio.start_server(serve, "127.0.0.1", 0)
     port = server.sockets[0].getsockname()[1]
@@ -41,6 +41,7 @@ async def frames_then_fault(
         with pytest.raises(CameraError) as raised:
             await read()
     finally:
+        read_done.set()
         server.close()
     return got, raised.value
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,7 +10,7 @@ from companion.app.mission import load_mission_config
 from companion.config import ConfigError
 from companion.perception.config import load_perception_config
 from sitl.campaign.spec import load_campaign_spec
-from tests.hostile_configs import REPO_ROOT, HostileConfig, hostile_configs
+from tests.hostile_configs import REPO_ROOT, HostileConfig, fly_dry_run, hostile_configs
 
 pytestmark = pytest.mark.unit
 
@@ -54,13 +52,7 @@ def test_slz_fly_refuses_them_with_exit_2_and_no_traceback(tmp_path: Path) -> No
     for hostile in (h for h in HOSTILE if h.name in chosen):
         path = tmp_path / f"{hostile.name}.yaml"
         path.write_bytes(hostile.content)
-        run = subprocess.run(
-            [sys.executable, "-m", "companion.cli", "fly", "--dry-run", "--config", str(path)],
-            cwd=REPO_ROOT,
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
+        run = fly_dry_run(path)
         assert run.returncode == 2, (hostile.name, run.stderr[-500:])
         assert "Traceback" not in run.stderr
         assert hostile.expect in run.stderr

@@ -49,9 +49,10 @@ def test_a_lease_held_by_another_process_is_respected_until_that_process_dies(tm
             "import sys, time; from pathlib import Path; from sitl.instances import lease_instance\n"
             f"lease = lease_instance([{instance}], lock_dir=Path({str(tmp_path)!r}))\n"
             "print('leased', flush=True)\n"
-            "time.sleep(60)\n",
+            "sys.stdin.read()\n",  # holds the lease until it is killed (or its stdin closes)
         ],
         cwd=REPO_ROOT,
+        stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
     )
