@@ -5,8 +5,9 @@ SITL. One seed gives the same sequence on any machine.
 
 MAVLink datagrams (:class:`MavlinkFuzzer`), in kinds chosen at random:
 
-- ``structured``: every message the SITL handles (commands, setpoints, parameters, modes, timesync), addressed to
-  it, with NaN, infinity or float32 extremes in every float field and random integers elsewhere;
+- ``structured``: every message the SITL handles (commands, setpoints, parameters, modes, timesync, the mission
+  protocol, MAVLink FTP, the joystick), addressed to it, with NaN, infinity or float32 extremes in every float field
+  and random integers elsewhere;
 - ``any_message``: a message of any other type in the dialect with random fields;
 - ``mutated``: a valid frame truncated, with a flipped bit, a wrong length byte, a bad CRC or trailing junk;
 - ``bad_signature``: a signed frame with a valid CRC and a signature made with another key;
@@ -16,9 +17,11 @@ MAVLink datagrams (:class:`MavlinkFuzzer`), in kinds chosen at random:
 
 Input that is well formed *and* meaningful (a valid mode change, an in-range parameter) is not fuzz but a command,
 so the structured kind never builds one: a float field always holds a value the SITL must refuse, and a mode field
-a mode that does not exist. Control requests (:class:`ControlFuzzer`) likewise: broken JSON, NaN and infinity,
-numbers that overflow, deep nesting, wrong types (``"lost": "false"``), values out of range, oversized strings,
-unknown commands and acknowledgements from a stranger; never ``shutdown``.
+a mode that does not exist. Messages of integers only (MANUAL_CONTROL, MISSION_COUNT, MISSION_CLEAR_ALL, FTP
+headers) are random and so sometimes meaningful: they act only where the state allows (sticks in POSCTL, an upload
+the fuzzer's own items must complete, which random items do not). Control requests (:class:`ControlFuzzer`)
+likewise: broken JSON, NaN and infinity, numbers that overflow, deep nesting, wrong types (``"lost": "false"``),
+values out of range, oversized strings, unknown commands and acknowledgements from a stranger; never ``shutdown``.
 """
 
 from __future__ import annotations
@@ -40,6 +43,17 @@ HANDLED = (
     "PARAM_SET",
     "SET_MODE",
     "TIMESYNC",
+    "MISSION_REQUEST_LIST",
+    "MISSION_REQUEST_INT",
+    "MISSION_REQUEST",
+    "MISSION_COUNT",
+    "MISSION_ITEM_INT",
+    "MISSION_ITEM",
+    "MISSION_CLEAR_ALL",
+    "MISSION_SET_CURRENT",
+    "MISSION_ACK",
+    "MANUAL_CONTROL",
+    "FILE_TRANSFER_PROTOCOL",
 )
 HANDLED_COMMANDS = (
     mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
@@ -51,6 +65,14 @@ HANDLED_COMMANDS = (
     mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
     mavlink.MAV_CMD_DO_SET_HOME,
     mavlink.MAV_CMD_DO_CHANGE_SPEED,
+    mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
+    mavlink.MAV_CMD_GET_HOME_POSITION,
+    mavlink.MAV_CMD_DO_REPOSITION,
+    mavlink.MAV_CMD_DO_ORBIT,
+    mavlink.MAV_CMD_MISSION_START,
+    mavlink.MAV_CMD_DO_SET_MISSION_CURRENT,
+    mavlink.MAV_CMD_DO_PAUSE_CONTINUE,
+    519,  # REQUEST_PROTOCOL_VERSION
 )
 PARAM_NAMES = (b"COM_OF_LOSS_T", b"COM_OBL_ACT", b"MPC_XY_VEL_MAX", b"MIS_TAKEOFF_ALT", b"MAV_SYS_ID", b"NAV_RCL_ACT")
 KINDS = ("structured", "any_message", "mutated", "bad_signature", "unknown_id", "noise", "mavlink1")

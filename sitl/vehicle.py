@@ -18,11 +18,10 @@ from types import FrameType
 from typing import Any, TextIO
 
 import numpy as np
-from pymavlink.dialects.v20 import common as mavlink
 
 from companion.config import quote
 from companion.vehicle.sim_control import Event, Tick
-from sitl.autopilot.commander import Commander, LandedState
+from sitl.autopilot.commander import Commander, LandedState, Severity
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MavlinkServer
@@ -34,6 +33,7 @@ from sitl.autopilot.telemetry import (
     Origin,
     StreamSchedule,
     TelemetryBuilder,
+    statustext_chunks,
 )
 from sitl.clock import SimClock
 from sitl.config import FaultKind, LinkName, SitlConfig
@@ -128,6 +128,7 @@ class SitlVehicle:
         self._running = True
         self._exit_code = 0
         self._last_heartbeat_wall = -math.inf
+        self._statustext_id = 0
         self.handler_errors = 0  # messages and requests whose handling raised (dropped, logged, counted)
         self._last_handler_error_wall = -math.inf
         self.lockstep = LockstepGate(config.lockstep, config.lockstep_period_s, config.lockstep_timeout_s)
@@ -366,6 +367,7 @@ class SitlVehicle:
                 self.controller.update_position(
                     state, self._setpoint, self._outer_dt_s, integrate=cmd.landed_state is not LandedState.ON_GROUND
                 )
+            self.telemetry.setpoint = self._setpoint
             self._announce()
             self.battery.update(self.controller.collective, self._outer_dt_s, cmd.armed)
             self._send_telemetry(t_s, state)
@@ -374,6 +376,7 @@ class SitlVehicle:
             motors = self.controller.update_attitude(state, dt_s)
         else:
             motors = np.full(4, IDLE_COMMAND if self.commander.armed else 0.0)
+        self.telemetry.motor_outputs = motors
         self.dynamics.set_motor_commands(motors)
         self.dynamics.step(dt_s)
         self.clock.advance()
@@ -386,14 +389,25 @@ class SitlVehicle:
             self._last_heartbeat_wall = -math.inf
             self._write_log_row(force=True)  # phase changes reach the disk at once
         while cmd.events:
-            text = cmd.events.popleft()
-            self.statustext(text, failsafe=text.startswith("Failsafe"))
+            severity, text = cmd.events.popleft()
+            self.statustext(text, severity)
+        if cmd.mission_changed:
+            cmd.mission_changed = False
+            state = self.dynamics.state()
+            for link in self.links:
+                link.send(self.telemetry.build("MISSION_CURRENT", link.mav, self.clock.now_s, state, cmd, self.battery))
+        while cmd.mission_reached:
+            seq = cmd.mission_reached.popleft()
+            for link in self.links:
+                link.send(link.mav.mission_item_reached_encode(seq))
 
-    def statustext(self, text: str, failsafe: bool = False) -> None:
-        """A STATUSTEXT on every link (CRITICAL for failsafes, as PX4 sends them)."""
-        severity = mavlink.MAV_SEVERITY_CRITICAL if failsafe else mavlink.MAV_SEVERITY_INFO
+    def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
+        """A STATUSTEXT on every link, at PX4's severity (refusals and failsafes CRITICAL), in chunks of 50
+        characters when longer (MAVLink 2's ``id`` and ``chunk_seq``)."""
+        self._statustext_id = (self._statustext_id + 1) % 65536 or 1
         for link in self.links:
-            link.send(link.mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+            for message in statustext_chunks(link.mav, text, int(severity), self._statustext_id):
+                link.send(message)
 
     def heartbeat_now(self) -> None:
         """A heartbeat on every link at once (a mode or arming change must be seen without waiting)."""
@@ -431,11 +445,13 @@ class SitlVehicle:
     # -- inputs --------------------------------------------------------------------------------------------------
     def _poll(self) -> None:
         for link in self.links:
-            for msg in link.receive():
+            for msg, from_peer in link.receive_tagged():
                 try:
-                    self.mavlink.handle(link, msg)
+                    self.mavlink.handle(link, msg, from_peer)
                 except Exception as exc:  # a message no check foresaw: drop and count it, never die of it
                     self._handler_failed(f"MAVLink {msg.get_type()} on {link.name}", exc)
+        self.mavlink.missions.tick()
+        self.mavlink.pump()
         assert self.control is not None
         for request, addr in self.control.receive():
             try:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import socket
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -203,3 +204,44 @@ def position_setpoint(
         0.0 if math.isnan(yaw_rad) else yaw_rad,
         0,
     )
+
+
+class ListeningGroundStation:
+    """A ground station that only listens, on its own thread, for the length of a ``with`` block (a mission flown
+    by :func:`sitl.mission.fly` blocks the test's thread). Keeps every message from any system: the vehicle and the
+    companion behind it."""
+
+    def __init__(self, port: int) -> None:
+        self.port = port
+        self.messages: list[Any] = []
+        self._stop = threading.Event()
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        self._sock.bind(("127.0.0.1", port))
+        self._sock.settimeout(0.1)
+        self._mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        self._mav.robust_parsing = True
+        self._thread = threading.Thread(target=self._listen, name=f"gcs-{port}", daemon=True)
+
+    def _listen(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, _ = self._sock.recvfrom(65535)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            self.messages.extend(m for m in self._mav.parse_buffer(data) or [] if m.get_type() != "BAD_DATA")
+
+    def __enter__(self) -> ListeningGroundStation:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self._sock.close()
+
+    def of(self, kind: str, system_id: int | None = None) -> list[Any]:
+        """The messages of one type (from one system when given), in arrival order."""
+        return [m for m in self.messages if m.get_type() == kind and system_id in (None, m.get_srcSystem())]

@@ -23,6 +23,7 @@ from companion.app.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from sitl.instances import leased_instance
 from sitl.mission import MissionResult, MissionSpec, fly, read_truth, touchdown
+from tests.sitl_tools import ListeningGroundStation, free_udp_port
 
 pytestmark = pytest.mark.sitl
 
@@ -133,7 +134,17 @@ def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_
     roi_half_m = 15.0  # the scenario's 30 m ROI, where the people stand
     area = [[-roi_half_m, -roi_half_m], [-roi_half_m, roi_half_m], [roi_half_m, roi_half_m], [roi_half_m, -roi_half_m]]
     held = {"perception": {"zones": {"landing_area_ne_m": area}}}
-    r = _fly(tmp_path, "walking", WALKING_SEED, sitl_overrides=walkers, mission_overrides=held)
+    # A ground station listens on the vehicle's GCS link (a free port of its own rather than 14550, which every SITL
+    # instance on this machine sends to).
+    gcs_port = free_udp_port()
+    with ListeningGroundStation(gcs_port) as gcs:
+        r = _fly(
+            tmp_path,
+            "walking",
+            WALKING_SEED,
+            sitl_overrides={**walkers, "gcs_port_remote": gcs_port},
+            mission_overrides=held,
+        )
     assert r.companion_exit_code == 0, Path(r.run_dir, "companion.log").read_text()[-3000:]
     assert r.phase == "done"
     assert r.landed
@@ -164,6 +175,23 @@ def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_
     )
     assert reported.returncode == 0, reported.stderr[-3000:]
     assert (Path(r.run_dir) / "flight" / "report" / "top_view.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # What the pilot saw at the ground station, forwarded by the autopilot from the companion: every phase change as
+    # a status text, the chosen target as LANDING_TARGET (the logged decisions' targets), the zone count and radius.
+    companion = [m for m in gcs.messages if m.get_srcComponent() != 1]
+    texts = [m.text for m in companion if m.get_type() == "STATUSTEXT"]
+    phases = [p for _, p in _phases(r.run_dir)]
+    assert [t.split(":")[0] for t in texts if t.startswith("SLZ ")] == [f"SLZ {p}" for p in phases]
+    assert all(m.severity in (5, 6) for m in companion if m.get_type() == "STATUSTEXT")  # no failsafe here
+    landing_targets = [m for m in companion if m.get_type() == "LANDING_TARGET"]
+    assert landing_targets
+    assert all(m.position_valid == 1 and m.frame == 1 for m in landing_targets)
+    for m in landing_targets:  # each one a target a logged decision acted on (float32 on the wire)
+        assert min(math.hypot(m.x - t["north_m"], m.y - t["east_m"]) for t in targets) < 1e-3, (m.x, m.y)
+    values = {m.name for m in companion if m.get_type() == "NAMED_VALUE_FLOAT"}
+    assert values == {"SLZ_ZONES", "SLZ_R_M", "SLZ_DRY"}
+    assert max(m.value for m in companion if m.get_type() == "NAMED_VALUE_FLOAT" and m.name == "SLZ_ZONES") >= 1
+    assert all(m.value == 0 for m in companion if m.get_type() == "NAMED_VALUE_FLOAT" and m.name == "SLZ_DRY")
+    assert gcs.of("HEARTBEAT")  # the vehicle's own stream came too
 
 
 def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path, demo: Demo) -> None:

@@ -40,6 +40,7 @@ class FakeLink:
         self.clock = VehicleClock()
         self.status = VehicleStatus(mode=FlightMode.HOLD, armed=True, in_air=True, last_telemetry_wall_s=None)
         self.commands: list[tuple[str, Any]] = []
+        self.mavlink: list[tuple[str, dict[str, Any]]] = []
         self.stopped_from_thread = threading.Event()
 
     def at(self, t_s: float, north_m: float = 0.0, east_m: float = 0.0, altitude_m: float = ALTITUDE_M) -> None:
@@ -86,8 +87,9 @@ class FakeLink:
     async def return_to_launch(self) -> None:
         self.commands.append(("return", None))
 
-    async def status_text(self, text: str) -> None:
-        """Status texts go nowhere: no ground station listens in these tests."""
+    async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
+        """Kept, as a ground station would see them."""
+        self.mavlink.append((name, fields))
 
     async def close(self) -> None:
         """Nothing to release."""

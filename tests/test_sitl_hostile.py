@@ -97,12 +97,18 @@ def test_a_stray_sender_is_served_but_does_not_take_the_link(sitl: SitlProcess, 
     stray.vehicle_addr = ("127.0.0.1", SitlConfig(instance=sitl.instance).api_port_local)
     try:
         for _ in range(20):
-            stray.send(stray.mav.heartbeat_encode(6, 8, 0, 0, 4))
+            stray.send(stray.mav.system_time_encode(0, 0))
         links = wait_until(
             lambda: ((s := sitl.state()["links"]["api"])["stray_frames"] >= before + 20 and s) or None,
             3.0,
             "the stray frames counted",
         )
+        assert links["partner"] == partner
+        # A sender with heartbeats (a second ground station) is sent everything too, but does not take the link.
+        stray.send(stray.mav.heartbeat_encode(6, 8, 0, 0, 4))
+        wait_until(lambda: stray.latest("LOCAL_POSITION_NED"), 2.0, "telemetry to the second peer")
+        links = sitl.state()["links"]["api"]
+        assert links["stray_frames"] == before + 20
     finally:
         stray.close()
     assert links["partner"] == partner

@@ -118,10 +118,11 @@ def test_parameters_read_set_list(api: MavlinkPeer) -> None:
     def all_params() -> list[Any] | None:
         api.poll()
         values = [m for m in api.messages if m.get_type() == "PARAM_VALUE"]
-        return values if values and len(values) == values[0].param_count else None
+        return values if values and len(values) == values[0].param_count + 1 else None  # with _HASH_CHECK
 
     values = wait_until(all_params, 3, "the whole parameter list")
-    names = {v.param_id for v in values}
+    assert values[0].param_id == "_HASH_CHECK"  # first, as PX4 sends it
+    names = {v.param_id for v in values[1:]}
     assert {"MIS_TAKEOFF_ALT", "COM_OF_LOSS_T", "COM_OBL_ACT", "MPC_XY_VEL_MAX"} <= names
 
     def read(name: str) -> Any:
@@ -137,10 +138,14 @@ def test_parameters_read_set_list(api: MavlinkPeer) -> None:
     echoed = wait_until(lambda: api.latest("PARAM_VALUE"), 2, "the PARAM_SET echo")
     assert echoed.param_type == ParamType.INT32
     assert struct.unpack("<i", struct.pack("<f", echoed.param_value))[0] == 2
-    # Out of range: refused, the old value echoed back.
+    # Out of range: stored and echoed as PX4 stores it (the controller flies with the range's end); NaN refused.
     api.messages.clear()
     api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"MPC_XY_VEL_MAX", 500.0, ParamType.REAL32))
-    assert wait_until(lambda: api.latest("PARAM_VALUE"), 2, "echo").param_value == pytest.approx(5.0)
+    assert wait_until(lambda: api.latest("PARAM_VALUE"), 2, "echo").param_value == pytest.approx(500.0)
+    api.messages.clear()
+    api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"MPC_XY_VEL_MAX", math.nan, ParamType.REAL32))
+    assert wait_until(lambda: api.latest("PARAM_VALUE"), 2, "echo").param_value == pytest.approx(500.0)
+    api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"MPC_XY_VEL_MAX", 5.0, ParamType.REAL32))
     api.send(
         api.mav.param_set_encode(api.vehicle_sysid, 1, b"COM_OBL_ACT", struct.unpack("<f", struct.pack("<i", 0))[0], 6)
     )

@@ -235,6 +235,24 @@ def test_parameter_ranges() -> None:
         ParameterStore({"MPC_XY_VEL_MAX": math.nan})
 
 
+def test_a_wire_value_is_stored_as_px4_stores_it_and_flown_within_its_range() -> None:
+    store = ParameterStore()
+    before = store.hash_check()
+    assert store.set_from_wire("MPC_XY_VEL_MAX", 50.0) is False  # outside [0.5, 20]: stored, and said so
+    assert (store.raw("MPC_XY_VEL_MAX"), store["MPC_XY_VEL_MAX"]) == (50.0, 20.0)
+    assert store.hash_check() != before  # a ground station's cache of the old value no longer matches
+    assert store.set_from_wire("COM_OBL_ACT", 2.4) is True
+    assert store.raw("COM_OBL_ACT") == 2.0
+    for bad in (math.nan, math.inf):
+        with pytest.raises(ParamError, match="is not a real32"):
+            store.set_from_wire("MPC_XY_VEL_MAX", bad)
+    with pytest.raises(ParamError, match="is not a int32"):
+        store.set_from_wire("COM_OBL_ACT", 3e9)
+    assert store.raw("MPC_XY_VEL_MAX") == 50.0
+    assert store.names() == sorted(store.names())
+    assert store.index(store.names()[7]) == 7
+
+
 @pytest.mark.parametrize("mode", list(FlightMode))
 def test_custom_mode_round_trip(mode: FlightMode) -> None:
     assert FlightMode.from_custom_mode(mode.custom_mode) is mode

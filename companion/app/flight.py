@@ -39,6 +39,7 @@ from typing import Any
 
 from companion.app.drivers import FreeRunningDriver, LockstepDriver
 from companion.app.flight_log import RecordKind
+from companion.app.ground_report import GroundReport
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.recorder import FlightRecorder
 from companion.camera.frames import CameraError, Frame, FrameSource
@@ -148,6 +149,7 @@ class FlightApp:
         self.recorder = recorder
         self.lockstep = lockstep
         self.dry_run = config.mode is OperatingMode.DRY_RUN
+        self.report = GroundReport(link, self.dry_run)
         zones = config.perception.zones
         self.guidance = LandingGuidance(
             config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m
@@ -189,7 +191,7 @@ class FlightApp:
             self.recorder.write(
                 RecordKind.PHASE, decision.t_s, phase=decision.phase, previous=previous, reason=decision.reason
             )
-            await self.link.status_text(f"SLZ {decision.phase.value}: {decision.reason}")
+            await self.report.phase(decision.phase, decision.reason)
         if decision.phase is LandingPhase.FAILSAFE:
             self.outcome.failsafes.append(decision.reason)
             self.recorder.write(RecordKind.FAILSAFE, decision.t_s, reason=decision.reason, action=decision.kind)
@@ -276,6 +278,7 @@ class FlightApp:
             return
         decision = self.guidance.on_frame(result, state)
         await self.apply(decision, "frame", state, seq=frame.seq)
+        await self.report.decision_values(result.t_s, len(result.tracks), decision.target, state)
         if self._commanding and decision.kind is not CommandKind.NONE and math.isfinite(frame.arrival_wall_s):
             latency_ms = 1000.0 * (time.monotonic() - frame.arrival_wall_s)
             self.recorder.write(RecordKind.LATENCY, frame.t_capture_s, seq=frame.seq, frame_to_command_ms=latency_ms)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 from companion.vehicle.clock import VehicleClock
 from companion.vehicle.pose_buffer import PoseBuffer
@@ -117,8 +117,9 @@ class VehicleLink(Protocol):
         """Return to launch."""
         ...
 
-    async def status_text(self, text: str) -> None:
-        """A status text to the ground station."""
+    async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
+        """Send one MAVLink message by name (``"STATUSTEXT"``) with its fields (names as in the MAVLink XML) over the
+        vehicle link; the autopilot forwards it to the ground station. Raises :class:`VehicleError` when refused."""
         ...
 
     async def close(self) -> None:

@@ -289,18 +289,20 @@ class MavsdkVehicleLink:
                     return None
         return None
 
-    async def status_text(self, text: str) -> None:
-        """STATUSTEXT to the ground station (best effort: a refused text is logged, not raised)."""
+    async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
+        """One message through MAVSDK's MAVLink-direct plugin (libmav packs it from the fields' JSON), broadcast: the
+        autopilot forwards it to its ground-station link."""
         if self._system is None:
-            return
-        from mavsdk.asyncio.plugins.server_utility import ServerUtilityAsync
-        from mavsdk.plugins.server_utility import StatusTextType
+            raise VehicleError(self.url, "not connected")
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
+        message = MavlinkMessage(message_name=name, fields_json=json.dumps(fields, allow_nan=False))
         try:
-            utility = ServerUtilityAsync(self._system)
-            await asyncio.wait_for(utility.send_status_text(StatusTextType.INFO, text[:50]), 2.0)
-        except Exception as exc:  # the ground station's view is informative only
-            logger.warning("status text not sent: %s", exc)
+            await asyncio.wait_for(self._direct.send_message(message), 2.0)
+        except asyncio.TimeoutError:
+            raise VehicleError(self.url, f"{name}: not sent within 2 s") from None
+        except Exception as exc:  # MavlinkDirectError: an unknown message or field
+            raise VehicleError(self.url, f"{name} refused: {getattr(exc, 'result', exc)}") from None
 
     async def close(self) -> None:
         """Cancel the telemetry tasks and destroy the MAVSDK instance."""

@@ -7,6 +7,12 @@ handled) but not followed, so a stray or hostile sender cannot steal the link; i
 where MAVSDK listens, and it hears every heartbeat even while another peer is the partner), and a partner silent for
 :data:`PARTNER_SILENCE_S` of wall time gives way to the next sender (a ground station restarted on another port).
 
+Several ground stations on one link: a sender that is not the partner but sends HEARTBEATs (a ground station or a
+MAVLink router does; a stray or a fuzzer usually does not) becomes a listener, up to :data:`MAX_LISTENERS`, and gets
+everything the link sends, as long as its heartbeats keep coming (:data:`PARTNER_SILENCE_S`). So a second ground
+station sees the full telemetry and every answer, instead of the half it would get if the link followed the latest
+sender, and it still cannot take the link from the partner.
+
 Malformed packets (bad CRC, truncated, unknown ids) are dropped and counted, never raised. Each UDP datagram is parsed
 on its own: a truncated frame is dropped with its datagram and cannot swallow the next one. One :meth:`receive` reads
 at most :data:`MAX_DATAGRAMS_PER_RECEIVE` datagrams, so a flood cannot starve the loop that sends heartbeats.
@@ -31,6 +37,7 @@ logger = logging.getLogger(__name__)
 
 MAX_DATAGRAMS_PER_RECEIVE = 256
 PARTNER_SILENCE_S = 10.0  # wall seconds without a valid frame from the partner before another sender may take over
+MAX_LISTENERS = 4  # ground stations beside the partner that get everything the link sends
 MAX_SOURCES_TRACKED = 1024  # distinct (system, component) pairs counted per link; the rest share one counter
 OTHER_SOURCE = (-1, -1)
 SIGNING_EPOCH_UNIX_S = 1420070400  # 2015-01-01T00:00:00Z, MAVLink's signing timestamp origin
@@ -107,6 +114,7 @@ class MavlinkLink:
         self._configured_remote = self.remote
         self.peer_seen = False
         self._partner_heard_wall = -float("inf")
+        self.listeners: dict[tuple[str, int], float] = {}  # address -> wall time of its last heartbeat
         self.cut = False  # a simulated link loss: nothing goes out, everything coming in is discarded
         self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._mav.robust_parsing = True
@@ -145,9 +153,27 @@ class MavlinkLink:
         self._mav.seq = (self._mav.seq + 1) % 256
         if self.cut:
             return
+        self._send_buffer(buf, msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT)
+
+    def forward(self, msg: Any) -> bool:
+        """Send a message received on another link as it came (its sender's ids and sequence), as PX4 forwards;
+        not on a signed link, whose frames must carry this link's signature. Returns whether it went out."""
+        if self.cut or self.signed:
+            return False
+        self._send_buffer(bytes(msg.get_msgbuf()), heartbeat=False)
+        return True
+
+    def _send_buffer(self, buf: bytes, heartbeat: bool) -> None:
         destinations = [self.remote]
-        if self.remote != self._configured_remote and msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+        if self.remote != self._configured_remote and heartbeat:
             destinations.append(self._configured_remote)
+        if self.listeners:
+            now = time.monotonic()
+            for addr, heard in list(self.listeners.items()):
+                if now - heard > PARTNER_SILENCE_S:
+                    del self.listeners[addr]
+                elif addr not in destinations:
+                    destinations.append(addr)
         for destination in destinations:
             try:
                 self._sock.sendto(buf, destination)
@@ -159,7 +185,12 @@ class MavlinkLink:
     def receive(self) -> list[Any]:
         """The messages waiting on the socket (at most MAX_DATAGRAMS_PER_RECEIVE datagrams' worth), malformed ones
         dropped and counted."""
-        out: list[Any] = []
+        return [msg for msg, _ in self.receive_tagged()]
+
+    def receive_tagged(self) -> list[tuple[Any, bool]]:
+        """As :meth:`receive`, each message with whether it came from the partner or a listener (a peer the link
+        talks to) rather than a stray sender."""
+        tagged: list[tuple[Any, bool]] = []
         for _ in range(MAX_DATAGRAMS_PER_RECEIVE):
             try:
                 data, addr = self._sock.recvfrom(65535)
@@ -171,10 +202,13 @@ class MavlinkLink:
                 raise
             if self.cut:
                 continue
+            out: list[Any] = []
             good = self._parse(data, out)
             if good:
-                self._heard(addr[0], addr[1], good)
-        return out
+                heartbeat = any(m.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT for m in out)
+                peer = self._heard(addr[0], addr[1], good, heartbeat)
+                tagged.extend((msg, peer) for msg in out)
+        return tagged
 
     def _parse(self, data: bytes, out: list[Any]) -> int:
         """Parse one datagram into ``out``; returns how many good messages it held."""
@@ -208,22 +242,35 @@ class MavlinkLink:
         self.stats.received += good
         return good
 
-    def _heard(self, host: str, port: int, frames: int) -> None:
-        """Valid frames came from ``host:port``: lock onto it, keep the partner, or count a stray sender."""
+    def _heard(self, host: str, port: int, frames: int, heartbeat: bool) -> bool:
+        """Valid frames came from ``host:port``: lock onto it, keep the partner, keep or add a listener, or count a
+        stray sender. Returns whether the sender is a peer (partner or listener)."""
         addr = (host, port)
         now = time.monotonic()
         if addr == self.remote:
             self.peer_seen = True
             self._partner_heard_wall = now
-            return
+            return True
         partner_gone = now - self._partner_heard_wall > PARTNER_SILENCE_S
         if addr == self._configured_remote or not self.peer_seen or partner_gone:
             logger.info("%s: partner at %s:%d", self.name, host, port)
+            self.listeners.pop(addr, None)
+            if self.peer_seen and self.remote != addr:
+                self.listeners[self.remote] = self._partner_heard_wall  # the old partner keeps listening a while
             self.peer_seen = True
             self.remote = addr
             self._partner_heard_wall = now
-            return
+            return True
+        if addr in self.listeners:
+            if heartbeat:
+                self.listeners[addr] = now
+            return True
+        if heartbeat and len(self.listeners) < MAX_LISTENERS:
+            logger.info("%s: another ground station at %s:%d listens too", self.name, host, port)
+            self.listeners[addr] = now
+            return True
         self.stats.stray_frames += frames
+        return False
 
     def close(self) -> None:
         """Close the socket."""

@@ -10,17 +10,23 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
+import time
+from collections import deque
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.autopilot.commander import FORCE_MAGIC, LandedState, MavResult
+from sitl.autopilot.commander import FORCE_MAGIC, LandedState, MavResult, Orbit, Severity
+from sitl.autopilot.ftp_server import FtpServer
 from sitl.autopilot.mavlink_link import MavlinkLink
-from sitl.autopilot.modes import FlightMode
+from sitl.autopilot.mission_server import MissionServer
+from sitl.autopilot.modes import FlightMode, MainMode
 from sitl.autopilot.params import ParamError, decode_value, encode_value
-from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID
+from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT
 from sitl.control_requests import count_capped
+from sitl.geodesy import geodetic_to_ned
 
 if TYPE_CHECKING:
     from sitl.vehicle import SitlVehicle
@@ -31,6 +37,13 @@ logger = logging.getLogger(__name__)
 IGNORE_PX, IGNORE_PY, IGNORE_PZ = 1, 2, 4
 IGNORE_VX, IGNORE_VY, IGNORE_VZ = 8, 16, 32
 IGNORE_YAW = 1024
+HASH_CHECK = "_HASH_CHECK"
+PARAM_TYPE_UINT32 = 5  # how PX4 sends _HASH_CHECK
+MAV_CMD_REQUEST_PROTOCOL_VERSION = 519
+REPOSITION_CHANGE_MODE = 1  # DO_REPOSITION param2 bit: switch to the go-to mode
+STICK_FULL = 1000.0  # MANUAL_CONTROL's full deflection
+PARAM_RATE_HZ = 500.0  # a parameter list goes out paced (PX4 spreads it over the link's bandwidth): a ground
+PARAM_BURST = 25  # station reading at its own pace must not lose half of it in a full receive buffer
 
 
 def whole(value: float, low: int, high: int, nan_is: int | None = None) -> int | None:
@@ -57,15 +70,27 @@ class MavlinkServer:
         self.last_setpoint_ned: tuple[float, float, float, float] | None = None  # any sender: n, e, d, yaw (rad)
         self.commands_seen: dict[int, int] = {}  # command id -> how many received
         self._last_reject_text_s = -math.inf
+        self.missions = MissionServer(vehicle)
+        self.ftp = FtpServer(vehicle.config.system_id)
+        self.forwarded = 0  # messages passed between the links (PX4's MAV_x_FORWARD)
+        self._param_lists: dict[int, tuple[MavlinkLink, deque[str]]] = {}  # per link: the list still to send
+        self._param_tokens = float(PARAM_BURST)
+        self._param_tokens_wall_s = time.monotonic()
 
     def _targets_us(self, msg: Any) -> bool:
         target = getattr(msg, "target_system", 0)
         return target in (0, self.v.config.system_id)
 
-    def handle(self, link: MavlinkLink, msg: Any) -> None:
-        """One message received on ``link``: commands, setpoints, parameters, modes, timesync."""
+    def handle(self, link: MavlinkLink, msg: Any, from_peer: bool = True) -> None:
+        """One message received on ``link``: commands, setpoints, parameters, modes, missions, files, sticks,
+        timesync; a message addressed to another system or component (the companion, a ground station) is passed to
+        the other links, as PX4 forwards, when it came from a peer the link talks to (``from_peer``)."""
         kind = msg.get_type()
+        if from_peer:
+            self._forward(link, msg)
         sender = f"{msg.get_srcSystem()}/{msg.get_srcComponent()}"
+        if self.missions.handle(link, msg):
+            return
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             if self._targets_us(msg) and getattr(msg, "target_component", 0) in (0, 1):
                 count_capped(self.commands_by_sender, sender)
@@ -89,11 +114,69 @@ class MavlinkServer:
                 self._handle_param(link, msg)
         elif kind == "SET_MODE":
             if self._targets_us(msg):
-                mode = FlightMode.from_custom_mode(int(msg.custom_mode))
-                if mode is not None:
-                    self.v.commander.set_mode(mode)
+                # As PX4: SET_MODE is turned into DO_SET_MODE, and answered as that command.
+                main, sub = (int(msg.custom_mode) >> 16) & 0xFF, (int(msg.custom_mode) >> 24) & 0xFF
+                result = self._set_mode(int(msg.base_mode), main, sub)
+                link.send(
+                    link.mav.command_ack_encode(
+                        mavlink.MAV_CMD_DO_SET_MODE, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+                    )
+                )
+                if self.v.commander.changed:
+                    self.v.heartbeat_now()
+        elif kind == "MANUAL_CONTROL":
+            if msg.target in (0, self.v.config.system_id):
+                self._manual_control(msg)
+        elif kind == "FILE_TRANSFER_PROTOCOL":
+            if self._targets_us(msg) and msg.target_component in (0, 1):
+                reply = self.ftp.handle(msg)
+                if reply is not None:
+                    peer = (msg.get_srcSystem(), msg.get_srcComponent())
+                    link.send(link.mav.file_transfer_protocol_encode(0, *peer, reply))
         elif kind == "TIMESYNC" and msg.tc1 == 0:
             link.send(link.mav.timesync_encode(int(self.v.clock.now_s * 1e9), msg.ts1))
+
+    def _forward(self, link: MavlinkLink, msg: Any) -> None:
+        """Pass ``msg`` to the other links unless it is addressed to this autopilot alone (PX4's
+        ``forward_message``: broadcasts, messages to another system and to another component of ours go on)."""
+        sysid = self.v.config.system_id
+        if (msg.get_srcSystem(), msg.get_srcComponent()) == (sysid, 1):
+            return
+        if getattr(msg, "target_system", 0) == sysid and getattr(msg, "target_component", 0) == 1:
+            return
+        for other in self.v.links:
+            if other is not link and other.forward(msg):
+                self.forwarded += 1
+
+    def _set_mode(self, base: int | None, main: int | None, sub: int | None) -> MavResult:
+        """DO_SET_MODE / SET_MODE: DENIED when it names no mode at all, UNSUPPORTED (with a CRITICAL text, as PX4
+        says it) for a PX4 mode this autopilot does not fly."""
+        if base is None or main is None or sub is None:
+            return MavResult.DENIED
+        mode = FlightMode.from_px4(main, sub)
+        if mode is None or not base & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            try:
+                name = MainMode(main).name
+            except ValueError:
+                name = f"{main}.{sub}"
+            self.v.statustext(f"Switching to mode {name} is not available in this SITL", Severity.CRITICAL)
+            return MavResult.UNSUPPORTED
+        return self.v.commander.set_mode(mode)
+
+    def _manual_control(self, msg: Any) -> None:
+        """A ground station's joystick (MANUAL_CONTROL, COM_RC_IN_MODE 1): sticks in POSCTL, body frame turned to
+        NED by the heading; x forward, y right, z throttle 0..1000 (500 centred)."""
+        values = (float(msg.x), float(msg.y), float(msg.z))
+        if not all(math.isfinite(v) for v in values):
+            return
+        forward, right = (min(max(v / STICK_FULL, -1.0), 1.0) for v in values[:2])
+        up = min(max((values[2] - STICK_FULL / 2) / (STICK_FULL / 2), -1.0), 1.0)
+        deadband = 0.05
+        forward, right, up = (0.0 if abs(v) < deadband else v for v in (forward, right, up))
+        yaw = self.v.telemetry._euler(self.v.dynamics.state())[2]
+        north = forward * math.cos(yaw) - right * math.sin(yaw)
+        east = forward * math.sin(yaw) + right * math.cos(yaw)
+        self.v.commander.pilot_sticks = np.array([north, east, -up])
 
     def _send_ack(self, link: MavlinkLink, msg: Any, result: MavResult) -> None:
         link.send(
@@ -121,27 +204,42 @@ class MavlinkServer:
         elif c == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             result = cmd.return_to_launch()
         elif c == mavlink.MAV_CMD_DO_SET_MODE:
-            base, main, sub = whole(p[0], 0, 255), whole(p[1], 0, 255), whole(p[2], 0, 255, nan_is=0)
-            mode = FlightMode.from_px4(main, sub) if main is not None and sub is not None else None
-            if base is None or main is None:
-                result = MavResult.DENIED  # not a mode at all
-            elif mode is None or not base & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                result = MavResult.UNSUPPORTED
-            else:
-                result = cmd.set_mode(mode)
+            result = self._set_mode(whole(p[0], 0, 255), whole(p[1], 0, 255), whole(p[2], 0, 255, nan_is=0))
         elif c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             msg_id = whole(p[0], 0, 0xFFFFFF)
             name = NAMES_BY_ID.get(msg_id) if msg_id is not None else None
             if msg_id is None or not math.isfinite(p[1]):
                 result = MavResult.DENIED
-            elif name is None or name == "AUTOPILOT_VERSION":
+            elif name is None or name in ONE_SHOT:
                 result = MavResult.UNSUPPORTED if msg_id != mavlink.MAVLINK_MSG_ID_HEARTBEAT else MavResult.ACCEPTED
             else:
                 self.v.schedules[id(link)].set_interval(name, float(p[1]))
                 result = MavResult.ACCEPTED
-        elif c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            capabilities = MESSAGE_IDS["AUTOPILOT_VERSION"]
-            wanted = whole(p[0], 0, 0xFFFFFF) if c == mavlink.MAV_CMD_REQUEST_MESSAGE else capabilities
+        elif c == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
+            msg_id = whole(p[0], 0, 0xFFFFFF)
+            if msg_id is None:
+                result = MavResult.DENIED
+            else:
+                name = NAMES_BY_ID.get(msg_id)
+                interval_us = 0  # not available
+                if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+                    interval_us = 1_000_000
+                elif name is not None and name not in ONE_SHOT:
+                    interval_s = self.v.schedules[id(link)].intervals_s.get(name, math.inf)
+                    interval_us = round(interval_s * 1e6) if math.isfinite(interval_s) else -1
+                result = MavResult.ACCEPTED
+                link.send(link.mav.message_interval_encode(msg_id, interval_us))
+        elif c in (
+            mavlink.MAV_CMD_REQUEST_MESSAGE,
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+            mavlink.MAV_CMD_GET_HOME_POSITION,
+            MAV_CMD_REQUEST_PROTOCOL_VERSION,
+        ):
+            wanted = {
+                mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: MESSAGE_IDS["AUTOPILOT_VERSION"],
+                mavlink.MAV_CMD_GET_HOME_POSITION: MESSAGE_IDS["HOME_POSITION"],
+                MAV_CMD_REQUEST_PROTOCOL_VERSION: MESSAGE_IDS["PROTOCOL_VERSION"],
+            }.get(c, whole(p[0], 0, 0xFFFFFF))
             name = NAMES_BY_ID.get(wanted) if wanted is not None else None
             if wanted is None:
                 result = MavResult.DENIED
@@ -157,6 +255,27 @@ class MavlinkServer:
                 result = MavResult.ACCEPTED
             else:
                 result = MavResult.TEMPORARILY_REJECTED if p[0] > 0.5 else MavResult.DENIED
+        elif c == mavlink.MAV_CMD_DO_REPOSITION:
+            result = self._reposition(msg, is_int)
+        elif c == mavlink.MAV_CMD_DO_ORBIT:
+            result = self._orbit(msg, is_int)
+        elif c == mavlink.MAV_CMD_MISSION_START:
+            first = whole(p[0], 0, 65535, nan_is=0)
+            result = MavResult.DENIED if first is None else cmd.start_mission(first)
+        elif c == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
+            seq = whole(p[0], -1, 65535)
+            if seq is None:
+                result = MavResult.DENIED
+            else:
+                result = cmd.set_mission_current(seq if seq >= 0 else cmd.mission_current)
+        elif c == mavlink.MAV_CMD_DO_PAUSE_CONTINUE:
+            pause = whole(p[0], 0, 1)
+            if pause is None:
+                result = MavResult.DENIED
+            elif pause == 0:
+                result = cmd.set_mode(FlightMode.AUTO_LOITER) if cmd.armed else MavResult.TEMPORARILY_REJECTED
+            else:
+                result = cmd.set_mode(FlightMode.AUTO_MISSION)
         elif c == mavlink.MAV_CMD_DO_CHANGE_SPEED:
             spec = self.v.params.spec("MPC_XY_VEL_MAX")
             if math.isfinite(p[1]) and spec.minimum <= p[1] <= spec.maximum:
@@ -174,6 +293,62 @@ class MavlinkServer:
             )
         if cmd.changed:
             self.v.heartbeat_now()  # let the client see the new mode/arming at once
+
+    def _global_target(self, msg: Any, is_int: bool) -> tuple[float, float, float] | None:
+        """The NED point of a command's x/y/z (latitude, longitude, altitude): NaN where the command leaves the
+        coordinate as it is (NaN, or 0/0 for the horizontal position); None when it is malformed."""
+        if is_int:
+            lat = float(msg.x) / 1e7 if msg.x != 0 or msg.y != 0 else math.nan
+            lon = float(msg.y) / 1e7 if msg.x != 0 or msg.y != 0 else math.nan
+            relative = int(msg.frame) in (
+                mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            )
+            alt = float(msg.z)
+        else:
+            lat, lon, alt, relative = float(msg.param5), float(msg.param6), float(msg.param7), False
+            if lat == 0 and lon == 0:
+                lat = lon = math.nan
+        if math.isinf(lat) or math.isinf(lon) or math.isinf(alt) or (math.isnan(lat) != math.isnan(lon)):
+            return None
+        c = self.v.config
+        north = east = down = math.nan
+        if not math.isnan(lat):
+            if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+                return None
+            north, east, _ = geodetic_to_ned(lat, lon, 0.0, c.origin_lat_deg, c.origin_lon_deg, 0.0)
+            if math.hypot(north, east) > 10_000.0:
+                return None
+        if not math.isnan(alt):
+            down = float(self.v.commander.home_ned_m[2]) - alt if relative else c.origin_alt_m - alt
+            if abs(down) > 10_000.0:
+                return None
+        return north, east, down
+
+    def _reposition(self, msg: Any, is_int: bool) -> MavResult:
+        """DO_REPOSITION (QGroundControl's "go to location" and "change altitude"): fly there in HOLD."""
+        target = self._global_target(msg, is_int)
+        if target is None or math.isinf(msg.param4):
+            return MavResult.DENIED
+        yaw = math.radians(float(msg.param4)) if math.isfinite(msg.param4) else math.nan
+        return self.v.commander.reposition(np.array(target), yaw)
+
+    def _orbit(self, msg: Any, is_int: bool) -> MavResult:
+        """DO_ORBIT: radius (param1; negative: counter-clockwise), speed (param2), centre and altitude (here when
+        NaN or 0/0)."""
+        target = self._global_target(msg, is_int)
+        radius, speed = float(msg.param1), float(msg.param2)
+        if target is None or not math.isfinite(radius) or not 1.0 <= abs(radius) <= 1000.0:
+            return MavResult.DENIED
+        if math.isnan(speed):
+            speed = 1.0
+        if not math.isfinite(speed) or abs(speed) > self.v.params["MPC_XY_VEL_MAX"]:
+            return MavResult.DENIED
+        if radius < 0:
+            radius, speed = -radius, -abs(speed)
+        here = self.v.dynamics.state().position_ned_m
+        north, east, down = (here[i] if math.isnan(v) else v for i, v in enumerate(target))
+        return self.v.commander.start_orbit(Orbit(float(north), float(east), float(down), radius, speed))
 
     def _handle_setpoint(self, msg: Any) -> None:
         mask = int(msg.type_mask)
@@ -221,46 +396,80 @@ class MavlinkServer:
         if self.v.clock.now_s - self._last_reject_text_s >= 1.0:
             self._last_reject_text_s = self.v.clock.now_s
             logger.warning("offboard setpoint rejected: %s", reason)
-            self.v.statustext(f"Setpoint rejected: {reason}")
+            self.v.statustext(f"Setpoint rejected: {reason}", Severity.CRITICAL)
 
     def _handle_param(self, link: MavlinkLink, msg: Any) -> None:
-        names = self.v.params.names()
+        """PX4's parameter protocol: the list starts with ``_HASH_CHECK`` (a ground station with a matching cache
+        stops there), a read by name or index, and PARAM_SET storing what PX4 stores (:meth:`ParameterStore.
+        set_from_wire`), echoed on every link so that every parameter view stays current."""
+        params = self.v.params
         kind = msg.get_type()
         if kind == "PARAM_REQUEST_LIST":
-            for name in names:
-                self._send_param(link, name)
+            self._send_hash_check(link)
+            self._param_lists[id(link)] = (link, deque(params.names()))  # a repeated request starts over
+            self.pump()
             return
         raw_id = msg.param_id
         name = raw_id.decode("ascii", "ignore") if isinstance(raw_id, bytes) else str(raw_id)
         name = name.rstrip("\x00")
         if kind == "PARAM_REQUEST_READ":
             if msg.param_index >= 0:
-                if msg.param_index < len(names):
-                    self._send_param(link, names[msg.param_index])
-                return
-            if name in names:
+                if msg.param_index < len(params):
+                    self._send_param(link, params.names()[msg.param_index])
+            elif name == HASH_CHECK:
+                self._send_hash_check(link)
+            elif name in params.names():
                 self._send_param(link, name)
             return
         # PARAM_SET
-        if name not in names:
-            self.v.statustext(f"Unknown parameter {name}")
+        if name == HASH_CHECK:
+            self._param_lists.pop(id(link), None)  # the ground station's cache is current: the rest is not needed
+            return
+        if name not in params.names():
+            self.v.statustext(f"Unknown parameter {name}", Severity.CRITICAL)
             return
         try:
-            spec = self.v.params.spec(name)
-            self.v.params.set(name, decode_value(spec, float(msg.param_value), int(msg.param_type)))
+            spec = params.spec(name)
+            if not params.set_from_wire(name, decode_value(spec, float(msg.param_value), int(msg.param_type))):
+                self.v.statustext(
+                    f"{name} = {params.raw(name):g} is outside [{spec.minimum:g}, {spec.maximum:g}]: "
+                    f"flying with {params[name]:g}",
+                    Severity.WARNING,
+                )
             self.v.controller.limits = self.v.limits()
         except ParamError as exc:
-            self.v.statustext(str(exc))
-        self._send_param(link, name)
+            self.v.statustext(str(exc), Severity.CRITICAL)
+        for each in self.v.links:
+            self._send_param(each, name)
+
+    def pump(self) -> None:
+        """Send the next parameters of the lists in progress, at most :data:`PARAM_RATE_HZ` per wall second."""
+        if not self._param_lists:
+            return
+        now = time.monotonic()
+        self._param_tokens = min(PARAM_BURST, self._param_tokens + (now - self._param_tokens_wall_s) * PARAM_RATE_HZ)
+        self._param_tokens_wall_s = now
+        for key, (link, names) in list(self._param_lists.items()):
+            while names and self._param_tokens >= 1.0:
+                self._send_param(link, names.popleft())
+                self._param_tokens -= 1.0
+            if not names:
+                del self._param_lists[key]
 
     def _send_param(self, link: MavlinkLink, name: str) -> None:
-        spec = self.v.params.spec(name)
+        params = self.v.params
+        spec = params.spec(name)
         link.send(
             link.mav.param_value_encode(
                 name.encode("ascii"),
-                encode_value(spec, self.v.params[name]),
+                encode_value(spec, params.raw(name)),
                 int(spec.param_type),
-                len(self.v.params.names()),
-                self.v.params.index(name),
+                len(params),
+                params.index(name),
             )
         )
+
+    def _send_hash_check(self, link: MavlinkLink) -> None:
+        as_float = struct.unpack("<f", struct.pack("<I", self.v.params.hash_check()))[0]
+        count = len(self.v.params)
+        link.send(link.mav.param_value_encode(HASH_CHECK.encode(), as_float, PARAM_TYPE_UINT32, count, 0xFFFF))

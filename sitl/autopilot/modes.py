@@ -17,6 +17,13 @@ class MainMode(enum.IntEnum):
     STABILIZED = 7
 
 
+class PosctlSubMode(enum.IntEnum):
+    """PX4 POSCTL sub-modes."""
+
+    POSCTL = 0
+    ORBIT = 1
+
+
 class AutoSubMode(enum.IntEnum):
     """PX4 AUTO sub-modes."""
 
@@ -31,8 +38,10 @@ class AutoSubMode(enum.IntEnum):
 class FlightMode(enum.Enum):
     """The modes this autopilot flies, with their (main, sub) PX4 encoding."""
 
-    POSCTL = (MainMode.POSCTL, 0)
+    POSCTL = (MainMode.POSCTL, PosctlSubMode.POSCTL)
+    ORBIT = (MainMode.POSCTL, PosctlSubMode.ORBIT)
     OFFBOARD = (MainMode.OFFBOARD, 0)
+    AUTO_MISSION = (MainMode.AUTO, AutoSubMode.MISSION)
     AUTO_TAKEOFF = (MainMode.AUTO, AutoSubMode.TAKEOFF)
     AUTO_LOITER = (MainMode.AUTO, AutoSubMode.LOITER)
     AUTO_LAND = (MainMode.AUTO, AutoSubMode.LAND)
@@ -62,7 +71,14 @@ class FlightMode(enum.Enum):
     def from_name(cls, name: str) -> FlightMode:
         """Parse ``"POSCTL"``, ``"AUTO.LAND"``, ``"auto_loiter"``, ``"hold"``..."""
         key = name.strip().upper().replace(".", "_")
-        aliases = {"HOLD": "AUTO_LOITER", "LAND": "AUTO_LAND", "TAKEOFF": "AUTO_TAKEOFF", "RTL": "AUTO_RTL"}
+        aliases = {
+            "HOLD": "AUTO_LOITER",
+            "LAND": "AUTO_LAND",
+            "TAKEOFF": "AUTO_TAKEOFF",
+            "RTL": "AUTO_RTL",
+            "MISSION": "AUTO_MISSION",
+            "POSCTL_ORBIT": "ORBIT",
+        }
         try:
             return cls[aliases.get(key, key)]
         except KeyError:
@@ -71,4 +87,6 @@ class FlightMode(enum.Enum):
     @property
     def px4_name(self) -> str:
         """PX4's name, e.g. ``AUTO.LAND``."""
+        if self is FlightMode.ORBIT:
+            return "POSCTL.ORBIT"
         return self.name.replace("_", ".", 1) if self.name.startswith("AUTO_") else self.name

@@ -8,14 +8,17 @@ configured size (an estimator's error); the controller flies the true state.
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.autopilot.commander import Commander
+from sitl.autopilot.commander import Commander, LandedState
+from sitl.autopilot.controller import Setpoint
+from sitl.autopilot.modes import FlightMode
 from sitl.dynamics.base import VehicleState
 from sitl.dynamics.rigid_body import quaternion_to_matrix
 from sitl.geodesy import ned_to_geodetic
@@ -32,6 +35,8 @@ API_RATES_HZ = {
     "BATTERY_STATUS": 1.0,
     "HOME_POSITION": 0.5,
 }
+# PX4's "normal" profile (mavlink_main.cpp) for a ground station: what QGroundControl's fly view, instrument panel
+# and setup pages read (speed and climb from VFR_HUD, the vibration and estimator indicators, RC, outputs, targets).
 GCS_RATES_HZ = {
     "SYS_STATUS": 1.0,
     "EXTENDED_SYS_STATE": 1.0,
@@ -42,6 +47,16 @@ GCS_RATES_HZ = {
     "GPS_RAW_INT": 1.0,
     "BATTERY_STATUS": 0.5,
     "HOME_POSITION": 0.5,
+    "VFR_HUD": 4.0,
+    "ALTITUDE": 1.0,
+    "ESTIMATOR_STATUS": 0.5,
+    "VIBRATION": 0.5,
+    "RC_CHANNELS": 5.0,
+    "SERVO_OUTPUT_RAW": 1.0,
+    "NAV_CONTROLLER_OUTPUT": 1.0,
+    "POSITION_TARGET_LOCAL_NED": 1.5,
+    "GPS_GLOBAL_ORIGIN": 0.1,
+    "MISSION_CURRENT": 0.5,
 }
 MESSAGE_IDS = {
     "SYS_STATUS": mavlink.MAVLINK_MSG_ID_SYS_STATUS,
@@ -54,7 +69,21 @@ MESSAGE_IDS = {
     "BATTERY_STATUS": mavlink.MAVLINK_MSG_ID_BATTERY_STATUS,
     "HOME_POSITION": mavlink.MAVLINK_MSG_ID_HOME_POSITION,
     "AUTOPILOT_VERSION": mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+    "VFR_HUD": mavlink.MAVLINK_MSG_ID_VFR_HUD,
+    "ALTITUDE": mavlink.MAVLINK_MSG_ID_ALTITUDE,
+    "ESTIMATOR_STATUS": mavlink.MAVLINK_MSG_ID_ESTIMATOR_STATUS,
+    "VIBRATION": mavlink.MAVLINK_MSG_ID_VIBRATION,
+    "RC_CHANNELS": mavlink.MAVLINK_MSG_ID_RC_CHANNELS,
+    "SERVO_OUTPUT_RAW": mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,
+    "NAV_CONTROLLER_OUTPUT": mavlink.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT,
+    "POSITION_TARGET_LOCAL_NED": mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED,
+    "GPS_GLOBAL_ORIGIN": mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,
+    "MISSION_CURRENT": mavlink.MAVLINK_MSG_ID_MISSION_CURRENT,
+    "PROTOCOL_VERSION": 300,
 }
+ONE_SHOT = frozenset({"AUTOPILOT_VERSION", "PROTOCOL_VERSION"})  # sent when asked for, never streamed
+STATUSTEXT_CHUNK_CHARS = 50
+STATUSTEXT_MAX_CHARS = 200  # longer texts are cut (four chunks)
 NAMES_BY_ID = {v: k for k, v in MESSAGE_IDS.items()}
 
 SENSORS = (
@@ -71,6 +100,54 @@ SENSORS = (
     | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
 )
 PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK
+
+
+class ProtocolVersionMessage(mavlink.MAVLink_message):  # type: ignore[misc]
+    """PROTOCOL_VERSION (300), which pymavlink's ``common`` dialect lacks: the answer to REQUEST_PROTOCOL_VERSION."""
+
+    id = 300
+    msgname = "PROTOCOL_VERSION"
+    fieldnames: ClassVar[list[str]] = [
+        "version",
+        "min_version",
+        "max_version",
+        "spec_version_hash",
+        "library_version_hash",
+    ]
+    ordered_fieldnames: ClassVar[list[str]] = fieldnames
+    crc_extra = 217
+    unpacker = struct.Struct("<HHH8s8s")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, version: int = 200, min_version: int = 100, max_version: int = 200) -> None:
+        mavlink.MAVLink_message.__init__(self, self.id, self.msgname)
+        self._fieldnames = self.fieldnames
+        self._instance_field = None
+        self._instance_offset = -1
+        self.version, self.min_version, self.max_version = version, min_version, max_version
+        self.spec_version_hash = bytes(8)
+        self.library_version_hash = bytes(8)
+
+    def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
+        """The frame, as the generated classes pack theirs."""
+        body = self.unpacker.pack(
+            self.version, self.min_version, self.max_version, self.spec_version_hash, self.library_version_hash
+        )
+        return bytes(self._pack(mav, self.crc_extra, body, force_mavlink1=force_mavlink1))
+
+
+def statustext_chunks(mav: Any, text: str, severity: int, text_id: int) -> list[Any]:
+    """STATUSTEXT messages for ``text``: one when it fits in 50 characters (``id`` 0), else chunks of 50 sharing
+    ``text_id`` with ``chunk_seq`` 0, 1... and a NUL-terminated last one, as MAVLink 2 specifies. At most
+    :data:`STATUSTEXT_MAX_CHARS` characters; non-ASCII characters become ``?``."""
+    data = text.encode("ascii", "replace")[:STATUSTEXT_MAX_CHARS]
+    if len(data) <= STATUSTEXT_CHUNK_CHARS:
+        return [mav.statustext_encode(severity, data, 0, 0)]
+    chunks = [data[i : i + STATUSTEXT_CHUNK_CHARS] for i in range(0, len(data), STATUSTEXT_CHUNK_CHARS)]
+    if len(chunks[-1]) == STATUSTEXT_CHUNK_CHARS:
+        chunks.append(b"")  # the terminator: a reader knows the text ended
+    return [mav.statustext_encode(severity, chunk, text_id, seq) for seq, chunk in enumerate(chunks)]
 
 
 @dataclass
@@ -152,6 +229,8 @@ class TelemetryBuilder:
         self.origin = origin
         self.rng = rng
         self.position_noise_m = position_noise_m
+        self.motor_outputs = np.zeros(4)  # the latest motor commands, [0, 1] (SERVO_OUTPUT_RAW)
+        self.setpoint: Setpoint | None = None  # what the position controller follows now (targets, errors)
         self._builders: dict[str, Callable[[Any, float, VehicleState, Commander, Battery], Any]] = {
             "SYS_STATUS": self._sys_status,
             "EXTENDED_SYS_STATE": self._extended_sys_state,
@@ -163,6 +242,17 @@ class TelemetryBuilder:
             "BATTERY_STATUS": self._battery,
             "HOME_POSITION": self._home,
             "AUTOPILOT_VERSION": self._autopilot_version,
+            "VFR_HUD": self._vfr_hud,
+            "ALTITUDE": self._altitude,
+            "ESTIMATOR_STATUS": self._estimator_status,
+            "VIBRATION": self._vibration,
+            "RC_CHANNELS": self._rc_channels,
+            "SERVO_OUTPUT_RAW": self._servo_output_raw,
+            "NAV_CONTROLLER_OUTPUT": self._nav_controller_output,
+            "POSITION_TARGET_LOCAL_NED": self._position_target,
+            "GPS_GLOBAL_ORIGIN": self._gps_global_origin,
+            "MISSION_CURRENT": self._mission_current,
+            "PROTOCOL_VERSION": lambda mav, t_s, s, cmd, bat: ProtocolVersionMessage(),
         }
 
     def can_build(self, name: str) -> bool:
@@ -318,8 +408,115 @@ class TelemetryBuilder:
             | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
             | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
             | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+            | mavlink.MAV_PROTOCOL_CAPABILITY_FTP
         )
         version = (1 << 24) | (15 << 16) | (0 << 8) | 255  # 1.15.0 release
         return mav.autopilot_version_encode(
             capabilities, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, 1, [0] * 18
         )
+
+    # -- what a ground station's instruments read (true state: no draw from the noise generator) ---------------
+    def _vfr_hud(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        vn, ve, vd = (float(v) for v in s.velocity_ned_mps)
+        speed = math.hypot(vn, ve)
+        heading = round(math.degrees(self._euler(s)[2]) % 360.0) % 360
+        throttle = round(100 * float(np.mean(self.motor_outputs))) if cmd.armed else 0
+        alt_amsl = self.origin.alt_m - float(s.position_ned_m[2])
+        return mav.vfr_hud_encode(speed, speed, heading, throttle, alt_amsl, -vd)
+
+    def _altitude(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        down = float(s.position_ned_m[2])
+        amsl = self.origin.alt_m - down
+        relative = float(cmd.home_ned_m[2]) - down
+        return mav.altitude_encode(int(t_s * 1e6), amsl, amsl, -down, relative, math.nan, math.nan)
+
+    def _estimator_status(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        flags = (
+            mavlink.ESTIMATOR_ATTITUDE
+            | mavlink.ESTIMATOR_VELOCITY_HORIZ
+            | mavlink.ESTIMATOR_VELOCITY_VERT
+            | mavlink.ESTIMATOR_POS_HORIZ_REL
+            | mavlink.ESTIMATOR_POS_HORIZ_ABS
+            | mavlink.ESTIMATOR_POS_VERT_ABS
+            | mavlink.ESTIMATOR_PRED_POS_HORIZ_REL
+            | mavlink.ESTIMATOR_PRED_POS_HORIZ_ABS
+        )
+        sigma = max(self.position_noise_m, 0.01)
+        return mav.estimator_status_encode(int(t_s * 1e6), flags, 0.1, 0.1, 0.1, 0.05, 0.0, 0.0, sigma, sigma)
+
+    def _vibration(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        level = 0.5 if cmd.landed_state is not LandedState.ON_GROUND else 0.05
+        return mav.vibration_encode(int(t_s * 1e6), level, level, level, 0, 0, 0)
+
+    def _rc_channels(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        if cmd.rc_lost:
+            return mav.rc_channels_encode(self._boot_ms(t_s), 0, *([65535] * 18), 0)
+        sticks = cmd.pilot_sticks if cmd.mode in (FlightMode.POSCTL,) else np.zeros(3)
+        pitch, roll, throttle = 1500 - 500 * sticks[0], 1500 + 500 * sticks[1], 1500 - 500 * sticks[2]
+        channels = [round(float(v)) for v in (roll, pitch, throttle, 1500)] + [1500] * 4 + [65535] * 10
+        return mav.rc_channels_encode(self._boot_ms(t_s), 8, *channels, 255)
+
+    def _servo_output_raw(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        pwm = [round(1000 + 1000 * float(min(max(m, 0.0), 1.0))) if cmd.armed else 900 for m in self.motor_outputs]
+        return mav.servo_output_raw_encode(int(t_s * 1e6) & 0xFFFFFFFF, 0, *(pwm + [0] * (16 - len(pwm))))
+
+    def _target(self, s: VehicleState) -> np.ndarray:
+        """The position the controller steers to (its position setpoint, the vehicle's position where it has none)."""
+        if self.setpoint is None:
+            return np.asarray(s.position_ned_m, dtype=np.float64)
+        return np.where(np.isnan(self.setpoint.position_ned_m), s.position_ned_m, self.setpoint.position_ned_m)
+
+    def _nav_controller_output(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        target = self._target(s)
+        dn, de = float(target[0] - s.position_ned_m[0]), float(target[1] - s.position_ned_m[1])
+        bearing = round(math.degrees(math.atan2(de, dn)))
+        roll, pitch, yaw = self._euler(s)
+        return mav.nav_controller_output_encode(
+            math.degrees(roll),
+            math.degrees(pitch),
+            round(math.degrees(yaw)),
+            bearing,
+            min(round(math.hypot(dn, de)), 65535),
+            float(s.position_ned_m[2] - target[2]),
+            0.0,
+            0.0,
+        )
+
+    def _position_target(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        sp = self.setpoint
+        nan3 = np.full(3, math.nan)
+        position = sp.position_ned_m if sp is not None else nan3
+        velocity = sp.velocity_ned_mps if sp is not None else nan3
+        yaw = sp.yaw_rad if sp is not None else math.nan
+        mask = 0b0000_1101_1100_0000  # accelerations and yaw rate ignored
+        for bit, value in zip((1, 2, 4, 8, 16, 32), [*position, *velocity], strict=True):
+            if math.isnan(value):
+                mask |= bit
+        if math.isnan(yaw):
+            mask |= 1024
+        p, v = (float(x) for x in position), (float(x) for x in velocity)
+        return mav.position_target_local_ned_encode(
+            self._boot_ms(t_s), mavlink.MAV_FRAME_LOCAL_NED, mask, *p, *v, 0.0, 0.0, 0.0, float(yaw), 0.0
+        )
+
+    def _gps_global_origin(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        o = self.origin
+        return mav.gps_global_origin_encode(
+            round(o.lat_deg * 1e7), round(o.lon_deg * 1e7), round(o.alt_m * 1000), int(t_s * 1e6)
+        )
+
+    def _mission_current(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+        total = len(cmd.mission)
+        if total == 0:
+            state = mavlink.MISSION_STATE_NO_MISSION
+        elif cmd.mission_current >= total:
+            state = mavlink.MISSION_STATE_COMPLETE
+        elif cmd.mode is FlightMode.AUTO_MISSION:
+            state = mavlink.MISSION_STATE_ACTIVE
+        else:
+            state = mavlink.MISSION_STATE_NOT_STARTED if cmd.mission_current == 0 else mavlink.MISSION_STATE_PAUSED
+        in_mission = 1 if cmd.mode is FlightMode.AUTO_MISSION else 2
+        return mav.mission_current_encode(min(cmd.mission_current, 65535), total, state, in_mission)
