@@ -21,7 +21,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl.autopilot.modes import FlightMode
 from sitl.geodesy import ned_to_geodetic
 from sitl.process import SitlProcess
-from tests.sitl_tools import GroundStation, free_udp_port, wait_until
+from tests.sitl_tools import GroundStation, free_udp_port, state_when, wait_until
 
 pytestmark = pytest.mark.sitl
 
@@ -446,3 +446,27 @@ def test_two_ground_stations_on_one_link_each_get_everything(
 def test_modes_round_trip_through_their_names() -> None:
     assert FlightMode.from_name("mission") is FlightMode.AUTO_MISSION
     assert FlightMode.ORBIT.px4_name == "POSCTL.ORBIT"
+
+
+def test_an_uploaded_fence_is_enforced_as_gf_action_says(qgc: GroundStation, gcs_sitl: tuple[SitlProcess, int]) -> None:
+    sitl, _ = gcs_sitl
+    # An exclusion circle over home: arming is refused, as PX4 refuses it outside the fence.
+    assert upload(qgc, [(5, 5004, *geo(0.0, 0.0), 0.0, [5.0])], mission_type=1) == 0
+    assert qgc.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == DENIED
+    text = answer(qgc, lambda m: m.get_type() == "STATUSTEXT", 2, "the arming refusal")
+    assert "outside the geofence" in text.text
+    assert text.severity == mavlink.MAV_SEVERITY_CRITICAL
+    # A 20 m square around home instead; a go-to 25 m north leaves it: GF_ACTION 2 (PX4's default) holds.
+    square = [geo(n, e) for n, e in ((-10, -10), (-10, 10), (10, 10), (10, -10))]
+    assert upload(qgc, [(5, 5001, *c, 0.0, [4.0]) for c in square], mission_type=1) == 0
+    assert qgc.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == ACCEPTED
+    assert qgc.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, ORIGIN[2] + 5) == 0
+    wait_until(lambda: sitl.state()["mode"] == "AUTO.LOITER", 20, "the takeoff done")
+    lat, lon = geo(25.0, 0.0)
+    assert qgc.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 1, 0, math.nan, lat, lon, ORIGIN[2] + 5) == ACCEPTED
+    state = state_when(sitl, lambda s: s["failsafe"] == "Geofence breached", 30, "the breach")
+    assert state["mode"] == "AUTO.LOITER"
+    stopped = state_when(sitl, lambda s: math.hypot(*s["velocity_ned_mps"][:2]) < 0.2, 20, "the vehicle stopped")
+    assert 10.0 < stopped["position_ned_m"][0] < 16.0  # braked just past the edge, nowhere near the go-to point
+    breach = answer(qgc, lambda m: m.get_type() == "STATUSTEXT" and "Geofence breached" in m.text, 2, "the text")
+    assert breach.severity == mavlink.MAV_SEVERITY_CRITICAL

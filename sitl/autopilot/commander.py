@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.geometry import inside_polygon
 from sitl.autopilot.controller import Setpoint
 from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.params import ParameterStore
@@ -97,6 +98,38 @@ class Orbit:
     speed_mps: float
 
 
+@dataclass(frozen=True)
+class Fence:
+    """An uploaded geofence in local NED: polygons as (K, 2) north/east vertex arrays, circles as (north, east,
+    radius). The vehicle must be inside at least one inclusion area when there are any, and outside every exclusion
+    area (PX4's ``Geofence::checkPolygons``)."""
+
+    inclusion_polygons: tuple[F64Array, ...] = ()
+    exclusion_polygons: tuple[F64Array, ...] = ()
+    inclusion_circles: tuple[tuple[float, float, float], ...] = ()
+    exclusion_circles: tuple[tuple[float, float, float], ...] = ()
+
+    def __bool__(self) -> bool:
+        return bool(
+            self.inclusion_polygons or self.exclusion_polygons or self.inclusion_circles or self.exclusion_circles
+        )
+
+    def contains(self, north_m: float, east_m: float) -> bool:
+        """The point is allowed by every area of the fence."""
+        if any(inside_polygon(p, north_m, east_m) for p in self.exclusion_polygons):
+            return False
+        if any(math.hypot(north_m - n, east_m - e) <= r for n, e, r in self.exclusion_circles):
+            return False
+        if not (self.inclusion_polygons or self.inclusion_circles):
+            return True
+        return any(inside_polygon(p, north_m, east_m) for p in self.inclusion_polygons) or any(
+            math.hypot(north_m - n, east_m - e) <= r for n, e, r in self.inclusion_circles
+        )
+
+
+GF_ACTIONS = {1: "warn", 2: "hold", 3: "rtl", 4: "land", 5: "land"}  # 4 (terminate) is flown as land: no parachute
+
+
 class ControlSource(enum.Enum):
     """Who asked for a mode change."""
 
@@ -160,6 +193,8 @@ class Commander:
         self._item_target_ned = np.full(3, math.nan)
         self._item_arrived_s = math.nan
         self._item_landing = False
+        self.fence = Fence()
+        self._fence_breached = False
         self.orbit: Orbit | None = None
         self._orbit_angle_rad = 0.0
         self._orbit_last_s = math.nan
@@ -217,6 +252,8 @@ class Commander:
             return f"mode {self.mode.px4_name} is not armable"
         if self.mode is FlightMode.AUTO_MISSION and not self.mission:
             return "no mission"
+        if self._outside_fence():
+            return "vehicle outside the geofence"
         if self.mode is FlightMode.OFFBOARD and not self.offboard_stream_ok():
             return "no offboard setpoints"
         if self.rc_lost and self.mode is FlightMode.POSCTL:
@@ -378,9 +415,43 @@ class Commander:
                 self.disarm(reason="Disarmed after landing")
                 self._landed_since_s = math.nan
 
+    def _outside_fence(self) -> bool:
+        """Outside the uploaded fence, or beyond GF_MAX_HOR_DIST / GF_MAX_VER_DIST from home (0: no limit)."""
+        position = self._position()
+        offset = position - self.home_ned_m
+        max_horizontal, max_vertical = self.params["GF_MAX_HOR_DIST"], self.params["GF_MAX_VER_DIST"]
+        if max_horizontal > 0 and math.hypot(offset[0], offset[1]) > max_horizontal:
+            return True
+        if max_vertical > 0 and -offset[2] > max_vertical:
+            return True
+        return bool(self.fence) and not self.fence.contains(float(position[0]), float(position[1]))
+
+    def set_fence(self, fence: Fence) -> None:
+        """A new geofence (an upload or a clear)."""
+        self.fence = fence
+        self._fence_breached = False
+
+    def _geofence(self) -> None:
+        """GF_ACTION once, when the vehicle leaves the fence in the air (as PX4: a breach, not every step outside)."""
+        limited = self.fence or self.params["GF_MAX_HOR_DIST"] > 0 or self.params["GF_MAX_VER_DIST"] > 0
+        if not limited or self.landed_state is LandedState.ON_GROUND:
+            self._fence_breached = False
+            return
+        outside = self._outside_fence()
+        if outside and not self._fence_breached:
+            action = GF_ACTIONS.get(int(self.params["GF_ACTION"]))
+            if action == "warn":
+                self._event("Geofence breached", Severity.CRITICAL)
+            elif action is not None:
+                self._trigger_failsafe(
+                    "Geofence breached", {"hold": 1, "rtl": 2, "land": 0}[action], {0: "land", 1: "hold", 2: "rtl"}
+                )
+        self._fence_breached = outside
+
     def _failsafes(self, t_s: float) -> None:
         if not self.armed:
             return
+        self._geofence()
         if self.mode is FlightMode.OFFBOARD and not self.offboard_stream_ok():
             self._trigger_failsafe("Offboard lost", int(self.params["COM_OBL_ACT"]), {0: "land", 1: "hold", 2: "rtl"})
         if self.rc_lost and t_s - self._rc_lost_since_s >= self.params["COM_RC_LOSS_T"]:
@@ -398,6 +469,9 @@ class Commander:
         self.failsafe = reason
         self.failsafe_since_s = self._now_s
         self._event(f"Failsafe: {reason}, {name}", Severity.CRITICAL)
+        if mode is self.mode is FlightMode.AUTO_LOITER:  # holding already, towards a go-to point: stop here
+            self._capture_hold()
+            self._braking = True
         self.set_mode(mode, ControlSource.FAILSAFE)
 
     def _mode_setpoint(self, state: VehicleState) -> Setpoint:

@@ -23,9 +23,10 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.autopilot.commander import MavResult, NavCommand, NavItem, Severity
+from sitl.autopilot.commander import Fence, MavResult, NavCommand, NavItem, Severity
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.geodesy import geodetic_to_ned
 
@@ -291,6 +292,7 @@ class MissionServer:
         """A whole list replaces the old one: missions are handed to the commander as flown items."""
         if mission_type is MissionType.FENCE:
             self._check_fence(items)
+            self.v.commander.set_fence(self._fence(items))
         if mission_type is MissionType.MISSION:
             self.v.commander.set_mission([self._nav_item(seq, item) for seq, item in enumerate(items)])
         self.lists[mission_type] = list(items)
@@ -355,6 +357,34 @@ class MissionServer:
         radius = p2 if command is NavCommand.WAYPOINT and math.isfinite(p2) and p2 > 0 else math.nan
         yaw = math.radians(p4) if math.isfinite(p4) and command is not NavCommand.LOITER_TIME else math.nan
         return NavItem(seq, command, north, east, down, above_home, max(hold_s, 0.0), radius, yaw)
+
+    def _fence(self, items: list[StoredItem]) -> Fence:
+        """The commander's fence from checked fence items (local NED)."""
+        polygons: dict[int, list[Any]] = {
+            mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION: [],
+            mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION: [],
+        }
+        circles: dict[int, list[tuple[float, float, float]]] = {
+            mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION: [],
+            mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION: [],
+        }
+        i = 0
+        while i < len(items):
+            item = items[i]
+            if item.command in polygons:
+                group = items[i : i + int(item.params[0])]
+                polygons[item.command].append(np.array([self._ned(v.lat_e7, v.lon_e7) for v in group]))
+                i += len(group)
+                continue
+            if item.command in circles:
+                circles[item.command].append((*self._ned(item.lat_e7, item.lon_e7), item.params[0]))
+            i += 1
+        return Fence(
+            tuple(polygons[mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION]),
+            tuple(polygons[mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION]),
+            tuple(circles[mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION]),
+            tuple(circles[mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION]),
+        )
 
     @staticmethod
     def _check_fence(items: list[StoredItem]) -> None:
