@@ -66,7 +66,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     lockstep = LockstepClient(sim.lockstep_url, sim.tick_timeout_s) if sim.lockstep_url else None
     lossless = config.recorder.frame_format is FrameFormat.PNG
     recorder = FlightRecorder(out, config.recorder.frame_every, lossless)
-    link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz)
+    link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz, config.vehicle.system_id)
 
     async def fly() -> int:
         try:

@@ -182,7 +182,8 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
     mission = deep_merge(
         mission,
         {
-            "vehicle": {"url": f"udpin://0.0.0.0:{ports.api_port_remote}"},
+            # The companion shares the vehicle's system id, as on a real drone: a ground station shows its texts.
+            "vehicle": {"url": f"udpin://0.0.0.0:{ports.api_port_remote}", "system_id": ports.system_id},
             "camera": {"url": f"sitl://127.0.0.1:{ports.frame_port}"},
             "simulator": {"lockstep_url": f"udp://127.0.0.1:{ports.control_port}"},
             "recorder": {"directory": str(spec.run_dir), **frames},

@@ -78,6 +78,7 @@ class SitlVehicle:
         airframe = self.dynamics.airframe
         self.params = ParameterStore({"MPC_THR_HOVER": round(airframe.hover_thrust, 4), **config.params})
         self.params.set("MAV_SYS_ID", config.system_id)
+        self.speed_mps: float | None = None  # DO_CHANGE_SPEED's, while it holds
         self.dynamics.set_wind(np.array(config.wind_ned_mps))
         home = self.dynamics.state().position_ned_m.copy()
         home[2] = 0.0
@@ -149,10 +150,11 @@ class SitlVehicle:
 
     # -- lifecycle ---------------------------------------------------------------------------------------------
     def limits(self) -> ControllerLimits:
-        """The controller's limits from the live parameters."""
+        """The controller's limits from the live parameters (and a DO_CHANGE_SPEED within them)."""
         p = self.params
+        xy_max = p["MPC_XY_VEL_MAX"] if self.speed_mps is None else min(self.speed_mps, p["MPC_XY_VEL_MAX"])
         return ControllerLimits(
-            xy_vel_max_mps=p["MPC_XY_VEL_MAX"],
+            xy_vel_max_mps=xy_max,
             z_vel_max_up_mps=p["MPC_Z_VEL_MAX_UP"],
             z_vel_max_down_mps=p["MPC_Z_VEL_MAX_DN"],
             tilt_max_deg=p["MPC_TILTMAX_AIR"],

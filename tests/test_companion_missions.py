@@ -191,7 +191,9 @@ def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_
     assert values == {"SLZ_ZONES", "SLZ_R_M", "SLZ_DRY"}
     assert max(m.value for m in companion if m.get_type() == "NAMED_VALUE_FLOAT" and m.name == "SLZ_ZONES") >= 1
     assert all(m.value == 0 for m in companion if m.get_type() == "NAMED_VALUE_FLOAT" and m.name == "SLZ_DRY")
-    assert gcs.of("HEARTBEAT")  # the vehicle's own stream came too
+    autopilot = {m.get_srcSystem() for m in gcs.of("HEARTBEAT") if m.get_srcComponent() == 1}
+    assert len(autopilot) == 1
+    assert {m.get_srcSystem() for m in companion} == autopilot  # one vehicle to the ground station, as on a drone
 
 
 def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Path, demo: Demo) -> None:

@@ -315,7 +315,7 @@ async def diagnose(config: MissionConfig, limits: DoctorLimits | None = None) ->
     results.append(
         await asyncio.get_running_loop().run_in_executor(None, check_model, config, limits.min_model_rate_hz)
     )
-    link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz)
+    link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz, config.vehicle.system_id)
     try:
         link_results = await check_link(link, config, limits)
         results += link_results

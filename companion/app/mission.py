@@ -67,6 +67,13 @@ class VehicleConfig(StrictModel):
         description="MAVSDK connection URL: udpin://0.0.0.0:14540 (SITL, PX4 offboard port), "
         "serial:///dev/ttyTHS1:921600 (Jetson TELEM2), tcpout://host:port.",
     )
+    system_id: int = Field(
+        default=1,
+        ge=1,
+        le=255,
+        description="The companion's MAVLink system id: set it to the autopilot's MAV_SYS_ID (PX4's default is 1), so "
+        "a ground station shows the companion's status texts as the vehicle's.",
+    )
     connect_timeout_s: float = Field(default=20.0, gt=0.0, le=600.0, description="Wall time to find the autopilot.")
     telemetry_rate_hz: float = Field(default=50.0, gt=0.0, le=250.0, description="Position and attitude rate asked.")
     link_lost_after_s: float = Field(default=1.5, gt=0.0, le=30.0, description="No telemetry this long: link lost.")

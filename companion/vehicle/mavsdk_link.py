@@ -47,10 +47,13 @@ class MavsdkVehicleLink:
         MAVSDK connection URL (``udpin://0.0.0.0:14540``, ``serial:///dev/ttyTHS1:921600``).
     telemetry_rate_hz : float
         Rate asked for the pose messages.
+    system_id : int
+        The companion's own MAVLink system id (the autopilot's, on a real vehicle).
     """
 
-    def __init__(self, url: str, telemetry_rate_hz: float = 50.0) -> None:
+    def __init__(self, url: str, telemetry_rate_hz: float = 50.0, system_id: int = 1) -> None:
         self.name = url
+        self.system_id = system_id
         self.url = url
         self.telemetry_rate_hz = telemetry_rate_hz
         self.poses = PoseBuffer(capacity=max(50, int(10 * telemetry_rate_hz)))
@@ -70,6 +73,7 @@ class MavsdkVehicleLink:
         from mavsdk.component_type import ComponentType
 
         config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
+        config.system_id = self.system_id
         self._mavsdk = Mavsdk(config)
         try:
             await asyncio.wait_for(self._mavsdk.add_any_connection(self.url), timeout_s)

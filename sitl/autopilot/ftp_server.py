@@ -69,8 +69,7 @@ SESSION_OPERATIONS = {Opcode.READ_FILE, Opcode.WRITE_FILE, Opcode.BURST_READ_FIL
 class FtpServer:
     """Answers FILE_TRANSFER_PROTOCOL requests (see the module docstring); counts what it refused."""
 
-    def __init__(self, system_id: int) -> None:
-        self.system_id = system_id
+    def __init__(self) -> None:
         self.requests = 0
         self.naks = 0
 

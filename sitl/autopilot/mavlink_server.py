@@ -71,7 +71,7 @@ class MavlinkServer:
         self.commands_seen: dict[int, int] = {}  # command id -> how many received
         self._last_reject_text_s = -math.inf
         self.missions = MissionServer(vehicle)
-        self.ftp = FtpServer(vehicle.config.system_id)
+        self.ftp = FtpServer()
         self.forwarded = 0  # messages passed between the links (PX4's MAV_x_FORWARD)
         self._param_lists: dict[int, tuple[MavlinkLink, deque[str]]] = {}  # per link: the list still to send
         self._param_tokens = float(PARAM_BURST)
@@ -173,7 +173,7 @@ class MavlinkServer:
         up = min(max((values[2] - STICK_FULL / 2) / (STICK_FULL / 2), -1.0), 1.0)
         deadband = 0.05
         forward, right, up = (0.0 if abs(v) < deadband else v for v in (forward, right, up))
-        yaw = self.v.telemetry._euler(self.v.dynamics.state())[2]
+        yaw = self.v.telemetry.euler(self.v.dynamics.state())[2]
         north = forward * math.cos(yaw) - right * math.sin(yaw)
         east = forward * math.sin(yaw) + right * math.cos(yaw)
         self.v.commander.pilot_sticks = np.array([north, east, -up])
@@ -277,13 +277,17 @@ class MavlinkServer:
             else:
                 result = cmd.set_mode(FlightMode.AUTO_MISSION)
         elif c == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            # As PX4: the speed flown from now on, within MPC_XY_VEL_MAX; no parameter changes (-1: back to it).
             spec = self.v.params.spec("MPC_XY_VEL_MAX")
-            if math.isfinite(p[1]) and spec.minimum <= p[1] <= spec.maximum:
-                self.v.params.set("MPC_XY_VEL_MAX", p[1])
-                self.v.controller.limits = self.v.limits()
+            if p[1] == -1:
+                self.v.speed_mps = None
+                result = MavResult.ACCEPTED
+            elif math.isfinite(p[1]) and spec.minimum <= p[1] <= spec.maximum:
+                self.v.speed_mps = float(p[1])
                 result = MavResult.ACCEPTED
             else:
                 result = MavResult.DENIED
+            self.v.controller.limits = self.v.limits()
         self._send_ack(link, msg, result)
         if follow_up is not None:
             link.send(
@@ -326,10 +330,14 @@ class MavlinkServer:
         return north, east, down
 
     def _reposition(self, msg: Any, is_int: bool) -> MavResult:
-        """DO_REPOSITION (QGroundControl's "go to location" and "change altitude"): fly there in HOLD."""
+        """DO_REPOSITION (QGroundControl's "go to location" and "change altitude"): fly there in HOLD. Without the
+        change-mode flag (param2 bit 0) only a vehicle already holding moves, as PX4 does."""
         target = self._global_target(msg, is_int)
-        if target is None or math.isinf(msg.param4):
+        change_mode = whole(msg.param2, 0, 0xFFFFFFFF, nan_is=0)
+        if target is None or math.isinf(msg.param4) or change_mode is None:
             return MavResult.DENIED
+        if not change_mode & REPOSITION_CHANGE_MODE and self.v.commander.mode is not FlightMode.AUTO_LOITER:
+            return MavResult.TEMPORARILY_REJECTED
         yaw = math.radians(float(msg.param4)) if math.isfinite(msg.param4) else math.nan
         return self.v.commander.reposition(np.array(target), yaw)
 
@@ -418,14 +426,14 @@ class MavlinkServer:
                     self._send_param(link, params.names()[msg.param_index])
             elif name == HASH_CHECK:
                 self._send_hash_check(link)
-            elif name in params.names():
+            elif name in params:
                 self._send_param(link, name)
             return
         # PARAM_SET
         if name == HASH_CHECK:
             self._param_lists.pop(id(link), None)  # the ground station's cache is current: the rest is not needed
             return
-        if name not in params.names():
+        if name not in params:
             self.v.statustext(f"Unknown parameter {name}", Severity.CRITICAL)
             return
         try:

@@ -221,6 +221,9 @@ class ParameterStore:
         spec = self._specs[name]
         return min(max(self._values[name], spec.minimum), spec.maximum)
 
+    def __contains__(self, name: object) -> bool:
+        return name in self._specs
+
     def raw(self, name: str) -> float:
         """The stored value of ``name``, as reported over MAVLink (it may lie outside the range)."""
         return self._values[name]

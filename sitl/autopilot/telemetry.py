@@ -311,7 +311,8 @@ class TelemetryBuilder:
         return mav.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, int(cmd.landed_state))
 
     @staticmethod
-    def _euler(s: VehicleState) -> tuple[float, float, float]:
+    def euler(s: VehicleState) -> tuple[float, float, float]:
+        """Roll, pitch and yaw (rad, ZYX) of the body FRD frame in NED."""
         R = quaternion_to_matrix(s.quaternion_wxyz)
         roll = math.atan2(R[2, 1], R[2, 2])
         pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
@@ -319,7 +320,7 @@ class TelemetryBuilder:
         return roll, pitch, yaw
 
     def _attitude(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        roll, pitch, yaw = self._euler(s)
+        roll, pitch, yaw = self.euler(s)
         p, q, r = (float(v) for v in s.rates_frd_radps)
         return mav.attitude_encode(self._boot_ms(t_s), roll, pitch, yaw, p, q, r)
 
@@ -338,7 +339,7 @@ class TelemetryBuilder:
         lat, lon, alt = ned_to_geodetic(n, e, d, self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m)
         rel = float(cmd.home_ned_m[2]) - d
         vn, ve, vd = (float(v) for v in s.velocity_ned_mps)
-        yaw = self._euler(s)[2]
+        yaw = self.euler(s)[2]
         hdg = round(math.degrees(yaw) % 360.0 * 100) % 36000
         return mav.global_position_int_encode(
             self._boot_ms(t_s),
@@ -422,7 +423,7 @@ class TelemetryBuilder:
     def _vfr_hud(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
         vn, ve, vd = (float(v) for v in s.velocity_ned_mps)
         speed = math.hypot(vn, ve)
-        heading = round(math.degrees(self._euler(s)[2]) % 360.0) % 360
+        heading = round(math.degrees(self.euler(s)[2]) % 360.0) % 360
         throttle = round(100 * float(np.mean(self.motor_outputs))) if cmd.armed else 0
         alt_amsl = self.origin.alt_m - float(s.position_ned_m[2])
         return mav.vfr_hud_encode(speed, speed, heading, throttle, alt_amsl, -vd)
@@ -473,7 +474,7 @@ class TelemetryBuilder:
         target = self._target(s)
         dn, de = float(target[0] - s.position_ned_m[0]), float(target[1] - s.position_ned_m[1])
         bearing = round(math.degrees(math.atan2(de, dn)))
-        roll, pitch, yaw = self._euler(s)
+        roll, pitch, yaw = self.euler(s)
         return mav.nav_controller_output_encode(
             math.degrees(roll),
             math.degrees(pitch),
