@@ -56,7 +56,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
     from sitl.campaign.provenance import source_commit
     from sitl.campaign.report import build_report
-    from sitl.campaign.runner import CampaignError, read_results, run_campaign
+    from sitl.campaign.runner import Backend, CampaignError, read_results, run_campaign
     from sitl.campaign.spec import load_campaign_spec
 
     if args.action == "replay":
@@ -75,7 +75,13 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, _interrupt)
         try:
             results = run_campaign(
-                spec, out, workers=args.workers, keep_runs=args.keep_runs, instance_base=args.instance_base
+                spec,
+                out,
+                workers=args.workers,
+                keep_runs=args.keep_runs,
+                instance_base=args.instance_base,
+                backend=Backend(args.backend),
+                address=args.address,
             )
         except CampaignError as exc:
             sys.stderr.write(f"slz campaign: {exc}\n")
@@ -246,6 +252,16 @@ def register(subcommands: Any) -> None:
     campaign.add_argument("--out", type=Path, help="campaign folder (default runs/campaigns/<name>)")
     campaign.add_argument("--workers", type=int, help="parallel missions (default: the spec's)")
     campaign.add_argument("--keep-runs", action="store_true", help="keep every mission's logs")
+    campaign.add_argument(
+        "--backend",
+        choices=["local", "ray"],  # sitl.campaign.runner.Backend (not imported to build the parser)
+        default="local",
+        help="local: worker processes on this machine (default); ray: Ray tasks on a cluster (the `ray` extra)",
+    )
+    campaign.add_argument(
+        "--address",
+        help="ray: the cluster (auto, HOST:PORT of the head, ray://HOST:PORT); default: Ray on this machine",
+    )
     campaign.add_argument("--report-only", action="store_true", help="rebuild the report from the results")
     campaign.add_argument(
         "--check-against",

@@ -27,8 +27,9 @@ pytestmark = pytest.mark.sitl
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SPEC = REPO_ROOT / "mission_configs" / "campaigns" / "smoke.yaml"
-# The only fields allowed to differ between two runs: when and in which segment a mission was flown, how long it took.
-WALL_FIELDS = {"wall_s", "segment", "finished_utc"}
+# The only fields allowed to differ between two runs: when and in which segment a mission was flown, how long it took,
+# and on which node.
+WALL_FIELDS = {"wall_s", "segment", "finished_utc", "node"}  # ...and where
 
 
 BASELINE = REPO_ROOT / "mission_configs" / "campaigns" / "baselines" / "smoke.json"
@@ -152,6 +153,43 @@ def test_two_workers_killed_and_resumed_give_the_same_results(one_worker: Path, 
     assert flown["wall_s"] > 0
     assert flown["missions_per_hour"] > 0
     assert "## How it was flown" in (out / "report.md").read_text()
+
+
+def test_on_a_ray_cluster_with_a_node_killed_the_results_are_the_local_ones(one_worker: Path, tmp_path: Path) -> None:
+    pytest.importorskip("ray", reason="Ray comes with the `ray` extra (in `dev`)")
+    from ray.cluster_utils import Cluster
+
+    # A cluster of two worker nodes of one CPU each on this machine (the head schedules nothing).
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False})
+    out = tmp_path / "ray"
+    try:
+        nodes = [cluster.add_node(num_cpus=1) for _ in range(2)]
+        cluster.wait_for_nodes()
+        run = campaign(out, 2, "--backend", "ray", "--address", cluster.address)
+        results_path = out / "results.jsonl"
+        deadline = time.monotonic() + 600
+        while not (results_path.is_file() and results_path.read_text().count("\n") >= 1):
+            assert run.poll() is None, run.communicate()[1][-3000:]
+            assert time.monotonic() < deadline, "no mission finished in 600 s"
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                run.wait(timeout=0.5)  # paces the poll; returns early only if the campaign ends by itself
+        # The node that finished first is flying its next mission: kill it (its raylet and workers, SIGKILL).
+        first = read_results(results_path)[0]
+        victim = next(n for n in nodes if first["node"].endswith("/" + n.node_id[:8]))
+        cluster.remove_node(victim, allow_graceful=False)
+        stdout, stderr = run.communicate(timeout=900)
+        assert run.returncode == 0, stdout[-3000:] + stderr[-3000:]
+    finally:
+        cluster.shutdown()  # type: ignore[no-untyped-call]
+    final = read_results(results_path)
+    assert results_path.read_text().count("\n") == 4  # every mission once: the killed one flown again, elsewhere
+    assert not any("error" in r for r in final)
+    by_id = {r["mission_id"]: r for r in comparable(final)}
+    expected = {r["mission_id"]: r for r in comparable(read_results(one_worker / "results.jsonl"))}
+    assert by_id == expected  # every metric, touchdown coordinates included
+    survivor = next(n for n in nodes if n is not victim).node_id[:8]
+    assert {r["node"].rsplit("/", 1)[1] for r in final} == {victim.node_id[:8], survivor}
+    assert sum(r["node"].endswith(survivor) for r in final) >= 3  # it flew its own and the victim's last
 
 
 def processes() -> list[tuple[int, int, str]]:

@@ -11,8 +11,10 @@ and config only, not on the number of workers or the machine's speed.
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import contextlib
+import enum
 import json
 import logging
 import multiprocessing
@@ -113,19 +115,28 @@ def error_result(plan: MissionPlan, error: str) -> dict[str, Any]:
 
 
 def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
-    """In a worker: fly one mission and return its metrics (or its error) as JSON."""
+    """In a local worker process: :func:`fly_one` on the worker's SITL instance."""
+    return fly_one(spec_json, mission_id, out_dir, keep, _worker_instance)
+
+
+def fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool, instance: int) -> dict[str, Any]:
+    """Fly one mission on SITL ``instance`` and return its metrics (or its error) as JSON, with the wall time it took
+    and the node that flew it (every backend flies a mission through here)."""
+    from sitl.campaign.ray_backend import node_name
+
     spec = CampaignSpec.model_validate(spec_json)
     plan = next(p for p in spec.missions() if p.mission_id == mission_id)
     run_dir = Path(out_dir) / "missions" / mission_id
     shutil.rmtree(run_dir, ignore_errors=True)  # a mission cut off by a kill starts again from nothing
     started = time.monotonic()
     try:
-        fly(mission_spec(spec, plan, run_dir, _worker_instance))
+        fly(mission_spec(spec, plan, run_dir, instance))
         metrics = mission_metrics(run_dir, mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
         result: dict[str, Any] = metrics.to_json()
     except (MissionError, SitlProcessError, OSError, ValueError, KeyError) as exc:
         result = error_result(plan, str(exc))
     result["wall_s"] = round(time.monotonic() - started, 3)
+    result["node"] = node_name()
     if not keep:
         shutil.rmtree(run_dir, ignore_errors=True)
     return result
@@ -151,12 +162,19 @@ def read_results(path: Path) -> list[dict[str, Any]]:
 
 
 class Progress:
-    """A one-line progress bar on stderr: missions done, rate and ETA."""
+    """A one-line progress bar on stderr: missions done, rate, ETA, failures, and missions per node."""
 
     def __init__(self, total: int, done: int, stream: TextIO = sys.stderr) -> None:
         self.total, self.done, self.stream = total, done, stream
         self._start_done = done
         self._start = time.monotonic()
+        self.failures = 0
+        self.nodes: collections.Counter[str] = collections.Counter()
+
+    def count(self, result: dict[str, Any]) -> None:
+        """Note one finished mission's result (its node, whether it failed)."""
+        self.failures += "error" in result
+        self.nodes[str(result.get("node", "?"))] += 1
 
     def update(self, done: int) -> None:
         """Redraw with ``done`` missions finished."""
@@ -167,9 +185,10 @@ class Progress:
         eta = (self.total - done) / rate_per_h * 60.0 if rate_per_h else float("nan")
         width = 30
         filled = round(width * done / max(self.total, 1))
+        nodes = ", ".join(f"{node} {n}" for node, n in sorted(self.nodes.items()))
         self.stream.write(
             f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{self.total} missions, {rate_per_h:.0f}/h, "
-            f"ETA {eta:.0f} min "
+            f"ETA {eta:.0f} min, {self.failures} failed" + (f"; by node: {nodes} " if nodes else " ")
         )
         self.stream.flush()
 
@@ -193,6 +212,50 @@ def missions_to_fly(plans: list[MissionPlan], done: dict[str, dict[str, Any]]) -
     return sorted(todo, key=lambda p: p.run)
 
 
+class Backend(str, enum.Enum):
+    """Where a campaign's missions fly."""
+
+    LOCAL = "local"  # worker processes on this machine (no Ray needed)
+    RAY = "ray"  # Ray tasks on a Ray cluster (sitl.campaign.ray_backend)
+
+
+def _run_local(
+    spec_json: dict[str, Any],
+    todo: list[MissionPlan],
+    out_dir: Path,
+    keep_runs: bool,
+    workers: int,
+    worker_ids: list[int] | None,
+    record: Callable[[str, dict[str, Any] | BaseException], None],
+) -> None:
+    """Fly ``todo`` in ``workers`` spawned worker processes; each result (or exception) to ``record`` as it ends."""
+    context = multiprocessing.get_context("spawn")
+    instances = None
+    if worker_ids is not None:
+        instances = context.Queue()
+        for instance in worker_ids:
+            instances.put(instance)
+    with concurrent.futures.ProcessPoolExecutor(
+        max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances,)
+    ) as pool:
+        futures = {pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs): p for p in todo}
+        try:
+            for future in concurrent.futures.as_completed(futures):
+                try:
+                    outcome: dict[str, Any] | BaseException = future.result()
+                except BrokenProcessPool as exc:  # a worker died: the missions not finished stay unflown
+                    raise CampaignError(
+                        f"a worker process died ({exc}); the missions not finished are flown when the "
+                        "campaign is started again"
+                    ) from None
+                except Exception as exc:  # a mission's own failure: recorded, flown again on resume
+                    outcome = exc
+                record(futures[future].mission_id, outcome)
+        except BaseException:  # Ctrl-C or a dead worker: no more missions, those in flight stopped
+            _stop_workers(pool)
+            raise
+
+
 def run_campaign(
     spec: CampaignSpec,
     out_dir: Path,
@@ -201,8 +264,15 @@ def run_campaign(
     on_result: Callable[[dict[str, Any]], None] | None = None,
     progress: bool = True,
     instance_base: int | None = None,
+    backend: Backend = Backend.LOCAL,
+    address: str | None = None,
 ) -> list[dict[str, Any]]:
-    """Fly every mission of ``spec`` not yet in ``out_dir/results.jsonl``; returns all results in plan order."""
+    """Fly every mission of ``spec`` not yet in ``out_dir/results.jsonl``; returns all results in plan order.
+
+    ``backend`` says where: local worker processes (``workers`` of them, on ``instance_base`` + k or leased
+    instances), or Ray tasks on the cluster at ``address`` (None: a Ray instance on this machine with ``workers``
+    CPUs). Every backend writes the same results: a mission's depends on its seed and config alone.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     spec_path = out_dir / "spec.yaml"
     spec_json = spec.model_dump(mode="json")
@@ -215,8 +285,11 @@ def run_campaign(
     results_path = out_dir / "results.jsonl"
     done = {r["mission_id"]: r for r in read_results(results_path)}
     plans = spec.missions()
+    by_id = {p.mission_id: p for p in plans}
     todo = missions_to_fly(plans, done)
     workers = workers or spec.workers
+    if backend is Backend.RAY and instance_base is not None:
+        raise CampaignError("--instance-base is for the local backend: on Ray every mission leases a free instance")
     worker_ids = worker_instances(instance_base, workers) if instance_base is not None else None
 
     policies = {p.mission_id: p.strategy.policy.value for p in plans}
@@ -231,44 +304,37 @@ def run_campaign(
         segment = segment_log.start(commit, workers, flown())
         stamp = {"segment": segment, "commit": commit}
         flown_here, interrupted = 0, True
-        context = multiprocessing.get_context("spawn")
-        instances = None
-        if worker_ids is not None:
-            instances = context.Queue()
-            for instance in worker_ids:
-                instances.put(instance)
         try:
-            with (
-                open_append(results_path) as results,
-                concurrent.futures.ProcessPoolExecutor(
-                    max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances,)
-                ) as pool,
-            ):
-                futures = {pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs): p for p in todo}
-                try:
-                    for future in concurrent.futures.as_completed(futures):
-                        try:
-                            result = future.result()
-                        except BrokenProcessPool as exc:  # a worker died: the missions not finished stay unflown
-                            raise CampaignError(
-                                f"a worker process died ({exc}); the missions not finished are flown when the "
-                                "campaign is started again"
-                            ) from None
-                        except Exception as exc:  # a mission's own failure: recorded, flown again on resume
-                            result = error_result(futures[future], f"{type(exc).__name__}: {exc}")
-                        result |= stamp | {"finished_utc": utc_now()}
-                        results.write(json.dumps(result, separators=(",", ":")) + "\n")
-                        results.flush()
-                        os.fsync(results.fileno())  # a kill loses at most the missions in flight
-                        done[result["mission_id"]] = result
-                        flown_here += "error" not in result
-                        if on_result is not None:
-                            on_result(result)
-                        if bar is not None:
-                            bar.update(flown())
-                except BaseException:  # Ctrl-C or a dead worker: no more missions, those in flight stopped
-                    _stop_workers(pool)
-                    raise
+            with open_append(results_path) as results:
+
+                def record(mission_id: str, outcome: dict[str, Any] | BaseException) -> None:
+                    nonlocal flown_here
+                    if isinstance(outcome, BaseException):
+                        result = error_result(by_id[mission_id], f"{type(outcome).__name__}: {outcome}")
+                    else:
+                        result = outcome
+                    result |= stamp | {"finished_utc": utc_now()}
+                    results.write(json.dumps(result, separators=(",", ":")) + "\n")
+                    results.flush()
+                    os.fsync(results.fileno())  # a kill loses at most the missions in flight
+                    done[result["mission_id"]] = result
+                    flown_here += "error" not in result
+                    if on_result is not None:
+                        on_result(result)
+                    if bar is not None:
+                        bar.count(result)
+                        bar.update(flown())
+
+                if backend is Backend.RAY:
+                    from sitl.campaign.ray_backend import RayBackendError, run_on_ray
+
+                    try:
+                        ids = [p.mission_id for p in todo]
+                        run_on_ray(spec_json, ids, out_dir, keep_runs, address, workers, record)
+                    except RayBackendError as exc:
+                        raise CampaignError(str(exc)) from None
+                else:
+                    _run_local(spec_json, todo, out_dir, keep_runs, workers, worker_ids, record)
             interrupted = False
         finally:
             segment_log.end(segment, flown_here, interrupted)
