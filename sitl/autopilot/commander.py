@@ -297,6 +297,7 @@ class Commander:
         self._braking = mode in (FlightMode.POSCTL, FlightMode.AUTO_LOITER)
         if mode is FlightMode.AUTO_TAKEOFF:
             self._hold_ned_m = self._position()
+            self.takeoff_altitude_m = self.params["MIS_TAKEOFF_ALT"]  # unless NAV_TAKEOFF names another
         if mode is FlightMode.AUTO_MISSION:
             self._start_item()
         self._event(f"Mode {mode.px4_name} ({source.value})")
@@ -306,9 +307,10 @@ class Commander:
         """NAV_TAKEOFF: climb to ``altitude_m`` above home (NaN: MIS_TAKEOFF_ALT), then hold."""
         if not self.armed:
             return MavResult.TEMPORARILY_REJECTED
-        wanted = altitude_m if math.isfinite(altitude_m) and altitude_m > 0 else self.params["MIS_TAKEOFF_ALT"]
-        self.takeoff_altitude_m = min(wanted, 100.0)  # this takeoff's: PX4 leaves MIS_TAKEOFF_ALT as it is
-        return self.set_mode(FlightMode.AUTO_TAKEOFF)
+        result = self.set_mode(FlightMode.AUTO_TAKEOFF)
+        if result is MavResult.ACCEPTED and math.isfinite(altitude_m) and altitude_m > 0:
+            self.takeoff_altitude_m = min(altitude_m, 100.0)  # this takeoff's: PX4 leaves MIS_TAKEOFF_ALT as it is
+        return result
 
     def land(self) -> MavResult:
         """NAV_LAND: descend at MPC_LAND_SPEED where the vehicle is (refused while disarmed: on the ground it would
