@@ -33,7 +33,7 @@ from sitl.autopilot.telemetry import (
     Origin,
     StreamSchedule,
     TelemetryBuilder,
-    statustext_chunks,
+    statustext_messages,
 )
 from sitl.clock import SimClock
 from sitl.config import FaultKind, LinkName, SitlConfig
@@ -408,7 +408,7 @@ class SitlVehicle:
         characters when longer (MAVLink 2's ``id`` and ``chunk_seq``)."""
         self._statustext_id = (self._statustext_id + 1) % 65536 or 1
         for link in self.links:
-            for message in statustext_chunks(link.mav, text, int(severity), self._statustext_id):
+            for message in statustext_messages(link.mav, text, int(severity), self._statustext_id):
                 link.send(message)
 
     def heartbeat_now(self) -> None:

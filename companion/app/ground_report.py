@@ -28,12 +28,11 @@ from typing import Any
 from companion.guidance.landing import LandingPhase, VehicleState
 from companion.perception.selection import Target
 from companion.vehicle.link import VehicleLink
+from companion.vehicle.statustext import statustext_chunks
 
 logger = logging.getLogger(__name__)
 
 REPORT_RATE_HZ = 2.0
-STATUSTEXT_CHUNK_CHARS = 50
-STATUSTEXT_MAX_CHARS = 200
 DRY_RUN_PREFIX = "[dry run] "
 MAV_FRAME_LOCAL_NED = 1
 LANDING_TARGET_TYPE_VISION_OTHER = 3
@@ -45,18 +44,6 @@ PHASE_SEVERITY = {
     LandingPhase.LAND: MAV_SEVERITY["notice"],
     LandingPhase.DONE: MAV_SEVERITY["notice"],
 }
-
-
-def statustext_chunks(text: str, severity: int, text_id: int) -> list[dict[str, Any]]:
-    """STATUSTEXT fields for ``text``: one message when it fits 50 characters (``id`` 0), else chunks of 50 sharing
-    ``text_id`` with ``chunk_seq`` 0, 1..., the last one shorter (an empty one when the text fills its chunks)."""
-    data = text.encode("ascii", "replace").decode("ascii")[:STATUSTEXT_MAX_CHARS]
-    if len(data) <= STATUSTEXT_CHUNK_CHARS:
-        return [{"severity": severity, "text": data, "id": 0, "chunk_seq": 0}]
-    chunks = [data[i : i + STATUSTEXT_CHUNK_CHARS] for i in range(0, len(data), STATUSTEXT_CHUNK_CHARS)]
-    if len(chunks[-1]) == STATUSTEXT_CHUNK_CHARS:
-        chunks.append("")
-    return [{"severity": severity, "text": c, "id": text_id, "chunk_seq": i} for i, c in enumerate(chunks)]
 
 
 def landing_target_fields(t_s: float, target: Target, state: VehicleState, dry_run: bool) -> dict[str, Any]:

@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.vehicle.statustext import statustext_chunks
 from sitl.autopilot.commander import Commander, LandedState
 from sitl.autopilot.controller import Setpoint
 from sitl.autopilot.modes import FlightMode
@@ -82,8 +83,6 @@ MESSAGE_IDS = {
     "PROTOCOL_VERSION": 300,
 }
 ONE_SHOT = frozenset({"AUTOPILOT_VERSION", "PROTOCOL_VERSION"})  # sent when asked for, never streamed
-STATUSTEXT_CHUNK_CHARS = 50
-STATUSTEXT_MAX_CHARS = 200  # longer texts are cut (four chunks)
 NAMES_BY_ID = {v: k for k, v in MESSAGE_IDS.items()}
 
 SENSORS = (
@@ -137,17 +136,12 @@ class ProtocolVersionMessage(mavlink.MAVLink_message):  # type: ignore[misc]
         return bytes(self._pack(mav, self.crc_extra, body, force_mavlink1=force_mavlink1))
 
 
-def statustext_chunks(mav: Any, text: str, severity: int, text_id: int) -> list[Any]:
-    """STATUSTEXT messages for ``text``: one when it fits in 50 characters (``id`` 0), else chunks of 50 sharing
-    ``text_id`` with ``chunk_seq`` 0, 1... and a NUL-terminated last one, as MAVLink 2 specifies. At most
-    :data:`STATUSTEXT_MAX_CHARS` characters; non-ASCII characters become ``?``."""
-    data = text.encode("ascii", "replace")[:STATUSTEXT_MAX_CHARS]
-    if len(data) <= STATUSTEXT_CHUNK_CHARS:
-        return [mav.statustext_encode(severity, data, 0, 0)]
-    chunks = [data[i : i + STATUSTEXT_CHUNK_CHARS] for i in range(0, len(data), STATUSTEXT_CHUNK_CHARS)]
-    if len(chunks[-1]) == STATUSTEXT_CHUNK_CHARS:
-        chunks.append(b"")  # the terminator: a reader knows the text ended
-    return [mav.statustext_encode(severity, chunk, text_id, seq) for seq, chunk in enumerate(chunks)]
+def statustext_messages(mav: Any, text: str, severity: int, text_id: int) -> list[Any]:
+    """STATUSTEXT messages for ``text``, chunked by :func:`companion.vehicle.statustext.statustext_chunks`."""
+    return [
+        mav.statustext_encode(f["severity"], f["text"].encode("ascii"), f["id"], f["chunk_seq"])
+        for f in statustext_chunks(text, severity, text_id)
+    ]
 
 
 @dataclass
