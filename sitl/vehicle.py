@@ -447,7 +447,7 @@ class SitlVehicle:
     # -- inputs --------------------------------------------------------------------------------------------------
     def _poll(self) -> None:
         for link in self.links:
-            for msg, from_peer in link.receive_tagged():
+            for msg, from_peer in link.receive():
                 try:
                     self.mavlink.handle(link, msg, from_peer)
                 except Exception as exc:  # a message no check foresaw: drop and count it, never die of it

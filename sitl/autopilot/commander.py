@@ -127,6 +127,9 @@ class Fence:
         )
 
 
+# What each failsafe parameter's values do (anything else: land).
+OBL_ACTIONS = {0: "land", 1: "hold", 2: "rtl"}  # COM_OBL_ACT
+RCL_ACTIONS = {1: "hold", 2: "rtl", 3: "land"}  # NAV_RCL_ACT (0: none, never triggered)
 GF_ACTIONS = {1: "warn", 2: "hold", 3: "rtl", 4: "land", 5: "land"}  # 4 (terminate) is flown as land: no parachute
 
 
@@ -445,9 +448,7 @@ class Commander:
             if action == "warn":
                 self._event("Geofence breached", Severity.CRITICAL)
             elif action is not None:
-                self._trigger_failsafe(
-                    "Geofence breached", {"hold": 1, "rtl": 2, "land": 0}[action], {0: "land", 1: "hold", 2: "rtl"}
-                )
+                self._trigger_failsafe("Geofence breached", action)
         self._fence_breached = outside
 
     def _failsafes(self, t_s: float) -> None:
@@ -455,16 +456,16 @@ class Commander:
             return
         self._geofence()
         if self.mode is FlightMode.OFFBOARD and not self.offboard_stream_ok():
-            self._trigger_failsafe("Offboard lost", int(self.params["COM_OBL_ACT"]), {0: "land", 1: "hold", 2: "rtl"})
+            self._trigger_failsafe("Offboard lost", OBL_ACTIONS.get(int(self.params["COM_OBL_ACT"]), "land"))
         if self.rc_lost and t_s - self._rc_lost_since_s >= self.params["COM_RC_LOSS_T"]:
             excepted = self.mode is FlightMode.OFFBOARD and int(self.params["COM_RCL_EXCEPT"]) & 4
             exposed = self.mode in (FlightMode.POSCTL, FlightMode.OFFBOARD, FlightMode.AUTO_LOITER)
             action = int(self.params["NAV_RCL_ACT"])
             if exposed and not excepted and action > 0 and self.failsafe != "RC lost":
-                self._trigger_failsafe("RC lost", action, {1: "hold", 2: "rtl", 3: "land"})
+                self._trigger_failsafe("RC lost", RCL_ACTIONS.get(action, "land"))
 
-    def _trigger_failsafe(self, reason: str, action: int, actions: dict[int, str]) -> None:
-        name = actions.get(action, "land")
+    def _trigger_failsafe(self, reason: str, name: str) -> None:
+        """Fly the failsafe action ``name`` (land, hold or rtl; hold on the ground) for ``reason``."""
         mode = {"land": FlightMode.AUTO_LAND, "hold": FlightMode.AUTO_LOITER, "rtl": FlightMode.AUTO_RTL}[name]
         if self.landed_state is LandedState.ON_GROUND and mode is not FlightMode.AUTO_LOITER:
             mode = FlightMode.AUTO_LOITER

@@ -62,6 +62,12 @@ class LinkStats:
         self.per_source[source] = self.per_source.get(source, 0) + 1
 
 
+def for_autopilot(msg: Any, system_id: int) -> bool:
+    """``msg`` is addressed to the autopilot ``system_id`` (component 1) or broadcast (a missing target field, or 0,
+    means everyone)."""
+    return getattr(msg, "target_system", 0) in (0, system_id) and getattr(msg, "target_component", 0) in (0, 1)
+
+
 class LinkError(Exception):
     """A link could not be opened (e.g. the port is taken)."""
 
@@ -182,14 +188,10 @@ class MavlinkLink:
                 if exc.errno not in (errno.ECONNREFUSED, errno.EAGAIN, errno.ENOBUFS):
                     logger.warning("%s: send failed: %s", self.name, exc)
 
-    def receive(self) -> list[Any]:
+    def receive(self) -> list[tuple[Any, bool]]:
         """The messages waiting on the socket (at most MAX_DATAGRAMS_PER_RECEIVE datagrams' worth), malformed ones
-        dropped and counted."""
-        return [msg for msg, _ in self.receive_tagged()]
-
-    def receive_tagged(self) -> list[tuple[Any, bool]]:
-        """As :meth:`receive`, each message with whether it came from the partner or a listener (a peer the link
-        talks to) rather than a stray sender."""
+        dropped and counted; each with whether it came from the partner or a listener (a peer the link talks to)
+        rather than a stray sender."""
         tagged: list[tuple[Any, bool]] = []
         for _ in range(MAX_DATAGRAMS_PER_RECEIVE):
             try:

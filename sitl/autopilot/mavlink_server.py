@@ -20,8 +20,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot.commander import FORCE_MAGIC, LandedState, MavResult, Orbit, Severity
 from sitl.autopilot.ftp_server import FtpServer
-from sitl.autopilot.mavlink_link import MavlinkLink
-from sitl.autopilot.mission_server import MissionServer
+from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
+from sitl.autopilot.mission_server import MAX_DISTANCE_M, MissionServer
 from sitl.autopilot.modes import FlightMode, MainMode
 from sitl.autopilot.params import ParamError, decode_value, encode_value
 from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT
@@ -92,7 +92,7 @@ class MavlinkServer:
         if self.missions.handle(link, msg):
             return
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            if self._targets_us(msg) and getattr(msg, "target_component", 0) in (0, 1):
+            if for_autopilot(msg, self.v.config.system_id):
                 count_capped(self.commands_by_sender, sender)
                 self.commands_seen[int(msg.command)] = self.commands_seen.get(int(msg.command), 0) + 1
                 self._handle_command(link, msg, kind == "COMMAND_INT")
@@ -128,7 +128,7 @@ class MavlinkServer:
             if msg.target in (0, self.v.config.system_id):
                 self._manual_control(msg)
         elif kind == "FILE_TRANSFER_PROTOCOL":
-            if self._targets_us(msg) and msg.target_component in (0, 1):
+            if for_autopilot(msg, self.v.config.system_id):
                 reply = self.ftp.handle(msg)
                 if reply is not None:
                     peer = (msg.get_srcSystem(), msg.get_srcComponent())
@@ -321,11 +321,11 @@ class MavlinkServer:
             if not (-90 <= lat <= 90 and -180 <= lon <= 180):
                 return None
             north, east, _ = geodetic_to_ned(lat, lon, 0.0, c.origin_lat_deg, c.origin_lon_deg, 0.0)
-            if math.hypot(north, east) > 10_000.0:
+            if math.hypot(north, east) > MAX_DISTANCE_M:
                 return None
         if not math.isnan(alt):
             down = float(self.v.commander.home_ned_m[2]) - alt if relative else c.origin_alt_m - alt
-            if abs(down) > 10_000.0:
+            if abs(down) > MAX_DISTANCE_M:
                 return None
         return north, east, down
 

@@ -27,7 +27,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot.commander import Fence, MavResult, NavCommand, NavItem, Severity
-from sitl.autopilot.mavlink_link import MavlinkLink
+from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
 from sitl.geodesy import geodetic_to_ned
 
 if TYPE_CHECKING:
@@ -136,9 +136,7 @@ class MissionServer:
         kind = msg.get_type()
         if not kind.startswith("MISSION_") or kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
             return False
-        if getattr(msg, "target_system", 0) not in (0, self.v.config.system_id):
-            return True
-        if getattr(msg, "target_component", 0) not in (0, 1):
+        if not for_autopilot(msg, self.v.config.system_id):
             return True
         peer = (msg.get_srcSystem(), msg.get_srcComponent())
         try:
@@ -291,7 +289,6 @@ class MissionServer:
     def _replace(self, mission_type: MissionType, items: list[StoredItem]) -> None:
         """A whole list replaces the old one: missions are handed to the commander as flown items."""
         if mission_type is MissionType.FENCE:
-            self._check_fence(items)
             self.v.commander.set_fence(self._fence(items))
         if mission_type is MissionType.MISSION:
             self.v.commander.set_mission([self._nav_item(seq, item) for seq, item in enumerate(items)])
@@ -359,11 +356,9 @@ class MissionServer:
         return NavItem(seq, command, north, east, down, above_home, max(hold_s, 0.0), radius, yaw)
 
     def _fence(self, items: list[StoredItem]) -> Fence:
-        """The commander's fence from checked fence items (local NED)."""
-        polygons: dict[int, list[Any]] = {
-            mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION: [],
-            mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION: [],
-        }
+        """The commander's fence (local NED) from fence items, checked as it is built: polygon vertices come in whole
+        groups of the count their first vertex declares (at least 3), and a circle has a radius."""
+        polygons: dict[int, list[Any]] = {command: [] for command in POLYGON_COMMANDS}
         circles: dict[int, list[tuple[float, float, float]]] = {
             mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION: [],
             mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION: [],
@@ -372,10 +367,17 @@ class MissionServer:
         while i < len(items):
             item = items[i]
             if item.command in polygons:
-                group = items[i : i + int(item.params[0])]
+                count = item.params[0]
+                if not (math.isfinite(count) and count >= 3 and count == round(count)):
+                    raise ItemRefusedError(MissionResult.INVALID_PARAM1, f"polygon at item {i} has {count} vertices")
+                group = items[i : i + int(count)]
+                if len(group) < count or any(v.command != item.command for v in group):
+                    raise ItemRefusedError(MissionResult.INVALID, f"polygon at item {i} is incomplete")
                 polygons[item.command].append(np.array([self._ned(v.lat_e7, v.lon_e7) for v in group]))
                 i += len(group)
                 continue
+            if item.command != mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT and not item.params[0] > 0:
+                raise ItemRefusedError(MissionResult.INVALID_PARAM1, f"circle at item {i} has no radius")
             if item.command in circles:
                 circles[item.command].append((*self._ned(item.lat_e7, item.lon_e7), item.params[0]))
             i += 1
@@ -385,22 +387,3 @@ class MissionServer:
             tuple(circles[mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION]),
             tuple(circles[mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION]),
         )
-
-    @staticmethod
-    def _check_fence(items: list[StoredItem]) -> None:
-        """Polygon vertices come in whole groups of the count their first vertex declares (at least 3)."""
-        i = 0
-        while i < len(items):
-            item = items[i]
-            if item.command in POLYGON_COMMANDS:
-                count = item.params[0]
-                if not (math.isfinite(count) and count >= 3 and count == round(count)):
-                    raise ItemRefusedError(MissionResult.INVALID_PARAM1, f"polygon at item {i} has {count} vertices")
-                group = items[i : i + int(count)]
-                if len(group) < count or any(v.command != item.command for v in group):
-                    raise ItemRefusedError(MissionResult.INVALID, f"polygon at item {i} is incomplete")
-                i += int(count)
-            else:
-                if item.command != mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT and not item.params[0] > 0:
-                    raise ItemRefusedError(MissionResult.INVALID_PARAM1, f"circle at item {i} has no radius")
-                i += 1

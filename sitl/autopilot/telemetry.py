@@ -449,7 +449,7 @@ class TelemetryBuilder:
     def _rc_channels(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
         if cmd.rc_lost:
             return mav.rc_channels_encode(self._boot_ms(t_s), 0, *([65535] * 18), 0)
-        sticks = cmd.pilot_sticks if cmd.mode in (FlightMode.POSCTL,) else np.zeros(3)
+        sticks = cmd.pilot_sticks if cmd.mode is FlightMode.POSCTL else np.zeros(3)
         pitch, roll, throttle = 1500 - 500 * sticks[0], 1500 + 500 * sticks[1], 1500 - 500 * sticks[2]
         channels = [round(float(v)) for v in (roll, pitch, throttle, 1500)] + [1500] * 4 + [65535] * 10
         return mav.rc_channels_encode(self._boot_ms(t_s), 8, *channels, 255)

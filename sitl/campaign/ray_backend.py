@@ -17,7 +17,6 @@ Ray is an optional dependency (the ``ray`` extra): nothing imports it unless thi
 from __future__ import annotations
 
 import logging
-import socket
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -31,19 +30,6 @@ WAIT_S = 1.0  # the driver wakes at least this often (wall), to notice an interr
 
 class RayBackendError(Exception):
     """Ray is missing, or the cluster cannot be reached (the address, and what went wrong)."""
-
-
-def node_name() -> str:
-    """This node's name in the results: its host name and, under Ray, its node id's first 8 characters."""
-    host = socket.gethostname()
-    try:
-        import ray
-
-        if ray.is_initialized():
-            return f"{host}/{ray.get_runtime_context().get_node_id()[:8]}"
-    except ImportError:
-        pass
-    return host
 
 
 def fly_on_node(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:

@@ -21,6 +21,7 @@ import multiprocessing
 import os
 import shutil
 import signal
+import socket
 import sys
 import time
 from collections.abc import Callable
@@ -114,6 +115,16 @@ def error_result(plan: MissionPlan, error: str) -> dict[str, Any]:
     }
 
 
+def node_name() -> str:
+    """This node's name in the results: its host name and, in a Ray worker, its Ray node id's first 8 characters.
+    Only a Ray worker has Ray imported: a local worker never imports it."""
+    host = socket.gethostname()
+    ray = sys.modules.get("ray")
+    if ray is not None and ray.is_initialized():
+        return f"{host}/{ray.get_runtime_context().get_node_id()[:8]}"
+    return host
+
+
 def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
     """In a local worker process: :func:`fly_one` on the worker's SITL instance."""
     return fly_one(spec_json, mission_id, out_dir, keep, _worker_instance)
@@ -122,8 +133,6 @@ def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: boo
 def fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool, instance: int) -> dict[str, Any]:
     """Fly one mission on SITL ``instance`` and return its metrics (or its error) as JSON, with the wall time it took
     and the node that flew it (every backend flies a mission through here)."""
-    from sitl.campaign.ray_backend import node_name
-
     spec = CampaignSpec.model_validate(spec_json)
     plan = next(p for p in spec.missions() if p.mission_id == mission_id)
     run_dir = Path(out_dir) / "missions" / mission_id
