@@ -1,12 +1,15 @@
 """Throughput on the ROI paper table's own missions, and whether the committed table still reproduces.
 
-Run: ``.venv/bin/python bench/campaign_sample.py [--workers 2] [--backend local|ray] [--out DIR]``. Flies
-``mission_configs/campaigns/paper_table1_roi_sample.yaml`` (runs 0 to 6 of each of the nine cells: 63 missions with
-the table's seeds and start poses) into a new folder, then prints and saves ``bench/results/campaign_sample.json``:
-missions per hour of wall time, missions per core-hour (a cluster user sizes a run with it), the mean wall time of a
+Run: ``.venv/bin/python bench/campaign_sample.py [--workers 2] [--backend local|ray] [--cold] [--out DIR]
+[--compare DIR]``. Flies ``mission_configs/campaigns/paper_table1_roi_sample.yaml`` (runs 0 to 6 of each of the nine
+cells: 63 missions with the table's seeds and start poses) into a new folder, warm workers unless ``--cold``, then
+prints and saves ``bench/results/campaign_sample_<warm|cold>.json``: missions per hour of wall time, missions per
+core-hour (a cluster user sizes a run with it), the mean wall time of a mission, the CPU time all processes took per
 mission, and, mission by mission, whether every metric (touchdown coordinates included) equals the newest committed
 result of the same mission (:data:`REFERENCES`). A mission that differs is listed with the fields that differ: the
 references were flown at earlier commits, so a difference is a change of behaviour since, intended or not.
+``--compare DIR`` also compares every mission with another campaign folder of the same sample (flown cold, or at
+another commit: the before of a before/after).
 """
 
 from __future__ import annotations
@@ -49,12 +52,18 @@ def main() -> int:
     parser.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.LOCAL.value)
     parser.add_argument("--address", help="ray: the cluster's address")
     parser.add_argument("--out", type=Path, help="campaign folder (default: a new temporary one)")
+    parser.add_argument("--cold", action="store_true", help="new processes for every mission (the before)")
+    parser.add_argument("--compare", type=Path, help="another campaign folder of this sample: compare every mission")
     args = parser.parse_args()
     spec = load_campaign_spec(SPEC)
     out = args.out or Path(tempfile.mkdtemp(prefix="campaign-sample-"))
-    started = time.monotonic()
-    results = run_campaign(spec, out, workers=args.workers, backend=Backend(args.backend), address=args.address)
+    started, cpu_before = time.monotonic(), os.times()
+    results = run_campaign(
+        spec, out, workers=args.workers, backend=Backend(args.backend), address=args.address, warm=not args.cold
+    )
     wall_s = time.monotonic() - started
+    cpu_after = os.times()  # this process and every child it waited for (workers reap their SITLs and companions)
+    cpu_s = sum(after - before for after, before in zip(cpu_after[:4], cpu_before[:4], strict=True))
     compared: dict[str, str] = {}
     differing: dict[str, list[str]] = {}
     for reference in REFERENCES:
@@ -66,11 +75,16 @@ def main() -> int:
             compared[mission_id] = str(reference.parent.relative_to(REPO_ROOT))
             if diff := differences(r, committed[mission_id]):
                 differing[mission_id] = diff
+    against: dict[str, list[str]] = {}
+    if args.compare is not None:
+        other = {r["mission_id"]: r for r in read_results(args.compare / "results.jsonl")}
+        against = {r["mission_id"]: differences(r, other.get(r["mission_id"], {})) for r in results}
     cores = args.workers if args.backend == Backend.LOCAL.value else os.cpu_count() or 1
     report = {
         "machine": machine_context(),
         "spec": str(SPEC.relative_to(REPO_ROOT)),
         "backend": args.backend,
+        "warm": not args.cold,
         "workers": args.workers,
         "missions": len(results),
         "errors": sum("error" in r for r in results),
@@ -78,13 +92,18 @@ def main() -> int:
         "missions_per_hour": round(3600.0 * len(results) / wall_s, 1),
         "missions_per_core_hour": round(3600.0 * len(results) / wall_s / cores, 1),
         "mean_mission_wall_s": round(sum(float(r.get("wall_s", 0.0)) for r in results) / max(len(results), 1), 2),
+        "cpu_s_per_mission": round(cpu_s / max(len(results), 1), 2) if args.backend == Backend.LOCAL.value else None,
         "compared_with": compared,
         "identical": len(compared) - len(differing),
         "differing": differing,
         "out": str(out),
     }
+    if args.compare is not None:
+        report["compared_folder"] = str(args.compare)
+        report["identical_to_compared"] = sum(not d for d in against.values())
+        report["differing_from_compared"] = {k: d for k, d in against.items() if d}
     print(report)
-    save_report(report, REPO_ROOT / "bench" / "results" / "campaign_sample.json")
+    save_report(report, REPO_ROOT / "bench" / "results" / f"campaign_sample_{'cold' if args.cold else 'warm'}.json")
     return 0
 
 

@@ -1,7 +1,8 @@
 """The ``slz`` command: one entry point, one subcommand per job.
 
-The drone's commands live here (``check-config``, ``fly``, ``doctor``, ``replay``, ``report``); other packages add
-theirs through the ``slz.commands`` entry-point group (the lab's ``sitl``, ``demo`` and ``campaign``: ``sitl.cli``).
+The drone's commands live here (``check-config``, ``fly``, ``doctor``, ``replay``, ``report``, and ``serve``, which runs
+any of them one after another in one warm process); other packages add theirs through the ``slz.commands``
+entry-point group (the lab's ``sitl``, ``demo`` and ``campaign``: ``sitl.cli``).
 This module imports nothing outside ``companion``, and subcommands import what they need lazily.
 """
 
@@ -165,6 +166,12 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0 if report.identical else 1
 
 
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from companion.app.serve import serve
+
+    return serve(main, preload=args.preload)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``slz``."""
     parser = argparse.ArgumentParser(prog="slz", description="SLZ Lander: safe landing in populated areas.")
@@ -208,6 +215,14 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--out", type=Path, help="output folder (default FLIGHT/report)")
     report.add_argument("--no-video", action="store_true", help="skip camera.mp4 (the contact sheet is kept)")
     report.set_defaults(func=_cmd_report)
+
+    serve = sub.add_parser(
+        "serve", help="run slz commands named on standard input, one after another, in this one warm process"
+    )
+    serve.add_argument(
+        "--preload", action="append", default=[], metavar="MODULE", help="import this before the first command"
+    )
+    serve.set_defaults(func=_cmd_serve)
 
     for plugin in _plugins():
         plugin(sub)

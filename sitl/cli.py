@@ -82,6 +82,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
                 instance_base=args.instance_base,
                 backend=Backend(args.backend),
                 address=args.address,
+                warm=not args.cold,
             )
         except CampaignError as exc:
             sys.stderr.write(f"slz campaign: {exc}\n")
@@ -261,6 +262,11 @@ def register(subcommands: Any) -> None:
     campaign.add_argument(
         "--address",
         help="ray: the cluster (auto, HOST:PORT of the head, ray://HOST:PORT); default: Ray on this machine",
+    )
+    campaign.add_argument(
+        "--cold",
+        action="store_true",
+        help="new SITL and companion processes for every mission (default: each worker keeps its own; same results)",
     )
     campaign.add_argument("--report-only", action="store_true", help="rebuild the report from the results")
     campaign.add_argument(

@@ -13,14 +13,13 @@ import contextlib
 import json
 import logging
 import math
-import os
 import shutil
 import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import yaml
@@ -29,7 +28,7 @@ from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig, camera_mismatches
 from companion.config import read_yaml_file, validate_config
 from sitl.config import SitlConfig
-from sitl.process import SitlProcess, die_with_parent, log_tail, terminate_then_kill
+from sitl.process import SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
 
 logger = logging.getLogger(__name__)
 
@@ -135,7 +134,7 @@ class CompanionProcess:
         """Start it (its output goes to ``log_path``)."""
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         with self.log_path.open("wb") as log:
-            env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+            env = child_env()
             self._proc = subprocess.Popen(
                 self.command, cwd=REPO_ROOT, stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=die_with_parent
             )
@@ -294,17 +293,84 @@ def _autopilot_lands(spec: MissionSpec) -> bool:
     return not commands or commands[-1]["command"] != "hold"
 
 
-def fly(spec: MissionSpec) -> MissionResult:
-    """Fly one mission (see the module docstring); writes ``result.json`` in the run folder.
+class SitlHandle(Protocol):
+    """What :func:`fly` needs of a mission's SITL (:class:`~sitl.process.SitlProcess`, :class:`~sitl.warm.WarmSitl`)."""
+
+    def start(self, ready_timeout_s: float) -> Any:
+        """Start it and wait until it answers on its control channel."""
+
+    def state(self) -> dict[str, Any]:
+        """Ground truth and counters (``TimeoutError`` when it does not answer)."""
+
+    @property
+    def running(self) -> bool:
+        """It has not ended."""
+
+    def wait(self, timeout_s: float) -> int:
+        """Its exit code once it ends by itself (``subprocess.TimeoutExpired`` after ``timeout_s``)."""
+
+    def stop(self) -> int | None:
+        """End it."""
+
+    def log_tail(self, lines: int = 40) -> str:
+        """The end of its output."""
+
+
+class CompanionHandle(Protocol):
+    """What :func:`fly` needs of a mission's companion (:class:`CompanionProcess`,
+    :class:`~sitl.warm.WarmCompanion`)."""
+
+    def start(self) -> Any:
+        """Start it."""
+
+    def wait(self, timeout_s: float) -> int:
+        """Its exit code; an exception (after stopping it) past ``timeout_s``."""
+
+    def stop(self) -> None:
+        """End it."""
+
+    def log_tail(self, lines: int = 30) -> str:
+        """The end of its output."""
+
+
+class MissionProcesses(Protocol):
+    """Where a mission's SITL and companion run: fresh processes (:class:`ColdProcesses`) or a campaign worker's
+    warm ones (:class:`~sitl.warm.WarmWorker`). Either way the same command lines, so the same result."""
+
+    def sitl(self, instance: int, config_path: Path, log_path: Path) -> SitlHandle:
+        """The SITL of one mission (``slz sitl --instance INSTANCE --config CONFIG_PATH``)."""
+
+    def companion(self, config_path: Path, out_dir: Path, timeout_s: float, log_path: Path) -> CompanionHandle:
+        """The companion of one mission (``slz fly --config CONFIG_PATH --out OUT_DIR --timeout TIMEOUT_S``)."""
+
+
+class ColdProcesses:
+    """Each mission in two new processes (the demo, the tests, a campaign with ``--cold``)."""
+
+    def sitl(self, instance: int, config_path: Path, log_path: Path) -> SitlProcess:
+        """A new ``slz sitl`` process; its output in ``log_path``'s folder as ``sitl-<instance>.log``."""
+        return SitlProcess(["--config", str(config_path)], instance, log_path.parent)
+
+    def companion(self, config_path: Path, out_dir: Path, timeout_s: float, log_path: Path) -> CompanionProcess:
+        """A new ``slz fly`` process."""
+        return CompanionProcess(config_path, out_dir, timeout_s, log_path)
+
+
+def fly(spec: MissionSpec, processes: MissionProcesses | None = None) -> MissionResult:
+    """Fly one mission (see the module docstring) on ``processes`` (default: new ones); writes ``result.json`` in
+    the run folder.
 
     A run folder holds one mission: the companion's flight log appends (it must survive a crash), so the log of an
     earlier flight in the same folder (a replay flown again) is removed first.
     """
+    processes = processes or ColdProcesses()
     shutil.rmtree(spec.run_dir / "flight", ignore_errors=True)
     sitl_path, mission_path = write_configs(spec)
     started = time.monotonic()
-    sitl = SitlProcess(["--config", str(sitl_path)], spec.instance, spec.run_dir)
-    companion = CompanionProcess(mission_path, spec.run_dir / "flight", spec.timeout_s, spec.run_dir / "companion.log")
+    sitl = processes.sitl(spec.instance, sitl_path, spec.run_dir / f"sitl-{spec.instance}.log")
+    companion = processes.companion(
+        mission_path, spec.run_dir / "flight", spec.timeout_s, spec.run_dir / "companion.log"
+    )
     try:
         sitl.start(ready_timeout_s=SITL_READY_WALL_S)
         companion.start()

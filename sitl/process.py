@@ -17,6 +17,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,17 @@ from companion.vehicle.sim_control import Command, Event
 from sitl.config import CONTROL_PORT
 
 logger = logging.getLogger(__name__)
+
+
+# A mission's processes compute on one thread each: a campaign flies one mission per CPU, and the libraries' idle
+# worker threads spin-wait for the next call (OpenCV's parallel_for pool called sched_yield about 30,000 times a second
+# in each process: docs/results/campaign_throughput.md). Set in the environment by hand, a variable wins.
+SINGLE_THREAD_ENV = {"OPENCV_FOR_THREADS_NUM": "1", "OPENBLAS_NUM_THREADS": "1"}
+
+
+def child_env() -> dict[str, str]:
+    """The environment of a SITL or companion process started for a mission (unbuffered output, one thread)."""
+    return {**SINGLE_THREAD_ENV, **os.environ, "PYTHONUNBUFFERED": "1"}
 
 
 def _load_prctl() -> Any:
@@ -70,7 +82,91 @@ class SitlProcessError(Exception):
     """The SITL process failed to start, answer or stop (what, and the end of its log)."""
 
 
-class SitlProcess:
+class ControlClient:
+    """Requests to one SITL instance's control channel (UDP on loopback), each answered by its own reply."""
+
+    def __init__(self, instance: int) -> None:
+        self.control_addr = ("127.0.0.1", CONTROL_PORT + instance)
+        self.instance = instance
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(("127.0.0.1", 0))
+        self._request_id = 0
+
+    def request(self, request: dict[str, Any], timeout_s: float = 2.0) -> dict[str, Any]:
+        """Send a control request and wait for its own reply (``TimeoutError`` after ``timeout_s``).
+
+        Each request carries an id that the SITL echoes, so a late reply to an earlier request is never taken for
+        this one's.
+        """
+        self._request_id += 1
+        request = {**request, "id": self._request_id}
+        self._sock.sendto(json.dumps(request).encode(), self.control_addr)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError(f"no reply to {request['cmd']} within {timeout_s} s")
+            self._sock.settimeout(remaining)
+            try:
+                data, _ = self._sock.recvfrom(65535)
+            except TimeoutError:
+                continue
+            except ConnectionRefusedError:
+                raise TimeoutError(f"control port {self.control_addr[1]} refused") from None
+            reply: dict[str, Any] = json.loads(data)
+            if reply.get("id") == self._request_id:
+                return reply
+
+    def wait_ready(
+        self, pid: int, exit_code: Callable[[], int | None], timeout_s: float, log_tail: Callable[[], str]
+    ) -> None:
+        """Ping until the SITL of process ``pid`` answers (a positive readiness check).
+
+        Raises
+        ------
+        SitlProcessError
+            The process exited (``exit_code()`` is not None), another process answers on this instance's port, or
+            nothing answered within ``timeout_s``; with the end of its log (``log_tail()``).
+        """
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            code = exit_code()
+            if code is not None:
+                raise SitlProcessError(f"SITL exited with {code} at start:\n{log_tail()}")
+            try:
+                reply = self.request({"cmd": Command.PING.value}, timeout_s=0.25)
+            except TimeoutError:
+                continue
+            if reply.get("event") == Event.PONG:
+                if reply.get("pid") not in (None, pid):  # another SITL holds this instance's ports
+                    raise SitlProcessError(
+                        f"instance {self.instance}: its control port is answered by another SITL (pid "
+                        f"{reply.get('pid')}); stop it or choose another instance"
+                    )
+                return
+        raise SitlProcessError(f"SITL not ready within {timeout_s} s:\n{log_tail()}")
+
+    def close(self) -> None:
+        """Close the socket."""
+        self._sock.close()
+
+
+class ControlledSitl:
+    """A running SITL's control requests, through the :class:`ControlClient` it holds while running."""
+
+    _control: ControlClient | None
+
+    def request(self, request: dict[str, Any], timeout_s: float = 2.0) -> dict[str, Any]:
+        """A control request and its own reply (:meth:`ControlClient.request`)."""
+        assert self._control is not None
+        return self._control.request(request, timeout_s)
+
+    def state(self) -> dict[str, Any]:
+        """Ground truth and counters."""
+        return self.request({"cmd": Command.STATE.value})
+
+
+class SitlProcess(ControlledSitl):
     """A ``slz sitl`` child process.
 
     Parameters
@@ -92,15 +188,14 @@ class SitlProcess:
         self.log_path = Path(log_dir) / f"sitl-{instance}.log"
         self.control_addr = ("127.0.0.1", CONTROL_PORT + instance)
         self._proc: subprocess.Popen[bytes] | None = None
-        self._sock: socket.socket | None = None
-        self._request_id = 0
+        self._control: ControlClient | None = None
 
     def start(self, ready_timeout_s: float = 20.0) -> SitlProcess:
         """Start the process and wait until it answers on its control channel."""
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         log = open(self.log_path, "wb")  # noqa: SIM115 - owned by the child
         cmd = [sys.executable, "-m", "sitl", "--instance", str(self.instance), *self.args]
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env = child_env()
         cpu = self.cpu
 
         def pin() -> None:
@@ -111,62 +206,20 @@ class SitlProcess:
         self._proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=pin)
         log.close()
         atexit.register(self.stop)
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.bind(("127.0.0.1", 0))
-        deadline = time.monotonic() + ready_timeout_s
-        while time.monotonic() < deadline:
-            if self._proc.poll() is not None:
-                raise SitlProcessError(f"SITL exited with {self._proc.returncode} at start:\n{self.log_tail()}")
-            try:
-                reply = self.request({"cmd": Command.PING.value}, timeout_s=0.25)
-            except TimeoutError:
-                continue
-            if reply.get("event") == Event.PONG:
-                if reply.get("pid") not in (None, self._proc.pid):  # another SITL holds this instance's ports
-                    self.stop()
-                    raise SitlProcessError(
-                        f"instance {self.instance}: its control port is answered by another SITL (pid "
-                        f"{reply.get('pid')}); stop it or choose another instance"
-                    )
-                return self
-        self.stop()
-        raise SitlProcessError(f"SITL not ready within {ready_timeout_s} s:\n{self.log_tail()}")
+        self._control = ControlClient(self.instance)
+        proc = self._proc
+        try:
+            self._control.wait_ready(proc.pid, proc.poll, ready_timeout_s, self.log_tail)
+        except SitlProcessError:
+            self.stop()
+            raise
+        return self
 
     @property
     def pid(self) -> int:
         """The child's process id."""
         assert self._proc is not None
         return self._proc.pid
-
-    def request(self, request: dict[str, Any], timeout_s: float = 2.0) -> dict[str, Any]:
-        """Send a control request and wait for its own reply (``TimeoutError`` after ``timeout_s``).
-
-        Each request carries an id that the SITL echoes, so a late reply to an earlier request is never taken for
-        this one's.
-        """
-        assert self._sock is not None
-        self._request_id += 1
-        request = {**request, "id": self._request_id}
-        self._sock.sendto(json.dumps(request).encode(), self.control_addr)
-        deadline = time.monotonic() + timeout_s
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise TimeoutError(f"no reply to {request['cmd']} within {timeout_s} s")
-            self._sock.settimeout(remaining)
-            try:
-                data, _ = self._sock.recvfrom(65535)
-            except TimeoutError:
-                continue
-            except ConnectionRefusedError:
-                raise TimeoutError(f"control port {self.control_addr[1]} refused") from None
-            reply: dict[str, Any] = json.loads(data)
-            if reply.get("id") == self._request_id:
-                return reply
-
-    def state(self) -> dict[str, Any]:
-        """Ground truth and counters."""
-        return self.request({"cmd": Command.STATE.value})
 
     @property
     def running(self) -> bool:
@@ -190,9 +243,9 @@ class SitlProcess:
                 proc.wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:
                 terminate_then_kill(proc, timeout_s)
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
+        if self._control is not None:
+            self._control.close()
+            self._control = None
         atexit.unregister(self.stop)
         self._proc = None
         return proc.returncode

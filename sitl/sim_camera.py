@@ -47,7 +47,16 @@ class SimCamera:
         return self.server.fileno()
 
     def capture(self, t_s: float, state: VehicleState) -> bool:
-        """Render and send the frame at ``t_s``; False if it was dropped (no client, or the last one unsent)."""
+        """Render and send the frame at ``t_s``; False if it was dropped (no client, or the last one unsent).
+
+        A frame for nobody (no client connected) is counted as dropped without being drawn: after a campaign's
+        companion has let go, the SITL runs on at full speed and would draw every frame it owes to no one. Every
+        frame's content depends on its instant and sequence number only, so skipping one changes no other."""
+        self.server.poll()
+        if not self.server.connected:
+            self.server.stats.dropped += 1
+            self.seq += 1
+            return False
         n, e, d = (float(v) for v in state.position_ned_m)
         pose = Pose.from_ned_quaternion(n, e, d, state.quaternion_wxyz)
         weather = self.weather.state_at(t_s)

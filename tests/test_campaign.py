@@ -1,8 +1,10 @@
 """The campaign runner end to end: real SITL and companion processes per mission, in parallel workers.
 
-The smoke spec (2 conditions x 2 strategies x 1 run, short missions) is flown twice: once with one worker, once with
-two workers killed mid-way (the whole process group, SIGKILL) and resumed. Both must give the same per-mission
-results and the same report tables; the report must be produced and every metric within its valid range.
+The smoke spec (2 conditions x 2 strategies x 1 run, short missions) is flown with one warm worker (one SITL and one
+companion process for all four missions), with two workers killed mid-way (the whole process group, SIGKILL) and
+resumed, with new processes for every mission (``--cold``), and on a two-node Ray cluster with a node killed. All must
+give the same per-mission results and the same report tables; the report must be produced and every metric within
+its valid range.
 """
 
 from __future__ import annotations
@@ -102,6 +104,19 @@ def test_the_report_is_written_and_every_metric_is_in_its_range(one_worker: Path
     for plot in ("success.png", "nearest_person.png", "touchdowns_static.png", "touchdowns_moving_20.png"):
         assert (one_worker / plot).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (one_worker / "results.csv").read_text().count("\n") == 5
+
+
+def test_missions_in_new_processes_give_the_warm_workers_results(one_worker: Path, tmp_path: Path) -> None:
+    """The fixture's campaign flew its four missions on one warm worker (one SITL and one companion process for all);
+    with ``--cold`` every mission starts both anew. Every metric must agree."""
+    out = tmp_path / "cold"
+    run = campaign(out, 2, "--cold")
+    _, stderr = run.communicate(timeout=900)
+    assert run.returncode == 0, stderr[-3000:]
+    cold = {r["mission_id"]: r for r in comparable(read_results(out / "results.jsonl"))}
+    warm = {r["mission_id"]: r for r in comparable(read_results(one_worker / "results.jsonl"))}
+    assert len(cold) == 4
+    assert cold == warm
 
 
 def test_two_workers_killed_and_resumed_give_the_same_results(one_worker: Path, tmp_path: Path) -> None:

@@ -1,12 +1,13 @@
 """Ray as the campaign's distributed backend: the same missions as Ray tasks, on every node of a cluster.
 
 Each mission is one Ray task (``num_cpus=1``, so Ray runs one per CPU it is given) in a Ray worker process, which Ray
-keeps between tasks (its imports stay warm). The task leases a free SITL instance on its node
-(:mod:`sitl.instances`), flies the mission exactly as the local backend does (:func:`sitl.campaign.runner.fly_one`),
-gives the instance back and returns the result's JSON. The driver streams the results into the same resumable
-campaign folder as they finish. When a node dies, Ray flies its missions in flight again on another node
-(``max_retries``): the mission's SITL and companion die with their worker (``sitl.process.die_with_parent``), and a
-mission is in lockstep, so where and how often it was started does not change its result.
+keeps between tasks. At its first mission a worker leases a free SITL instance on its node (:mod:`sitl.instances`) and
+starts its warm SITL and companion processes (:mod:`sitl.warm`), kept for its later missions; each task flies its
+mission exactly as the local backend does (:func:`sitl.campaign.runner.fly_one`) and returns the result's JSON. The
+driver streams the results into the same resumable campaign folder as they finish. When a node dies, Ray flies its
+missions in flight again on another node (``max_retries``): the mission's SITL and companion die with their worker
+(``sitl.process.die_with_parent``), and a mission is in lockstep, so where and how often it was started does not change
+its result.
 
 A mission's folder (``missions/<id>``) is made under the campaign folder when the node sees that folder (the driver's
 machine, or a shared file system), else under the node's temporary directory; ``--keep-runs`` keeps it there.
@@ -20,7 +21,11 @@ import logging
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sitl.instances import InstanceLease
+    from sitl.warm import WarmWorker
 
 logger = logging.getLogger(__name__)
 
@@ -32,14 +37,25 @@ class RayBackendError(Exception):
     """Ray is missing, or the cluster cannot be reached (the address, and what went wrong)."""
 
 
-def fly_on_node(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
-    """In a Ray worker: lease a SITL instance on this node, fly the mission, give the instance back."""
-    from sitl.campaign.runner import fly_one
-    from sitl.instances import leased_instance
+_warm: WarmWorker | None = None  # this Ray worker process's warm processes, on the instance it leased for life
+_warm_lease: InstanceLease | None = None
+
+
+def fly_on_node(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool, warm: bool) -> dict[str, Any]:
+    """In a Ray worker: fly the mission on this worker's warm processes (leasing a SITL instance for the worker's
+    lifetime at its first mission), or, not ``warm``, lease an instance for this mission alone."""
+    global _warm, _warm_lease
+    from sitl.campaign.runner import fly_one, warm_worker
+    from sitl.instances import lease_instance, leased_instance
 
     folder = Path(out_dir)
     if not folder.is_dir():  # another machine than the driver's, without a shared file system
         folder = Path(tempfile.gettempdir()) / "slz-campaigns" / folder.name
+    if warm:
+        if _warm is None:
+            _warm_lease = lease_instance()  # held until this worker process exits
+            _warm = warm_worker(_warm_lease.instance)
+        return fly_one(spec_json, mission_id, str(folder), keep, _warm.instance, _warm)
     with leased_instance() as lease:
         return fly_one(spec_json, mission_id, str(folder), keep, lease.instance)
 
@@ -52,6 +68,7 @@ def run_on_ray(
     address: str | None,
     workers: int,
     record: Callable[[str, dict[str, Any] | BaseException], None],
+    warm: bool = True,
 ) -> None:
     """Fly ``mission_ids`` as Ray tasks and hand each result (or the exception that ended it) to ``record``, in the
     order they finish.
@@ -78,7 +95,7 @@ def run_on_ray(
     try:
         fly = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(fly_on_node)
         for mission_id in mission_ids:
-            pending[fly.remote(spec_json, mission_id, str(out_dir), keep)] = mission_id
+            pending[fly.remote(spec_json, mission_id, str(out_dir), keep, warm)] = mission_id
         logger.info("%d missions on Ray", len(pending))
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)

@@ -11,6 +11,7 @@ and config only, not on the number of workers or the machine's speed.
 
 from __future__ import annotations
 
+import atexit
 import collections
 import concurrent.futures
 import contextlib
@@ -23,6 +24,7 @@ import shutil
 import signal
 import socket
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures.process import BrokenProcessPool
@@ -38,8 +40,9 @@ from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.config import MAX_INSTANCE, SitlConfig
 from sitl.instances import InstanceLease, lease_instance
-from sitl.mission import MissionError, MissionSpec, fly
+from sitl.mission import MissionError, MissionProcesses, MissionSpec, fly
 from sitl.process import SitlProcessError
+from sitl.warm import ServeProcessError, WarmWorker
 
 logger = logging.getLogger(__name__)
 
@@ -88,15 +91,18 @@ def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance:
 
 _worker_instance = INSTANCE_BASE
 _worker_lease: InstanceLease | None = None
+_worker_warm: WarmWorker | None = None
 
 
-def _init_worker(instances: Any) -> None:
-    global _worker_instance, _worker_lease
+def _init_worker(instances: Any, warm: bool) -> None:
+    global _worker_instance, _worker_lease, _worker_warm
     if instances is None:  # lease a free instance for this worker's lifetime (released when it exits)
         _worker_lease = lease_instance()
         _worker_instance = _worker_lease.instance
     else:
         _worker_instance = int(instances.get())
+    if warm:
+        _worker_warm = warm_worker(_worker_instance)
     logging.basicConfig(level=logging.WARNING)
     # SIGTERM ends a worker at once (the default action: the pool would catch an exception and fly the next
     # mission); its SITL and companion get SIGTERM from the kernel as it dies (sitl.process.die_with_parent).
@@ -125,24 +131,39 @@ def node_name() -> str:
     return host
 
 
+def warm_worker(instance: int) -> WarmWorker:
+    """This process's warm worker on ``instance`` (its processes stopped when this process exits)."""
+    worker = WarmWorker(instance, Path(tempfile.gettempdir()) / "slz-warm")
+    atexit.register(worker.close)
+    return worker
+
+
 def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
-    """In a local worker process: :func:`fly_one` on the worker's SITL instance."""
-    return fly_one(spec_json, mission_id, out_dir, keep, _worker_instance)
+    """In a local worker process: :func:`fly_one` on the worker's SITL instance (and its warm processes)."""
+    return fly_one(spec_json, mission_id, out_dir, keep, _worker_instance, _worker_warm)
 
 
-def fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool, instance: int) -> dict[str, Any]:
+def fly_one(
+    spec_json: dict[str, Any],
+    mission_id: str,
+    out_dir: str,
+    keep: bool,
+    instance: int,
+    processes: MissionProcesses | None = None,
+) -> dict[str, Any]:
     """Fly one mission on SITL ``instance`` and return its metrics (or its error) as JSON, with the wall time it took
-    and the node that flew it (every backend flies a mission through here)."""
+    and the node that flew it (every backend flies a mission through here). ``processes``: a warm worker's, or
+    None for new processes."""
     spec = CampaignSpec.model_validate(spec_json)
     plan = next(p for p in spec.missions() if p.mission_id == mission_id)
     run_dir = Path(out_dir) / "missions" / mission_id
     shutil.rmtree(run_dir, ignore_errors=True)  # a mission cut off by a kill starts again from nothing
     started = time.monotonic()
     try:
-        fly(mission_spec(spec, plan, run_dir, instance))
+        fly(mission_spec(spec, plan, run_dir, instance), processes)
         metrics = mission_metrics(run_dir, mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
         result: dict[str, Any] = metrics.to_json()
-    except (MissionError, SitlProcessError, OSError, ValueError, KeyError) as exc:
+    except (MissionError, SitlProcessError, ServeProcessError, OSError, ValueError, KeyError) as exc:
         result = error_result(plan, str(exc))
     result["wall_s"] = round(time.monotonic() - started, 3)
     result["node"] = node_name()
@@ -236,8 +257,10 @@ def _run_local(
     workers: int,
     worker_ids: list[int] | None,
     record: Callable[[str, dict[str, Any] | BaseException], None],
+    warm: bool,
 ) -> None:
-    """Fly ``todo`` in ``workers`` spawned worker processes; each result (or exception) to ``record`` as it ends."""
+    """Fly ``todo`` in ``workers`` spawned worker processes (each with its warm processes when ``warm``); each result
+    (or exception) to ``record`` as it ends."""
     context = multiprocessing.get_context("spawn")
     instances = None
     if worker_ids is not None:
@@ -245,7 +268,7 @@ def _run_local(
         for instance in worker_ids:
             instances.put(instance)
     with concurrent.futures.ProcessPoolExecutor(
-        max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances,)
+        max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances, warm)
     ) as pool:
         futures = {pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs): p for p in todo}
         try:
@@ -275,12 +298,15 @@ def run_campaign(
     instance_base: int | None = None,
     backend: Backend = Backend.LOCAL,
     address: str | None = None,
+    warm: bool = True,
 ) -> list[dict[str, Any]]:
     """Fly every mission of ``spec`` not yet in ``out_dir/results.jsonl``; returns all results in plan order.
 
     ``backend`` says where: local worker processes (``workers`` of them, on ``instance_base`` + k or leased
     instances), or Ray tasks on the cluster at ``address`` (None: a Ray instance on this machine with ``workers``
-    CPUs). Every backend writes the same results: a mission's depends on its seed and config alone.
+    CPUs). ``warm``: each worker keeps a SITL and a companion process across its missions (:mod:`sitl.warm`);
+    False starts both anew for every mission. Every backend writes the same results, warm or not: a mission's
+    depends on its seed and config alone.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     spec_path = out_dir / "spec.yaml"
@@ -339,11 +365,11 @@ def run_campaign(
 
                     try:
                         ids = [p.mission_id for p in todo]
-                        run_on_ray(spec_json, ids, out_dir, keep_runs, address, workers, record)
+                        run_on_ray(spec_json, ids, out_dir, keep_runs, address, workers, record, warm)
                     except RayBackendError as exc:
                         raise CampaignError(str(exc)) from None
                 else:
-                    _run_local(spec_json, todo, out_dir, keep_runs, workers, worker_ids, record)
+                    _run_local(spec_json, todo, out_dir, keep_runs, workers, worker_ids, record, warm)
             interrupted = False
         finally:
             segment_log.end(segment, flown_here, interrupted)

@@ -159,39 +159,41 @@ class Park:
         canvas = size if paint else 1
         yy, xx = np.mgrid[0:canvas, 0:canvas].astype(np.float32) - size / 2
         px_per_m = 1.0 / self.texture_res_m
+        # Each feature paints the pixels of its mask, computing its colour there only (the colour of a pixel is the
+        # same float32 arithmetic as over the whole texture: the same texture, without full-size temporaries).
         # Sand patches and a paved plaza.
         for _ in range(int(rng.integers(1, 3))):
             c = rng.uniform(-0.4, 0.4, size=2) * size
             r = rng.uniform(3.0, 8.0) * px_per_m
-            patch = (np.hypot(xx - c[0], yy - c[1]) < r * (1 + 0.15 * fine))[:, :, None]
-            ground = np.where(patch, np.array(SAND, np.float32) * (1 + 0.05 * fine[:, :, None]), ground)
+            patch = np.hypot(xx - c[0], yy - c[1]) < r * (1 + 0.15 * fine)
+            ground[patch] = np.array(SAND, np.float32) * (1 + 0.05 * fine[patch][:, None])
         if rng.random() < 0.7:
             c = rng.uniform(-0.35, 0.35, size=2) * size
             half = rng.uniform(4.0, 9.0) * px_per_m
             plaza = (np.abs(xx - c[0]) < half) & (np.abs(yy - c[1]) < half)
-            tiles = ((np.floor(xx / (0.5 * px_per_m)) + np.floor(yy / (0.5 * px_per_m))) % 2).astype(np.float32)
-            colour = np.array(PAVING[0], np.float32)[None, None, :] * (0.92 + 0.08 * tiles[:, :, None])
-            ground = np.where(plaza[:, :, None], colour, ground)
+            x_in, y_in = xx[plaza], yy[plaza]
+            tiles = ((np.floor(x_in / (0.5 * px_per_m)) + np.floor(y_in / (0.5 * px_per_m))) % 2).astype(np.float32)
+            ground[plaza] = np.array(PAVING[0], np.float32)[None, :] * (0.92 + 0.08 * tiles[:, None])
         # A sports court with white markings.
         if rng.random() < 0.6:
             c = rng.uniform(-0.3, 0.3, size=2) * size
             w, h = 14.0 * px_per_m, 26.0 * px_per_m
             court = (np.abs(xx - c[0]) < w / 2) & (np.abs(yy - c[1]) < h / 2)
-            ground = np.where(court[:, :, None], np.array(COURT[int(rng.integers(len(COURT)))], np.float32), ground)
+            ground[court] = np.array(COURT[int(rng.integers(len(COURT)))], np.float32)
             line = 0.08 * px_per_m
             edge = court & (
                 (np.abs(np.abs(xx - c[0]) - w / 2 + line) < line) | (np.abs(np.abs(yy - c[1]) - h / 2 + line) < line)
             )
             mid = court & (np.abs(yy - c[1]) < line)
-            ground = np.where((edge | mid)[:, :, None], np.float32(235.0), ground)
+            ground[edge | mid] = np.float32(235.0)
         # Asphalt and paved paths crossing the park.
         for _ in range(int(rng.integers(1, 4))):
             colour = np.array(ASPHALT if rng.random() < 0.5 else PAVING[1], dtype=np.float32)
             width = rng.uniform(2.0, 5.0) * px_per_m
             angle = rng.uniform(0, math.pi)
             offset = rng.uniform(-0.45, 0.45) * size
-            dist = np.abs(xx * math.sin(angle) - yy * math.cos(angle) - offset)
-            ground = np.where((dist < width / 2)[:, :, None], colour * (1 + 0.04 * fine[:, :, None]), ground)
+            path = np.abs(xx * math.sin(angle) - yy * math.cos(angle) - offset) < width / 2
+            ground[path] = colour * (1 + 0.04 * fine[path][:, None])
         return np.clip(ground, 0, 255).astype(np.uint8)
 
     def _objects(self, rng: np.random.Generator, roi_half_m: float) -> list[ParkObject]:
