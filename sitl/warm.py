@@ -245,6 +245,8 @@ class WarmSitl(ControlledSitl):
 
     def stop(self, timeout_s: float = STOP_WALL_S) -> int | None:
         """Ask it to shut down and wait for its command to end; a process that does not end it is killed."""
+        if self._control is None:  # never started (the process did not take the command), or stopped already
+            return self._exit_code
         if self._ended() is None:
             with contextlib.suppress(TimeoutError, OSError):
                 self.request({"cmd": Command.SHUTDOWN.value}, timeout_s=0.5)
