@@ -129,6 +129,10 @@ def test_a_warm_worker_flies_on_after_its_companion_process_is_killed_mid_missio
             assert worker.companion_process.pid != companion_pid  # a new companion process
             assert worker.sitl_process.pid == sitl_pid  # the SITL's mission ended cleanly: it stayed warm
             assert worker.sitl_process.commands == 3
+            # Between missions SIGTERM ends the SITL process as it ends a fresh one (the handler `slz sitl` installs
+            # for its mission is put back when the mission ends).
+            os.kill(worker.sitl_process.pid, signal.SIGTERM)
+            wait_until(lambda: not worker.sitl_process.alive, 10.0, "the idle SITL process ended by SIGTERM")
         finally:
             worker.close()
     assert not worker.sitl_process.alive

@@ -25,6 +25,7 @@ import importlib
 import json
 import logging
 import os
+import signal
 import sys
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -79,7 +80,11 @@ def parse_request(line: str) -> tuple[list[str], Path]:
 
 
 def run_one(run: Callable[[Sequence[str]], int], argv: list[str]) -> dict[str, Any]:
-    """``run(argv)``'s exit code as a reply; an exception is written to the command's log and named in the reply."""
+    """``run(argv)``'s exit code as a reply; an exception is written to the command's log and named in the reply.
+
+    Signal handlers a command installs (``slz sitl`` stops its vehicle on SIGTERM) are put back when it ends, so
+    between commands SIGTERM and SIGINT end the process as they would end a fresh one."""
+    handlers = {signum: signal.getsignal(signum) for signum in (signal.SIGTERM, signal.SIGINT)}
     try:
         return {"exit_code": int(run(argv))}
     except SystemExit as exc:  # argparse's usage errors, sys.exit() in a command
@@ -88,6 +93,9 @@ def run_one(run: Callable[[Sequence[str]], int], argv: list[str]) -> dict[str, A
     except Exception as exc:
         traceback.print_exc()
         return {"exit_code": 1, "error": f"{type(exc).__name__}: {exc}"}
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
 
 
 def serve(run: Callable[[Sequence[str]], int], preload: Sequence[str] = (), requests: TextIO | None = None) -> int:
