@@ -52,7 +52,8 @@ class SimCamera:
         A frame for nobody (no client connected) is counted as dropped without being drawn: after a campaign's
         companion has let go, the SITL runs on at full speed and would draw every frame it owes to no one. Every
         frame's content depends on its instant and sequence number only, so skipping one changes no other."""
-        self.server.poll()
+        if not self.server.connected:
+            self.server.poll()  # a client connecting now gets this frame (a connected one is polled by the send)
         if not self.server.connected:
             self.server.stats.dropped += 1
             self.seq += 1

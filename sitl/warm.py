@@ -209,16 +209,20 @@ class WarmSitl(ControlledSitl):
             raise
         return self
 
+    def _collect(self, timeout_s: float) -> None:
+        """Take the command's exit code if it ends within ``timeout_s`` (-9 when its process died)."""
+        try:
+            reply = self.process.result(timeout_s)
+        except ServeProcessError:
+            self._exit_code = -9
+            return
+        if reply is not None:
+            self._exit_code = int(reply.get("exit_code", 1))
+
     def _ended(self) -> int | None:
         """Its exit code once the command has ended (by itself, or its process died), else None."""
         if self._exit_code is None and self.process.busy:
-            try:
-                reply = self.process.result(0.0)
-            except ServeProcessError:
-                self._exit_code = -9
-                return self._exit_code
-            if reply is not None:
-                self._exit_code = int(reply.get("exit_code", 1))
+            self._collect(0.0)
         return self._exit_code
 
     @property
@@ -233,13 +237,7 @@ class WarmSitl(ControlledSitl):
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise subprocess.TimeoutExpired(self.argv, timeout_s)
-            try:
-                reply = self.process.result(remaining)
-            except ServeProcessError:
-                self._exit_code = -9
-                break
-            if reply is not None:
-                self._exit_code = int(reply.get("exit_code", 1))
+            self._collect(remaining)
         assert self._exit_code is not None
         return self._exit_code
 
