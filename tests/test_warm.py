@@ -63,7 +63,7 @@ def test_serve_runs_commands_one_after_another_each_with_its_own_log(serve: Serv
 
 @pytest.mark.unit
 def test_serve_answers_a_malformed_request_and_ends_with_its_input(tmp_path: Path) -> None:
-    command = [sys.executable, "-m", "companion.cli", "serve"]
+    command = [sys.executable, "-m", "companion.cli", "serve", "--preload", "tests.serve_probe"]
     requests = "not json\n" + json.dumps({"argv": [], "log": str(tmp_path / "x.log")}) + "\n"
     requests += json.dumps({"argv": ["--version"], "log": str(tmp_path / "v.log")}) + "\n"
     done = subprocess.run(
@@ -78,6 +78,9 @@ def test_serve_answers_a_malformed_request_and_ends_with_its_input(tmp_path: Pat
     assert replies[3] == {"exit_code": 0}  # --version prints and exits 0: into its log, not the replies
     assert "slz-lander" in (tmp_path / "v.log").read_text()
     assert len(replies) == 4
+    # Between and after commands, the process's own standard error is its own again.
+    assert "serve probe: exiting" in done.stderr
+    assert "serve probe" not in (tmp_path / "v.log").read_text()
 
 
 @pytest.mark.unit

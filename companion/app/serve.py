@@ -12,6 +12,7 @@ Protocol (JSON, one object per line):
 - the process says ``{"ready": pid}`` on standard output once its ``--preload`` modules are imported;
 - a request is ``{"argv": [...], "log": "path"}``: the command's standard output and error (file descriptors 1
   and 2, so the output of native libraries and of child processes too) go to ``log`` (truncated) while it runs;
+  between commands standard output goes nowhere and standard error to the process's own (its start-up log);
 - its reply is ``{"exit_code": n}``, plus ``"error"`` when it raised (the traceback is in its log);
 - end of input ends the process (exit 0).
 
@@ -39,9 +40,17 @@ class ServeError(Exception):
     """A request that cannot be served (what was wrong with it)."""
 
 
+def _stdout_to_null() -> None:
+    """Point file descriptor 1 at ``/dev/null``."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    os.close(null)
+
+
 @contextlib.contextmanager
-def output_to(log_path: Path) -> Iterator[None]:
-    """Point file descriptors 1 and 2 at ``log_path`` (created, truncated) for the block, then at ``/dev/null``."""
+def output_to(log_path: Path, stderr_after: int) -> Iterator[None]:
+    """Point file descriptors 1 and 2 at ``log_path`` (created, truncated) for the block; then 1 at ``/dev/null`` and
+    2 back at ``stderr_after`` (the process's own log)."""
     for stream in (sys.stdout, sys.stderr):
         stream.flush()
     log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -57,10 +66,8 @@ def output_to(log_path: Path) -> Iterator[None]:
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(OSError, ValueError):
                 stream.flush()
-        null = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(null, 1)
-        os.dup2(null, 2)
-        os.close(null)
+        _stdout_to_null()
+        os.dup2(stderr_after, 2)
 
 
 def parse_request(line: str) -> tuple[list[str], Path]:
@@ -103,9 +110,8 @@ def serve(run: Callable[[Sequence[str]], int], preload: Sequence[str] = (), requ
     for module in preload:
         importlib.import_module(module)
     reply = os.fdopen(os.dup(1), "w", buffering=1)  # os.dup: not inherited by child processes
-    null = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(null, 1)  # between commands nothing may reach the reply stream
-    os.close(null)
+    own_stderr = os.dup(2)  # the process's own log, between commands
+    _stdout_to_null()  # between commands nothing may reach the reply stream
     reply.write(json.dumps({"ready": os.getpid()}) + "\n")
     for line in requests if requests is not None else sys.stdin:
         if not line.strip():
@@ -115,7 +121,7 @@ def serve(run: Callable[[Sequence[str]], int], preload: Sequence[str] = (), requ
         except ServeError as exc:
             reply.write(json.dumps({"exit_code": 2, "error": str(exc)}) + "\n")
             continue
-        with output_to(log_path):
+        with output_to(log_path, own_stderr):
             answer = run_one(run, argv)
         reply.write(json.dumps(answer) + "\n")
     reply.close()
