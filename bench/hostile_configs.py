@@ -2,9 +2,9 @@
 
 Run: ``.venv/bin/python bench/hostile_configs.py``. Each file runs in its own ``slz fly --dry-run`` process (the
 refusal must come before anything is started), timed from process start to exit; the load alone is also timed in
-this process. Asserted: exit 2, no traceback, the expected text in the message, a message under 2,000 characters,
-every file refused within 1 s of loading. Prints and saves ``bench/results/hostile_configs.json`` with the machine's
-context.
+this process. Asserted: exit 2, no traceback, the field (or the document) named with one of the project's own
+reasons, a message under 2,000 characters, every file refused within 1 s of loading. Prints and saves
+``bench/results/hostile_configs.json`` with the machine's context.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def main() -> int:
                 "process_s": round(process_s, 3),
                 "exit": run.returncode,
                 "traceback": "Traceback" in run.stderr,
-                "named": hostile.expect in run.stderr and hostile.expect in message,
+                "named": hostile.refusal_problem(run.stderr) is None and hostile.refusal_problem(message) is None,
                 "message_chars": len(run.stderr),
                 "message": run.stderr.strip().splitlines()[-1][:160] if run.stderr.strip() else "",
             }

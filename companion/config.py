@@ -119,12 +119,12 @@ class _StrictLoader(_SafeLoader):  # type: ignore[valid-type,misc]
 
 
 def _yaml_problem(exc: yaml.YAMLError) -> str:
-    """A YAML error in one short line (PyYAML's own message may quote a whole line of the file)."""
+    """A YAML error in one short line naming the document (PyYAML's own message may quote a whole line of the file)."""
     if isinstance(exc, yaml.MarkedYAMLError):
         where = f" (line {exc.problem_mark.line + 1}, column {exc.problem_mark.column + 1})" if exc.problem_mark else ""
         what = " ".join(str(part) for part in (exc.context, exc.problem) if part)
-        return f"not valid YAML: {cut(what, 200)}{where}"
-    return f"not valid YAML: {cut(str(exc), 200)}"
+        return f"<root>: not valid YAML: {cut(what, 200)}{where}"
+    return f"<root>: not valid YAML: {cut(str(exc), 200)}"
 
 
 def _check_nesting(text: str, source: str) -> None:

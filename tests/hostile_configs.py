@@ -19,13 +19,44 @@ SHIPPED = REPO_ROOT / "mission_configs" / "sitl.yaml"
 FENCE_LINE = "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]"
 
 
+# This project's wording of any refusal by the YAML parser (companion.config): where the parser may refuse a file
+# before this project's own check does (nesting, aliases), either refusal is right, and whose it is depends on the
+# parser's release. The parser's own words are never asserted.
+PARSER_REFUSED = "not valid YAML"
+
+
 @dataclass(frozen=True)
 class HostileConfig:
-    """One file: its name, its bytes, and text its refusal must contain."""
+    """One file, and the refusal it must get.
+
+    Attributes
+    ----------
+    name : str
+        The file's name (no suffix).
+    content : bytes
+        The file.
+    field : str
+        What the refusal must name: a problem line begins with this dotted field path, or with ``<root>`` for the
+        document as a whole.
+    reasons : tuple of str
+        Phrases of this project's own messages, one of which the refusal must contain; empty where the words are a
+        library's (pydantic's, Python's), so that only the field is asserted.
+    """
 
     name: str
     content: bytes
-    expect: str
+    field: str
+    reasons: tuple[str, ...] = ()
+
+    def refusal_problem(self, message: str) -> str | None:
+        """What is wrong with ``message`` (a ``ConfigError``'s text, or ``slz``'s standard error) as this file's
+        refusal, or None when it is the refusal it must be."""
+        problems = [line.strip()[2:] for line in message.splitlines() if line.strip().startswith("- ")]
+        if not any(p.startswith(self.field) and p[len(self.field) : len(self.field) + 1] in ":.[" for p in problems):
+            return f"no problem names {self.field!r}: {problems}"
+        if self.reasons and not any(reason in message for reason in self.reasons):
+            return f"none of {self.reasons} in {problems}"
+        return None
 
 
 def fly_dry_run(config: Path) -> subprocess.CompletedProcess[str]:
@@ -65,25 +96,32 @@ def hostile_configs() -> list[HostileConfig]:
         return _with(base, "  takeoff_altitude_m: 20.0", f"  takeoff_altitude_m: {value}")
 
     deep = 20_000
+    too_deep = ("nested deeper than", PARSER_REFUSED)  # our depth check, or the parser's own limit first
+    alias_bomb = ("aliases expand beyond", PARSER_REFUSED)
+    non_finite = ("must be a finite number",)
     out = [
-        HostileConfig("empty", b"", "empty document"),
-        HostileConfig("comment_only", b"# nothing here\n\n", "empty document"),
-        HostileConfig("null_document", b"null\n", "empty document"),
-        HostileConfig("binary_junk", bytes(rng.integers(0, 256, 4096, dtype=np.uint8)), "<root>"),
-        HostileConfig("latin1_bytes", base.encode() + "\n# caf\xe9\n".encode("latin-1"), "not UTF-8"),
-        HostileConfig("nul_bytes", base.encode() + b"\x00\x00", "NUL"),
-        HostileConfig("deep_flow_sequence", b"vehicle: " + b"[" * deep + b"]" * deep + b"\n", "nested deeper"),
+        HostileConfig("empty", b"", "<root>", ("empty document",)),
+        HostileConfig("comment_only", b"# nothing here\n\n", "<root>", ("empty document",)),
+        HostileConfig("null_document", b"null\n", "<root>", ("empty document",)),
+        HostileConfig("binary_junk", bytes(rng.integers(0, 256, 4096, dtype=np.uint8)), "<root>", ("not UTF-8",)),
+        HostileConfig("latin1_bytes", base.encode() + "\n# caf\xe9\n".encode("latin-1"), "<root>", ("not UTF-8",)),
+        HostileConfig("nul_bytes", base.encode() + b"\x00\x00", "<root>", ("NUL",)),
+        HostileConfig("deep_flow_sequence", b"vehicle: " + b"[" * deep + b"]" * deep + b"\n", "<root>", too_deep),
         HostileConfig(
             "deep_block_mapping",
             "".join(f"{' ' * i}k{i}:\n" for i in range(200)).encode() + b" " * 200 + b"v: 1\n",
-            "nested deeper",
+            "<root>",
+            too_deep,
         ),
-        HostileConfig("alias_bomb_lists", _laughs(10, "list"), "aliases expand beyond"),
-        HostileConfig("alias_bomb_mappings", _laughs(24, "map"), "aliases expand beyond"),
+        HostileConfig("alias_bomb_lists", _laughs(10, "list"), "<root>", alias_bomb),
+        HostileConfig("alias_bomb_mappings", _laughs(24, "map"), "<root>", alias_bomb),
         HostileConfig(
-            "megabyte_value", _with(base, "url: udpin://0.0.0.0:14540", "url: " + "x" * 1_000_000), "vehicle.url"
+            "megabyte_value",
+            _with(base, "url: udpin://0.0.0.0:14540", "url: " + "x" * 1_000_000),
+            "vehicle.url",
+            ("(got 'xxx",),
         ),
-        HostileConfig("over_a_mebibyte", base.encode() + b"#" + b"x" * (1 << 20) + b"\n", "bytes"),
+        HostileConfig("over_a_mebibyte", base.encode() + b"#" + b"x" * (1 << 20) + b"\n", "<root>", ("more than the",)),
         HostileConfig(
             "geofence_nan_corner",
             _with(
@@ -92,6 +130,7 @@ def hostile_configs() -> list[HostileConfig]:
                 "  polygon_ne_m: [[.nan, 0], [0, 20], [20, 20], [20, 0]]",
             ),
             "geofence.polygon_ne_m",
+            non_finite,
         ),
         HostileConfig(
             "geofence_inf_corner",
@@ -101,6 +140,7 @@ def hostile_configs() -> list[HostileConfig]:
                 "  polygon_ne_m: [[-.inf, 0], [0, 20], [20, 20], [20, 0]]",
             ),
             "geofence.polygon_ne_m",
+            non_finite,
         ),
         HostileConfig(
             "geofence_bow_tie",
@@ -109,7 +149,8 @@ def hostile_configs() -> list[HostileConfig]:
                 "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
                 "  polygon_ne_m: [[0, 0], [20, 20], [20, 0], [0, 10]]",
             ),
-            "simple polygon",
+            "geofence",
+            ("polygon_ne_m must be a simple polygon",),
         ),
         HostileConfig(
             "geofence_no_area",
@@ -118,7 +159,8 @@ def hostile_configs() -> list[HostileConfig]:
                 "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
                 "  polygon_ne_m: [[0, 0], [10, 10], [20, 20]]",
             ),
-            "enclose",
+            "geofence",
+            ("polygon_ne_m must enclose",),
         ),
         HostileConfig(
             "geofence_folded_edge",
@@ -127,38 +169,56 @@ def hostile_configs() -> list[HostileConfig]:
                 "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]",
                 "  polygon_ne_m: [[-30, -30], [-30, 30], [30, 30], [30, -30], [30, 40]]",
             ),
-            "simple polygon",
+            "geofence",
+            ("polygon_ne_m must be a simple polygon",),
         ),
-        HostileConfig("start_north_nan", _with(base, "start:", "start:\n  start_north_m: .nan"), "start.start_north_m"),
+        HostileConfig(
+            "start_north_nan", _with(base, "start:", "start:\n  start_north_m: .nan"), "start.start_north_m", non_finite
+        ),
         HostileConfig(
             "takeoff_inf",
             takeoff(".inf"),
             "start.takeoff_altitude_m",
+            non_finite,
         ),
         HostileConfig(
-            "max_altitude_negative", _with(base, "  max_altitude_m: 40.0", "  max_altitude_m: -5"), "max_altitude_m"
+            "max_altitude_negative",
+            _with(base, "  max_altitude_m: 40.0", "  max_altitude_m: -5"),
+            "geofence.max_altitude_m",
+            ("(got -5)",),
         ),
-        HostileConfig("duplicate_top_key", base.encode() + b"\nvehicle: {connect_timeout_s: 1.0}\n", "duplicate key"),
+        HostileConfig(
+            "duplicate_top_key",
+            base.encode() + b"\nvehicle: {connect_timeout_s: 1.0}\n",
+            "<root>",
+            ("duplicate key 'vehicle'",),
+        ),
         HostileConfig(
             "duplicate_nested_key",
             _with(base, "start:", "start:\n  takeoff_altitude_m: 10.0\n  takeoff_altitude_m: 30.0"),
-            "duplicate key 'takeoff_altitude_m'",
+            "<root>",
+            ("duplicate key 'takeoff_altitude_m'",),
         ),
         HostileConfig("unknown_section", base.encode() + b"\nturbo: true\n", "turbo"),
-        HostileConfig("section_not_mapping", _with(base, "geofence:", "geofence: 5\nunused:"), "geofence"),
-        HostileConfig("top_level_list", b"- vehicle\n- camera\n", "expected a mapping"),
-        HostileConfig("top_level_string", b"fly safely\n", "expected a mapping"),
-        HostileConfig("two_documents", base.encode() + b"\n---\nvehicle: {}\n", "single document"),
-        HostileConfig("python_tag", b"vehicle: !!python/object/apply:os.system ['true']\n", "python/object"),
-        HostileConfig("tab_indent", b"vehicle:\n\turl: udpin://0.0.0.0:14540\n", "not valid YAML"),
+        HostileConfig(
+            "section_not_mapping", _with(base, "geofence:", "geofence: 5\nunused:"), "geofence", ("(got 5)",)
+        ),
+        HostileConfig("top_level_list", b"- vehicle\n- camera\n", "<root>", ("expected a mapping",)),
+        HostileConfig("top_level_string", b"fly safely\n", "<root>", ("expected a mapping",)),
+        HostileConfig("two_documents", base.encode() + b"\n---\nvehicle: {}\n", "<root>", (PARSER_REFUSED,)),
+        HostileConfig(
+            "python_tag", b"vehicle: !!python/object/apply:os.system ['true']\n", "<root>", (PARSER_REFUSED,)
+        ),
+        HostileConfig("tab_indent", b"vehicle:\n\turl: udpin://0.0.0.0:14540\n", "<root>", (PARSER_REFUSED,)),
         HostileConfig("huge_integer", _with(base, "  frame_every: 10", "  frame_every: " + "9" * 5000), "<root>"),
         HostileConfig(
             "altitude_floor_negative",
             _with(base, "guidance:", "guidance:\n  perception_min_altitude_m: -1"),
             "guidance.perception_min_altitude_m",
+            ("(got -1)",),
         ),
-        HostileConfig("complex_key", b"? [a, b]\n: 1\n", "unhashable key"),
-        HostileConfig("string_for_number", takeoff("high"), "takeoff"),
-        HostileConfig("long_key", base.encode() + b"\n" + b"k" * 100_000 + b": 1\n", "not valid YAML"),
+        HostileConfig("complex_key", b"? [a, b]\n: 1\n", "<root>", (PARSER_REFUSED,)),
+        HostileConfig("string_for_number", takeoff("high"), "start.takeoff_altitude_m", ("(got 'high')",)),
+        HostileConfig("long_key", base.encode() + b"\n" + b"k" * 100_000 + b": 1\n", "<root>", (PARSER_REFUSED,)),
     ]
     return out
