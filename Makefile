@@ -1,21 +1,40 @@
 # SLZ Lander: two commands do all set-up. `make demo` runs the main job, `make test` runs the checks.
-# Both create the virtualenv idempotently (re-installed only when pyproject.toml changes).
+# Both create the virtualenv idempotently from the lock (re-installed only when the lock or pyproject.toml changes):
+# requirements/dev.lock pins every distribution with its hashes, so a fresh machine installs what was tested.
+# `make lock` rewrites the locks (scripts/lock.py, uv), `make lock-upgrade` moves them to the newest releases, and
+# `make test-latest` runs the whole suite on the newest releases without touching the lock.
 
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
+LOCK := requirements/dev.lock
+# LOCKED=0 installs the newest releases pyproject.toml allows instead of the lock (`make test-latest`).
+LOCKED ?= 1
+LATEST_VENV := .venv-latest
 
-.PHONY: setup demo test test-slow lint typecheck pytest bench paper-table paper-table-roi eval-real training models clean
+.PHONY: setup demo test test-latest test-slow lock lock-upgrade lockcheck lint typecheck pytest bench paper-table \
+	paper-table-roi eval-real training models clean
 
 setup: $(STAMP)
 
+ifeq ($(LOCKED),1)
+$(STAMP): pyproject.toml $(LOCK) scripts/install-system-deps.sh
+	bash scripts/install-system-deps.sh
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(BIN)/python -m pip check
+	$(BIN)/python scripts/lock.py check $(LOCK)
+	@touch $(STAMP)
+else
 $(STAMP): pyproject.toml scripts/install-system-deps.sh
 	bash scripts/install-system-deps.sh
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet --upgrade --upgrade-strategy eager pip 'setuptools>=77' wheel -e '.[dev]'
+	$(BIN)/python -m pip check
 	@touch $(STAMP)
+endif
 
 demo: $(STAMP)
 	$(BIN)/slz demo --out runs
@@ -25,14 +44,36 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 
 typecheck: $(STAMP)
-	$(BIN)/mypy companion sitl bench tests models
+	$(BIN)/mypy companion sitl bench tests models scripts
 
 # pytest exits 5 when it collected no test: make treats that as a failure, as it must. --durations: the CI log
 # names the slowest tests, to keep the suite well under 15 minutes on 2 cores.
 pytest: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow" --durations=15
 
-test: lint typecheck pytest
+# The environment is the lock's, exactly (nothing upgraded or added by hand since `make setup`).
+lockcheck: $(STAMP)
+ifeq ($(LOCKED),1)
+	$(BIN)/python scripts/lock.py check $(LOCK)
+else
+	$(BIN)/python scripts/lock.py check --report $(LOCK)
+endif
+
+test: lockcheck lint typecheck pytest
+
+# The whole suite on the newest releases pyproject.toml allows, in its own virtualenv (re-resolved at every run),
+# after a list of what differs from the lock. A failure here is an upgrade to decide on, not a broken main.
+test-latest:
+	rm -f $(LATEST_VENV)/.installed-stamp
+	$(MAKE) test VENV=$(LATEST_VENV) LOCKED=0
+
+# Rewrite requirements/*.lock after a change to pyproject.toml (locked versions kept where they still fit), or move
+# every lock to the newest releases (then `make setup test`, and commit the locks with what the upgrade needed).
+lock: $(STAMP)
+	$(BIN)/python scripts/lock.py compile
+
+lock-upgrade: $(STAMP)
+	$(BIN)/python scripts/lock.py compile --upgrade
 
 # The slow tier: the tests too long for every run (the MAVSDK square at real speed, `slz campaign replay`).
 # The nightly workflow runs them.
@@ -67,10 +108,11 @@ eval-real: $(STAMP)
 # Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
 # quantization, evaluation, ablations; about two hours on 2 cores). The drone needs neither.
 training: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,training]'
+	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r requirements/training.lock
+	$(BIN)/python scripts/lock.py check requirements/training.lock
 
 models: training
 	bash scripts/build-density-models.sh
 
 clean:
-	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache runs
+	rm -rf $(VENV) $(LATEST_VENV) .mypy_cache .ruff_cache .pytest_cache runs

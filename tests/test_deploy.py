@@ -1,7 +1,8 @@
 """What can be checked of the deployment here, without a Jetson.
 
-- The companion's dependency set resolves for the drone: aarch64, CPython 3.10 (JetPack 6), binary wheels only. A pip
-  resolve for that platform from the package registry, nothing installed.
+- The drone's lock (requirements/drone.lock) resolves for the drone: aarch64, CPython 3.10 (JetPack 6), binary wheels
+  only, each with a hash in the lock. A pip resolve for that platform from the package registry, nothing installed;
+  the container and the Jetson install use that lock.
 - The systemd unit passes ``systemd-analyze verify`` and keeps the rules that make it safe on a vehicle.
 - The install script passes ``shellcheck`` and refuses a machine that is not a Jetson.
 - The GitHub workflow runs the tests on push and the gated nightly campaign.
@@ -9,7 +10,6 @@
 
 from __future__ import annotations
 
-import importlib.metadata
 import json
 import os
 import shutil
@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from packaging.utils import canonicalize_name
 
 pytestmark = pytest.mark.unit
 
@@ -27,34 +28,53 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 UNIT = REPO_ROOT / "deploy" / "systemd" / "slz-lander.service"
 INSTALL = REPO_ROOT / "deploy" / "jetson" / "install.sh"
 # JetPack 6 is Ubuntu 22.04: glibc 2.35, so any manylinux tag up to 2.35 runs there.
+LOCK_TOOL = REPO_ROOT / "scripts" / "lock.py"
+DRONE_LOCK = REPO_ROOT / "requirements" / "drone.lock"
 AARCH64_PLATFORMS = ["manylinux2014_aarch64", *(f"manylinux_2_{minor}_aarch64" for minor in range(17, 36))]
 
 
-def companion_requirements() -> list[str]:
-    """``[project.dependencies]`` of pyproject.toml as installed: exactly what the drone gets from ``pip install .``."""
-    requirements = importlib.metadata.requires("slz-lander") or []
-    return [r for r in requirements if "extra ==" not in r]
-
-
-def test_the_companion_dependencies_resolve_for_aarch64_python_3_10(tmp_path: Path) -> None:
-    requirements = companion_requirements()
+def test_the_drone_lock_resolves_for_aarch64_python_3_10_with_its_hashes(tmp_path: Path) -> None:
+    # The Jetson's pins (markers resolved for aarch64, CPython 3.10: pip evaluates markers for the interpreter it
+    # runs on, not the --platform it is given), each a wheel the Jetson can load whose hash is in the lock.
+    pins = tmp_path / "drone-aarch64-cp310.txt"
+    done = subprocess.run(
+        [sys.executable, str(LOCK_TOOL), "for-target", "--machine", "aarch64", "--python", "3.10", str(DRONE_LOCK)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    pins.write_text(done.stdout)
     platforms = [arg for p in AARCH64_PLATFORMS for arg in ("--platform", p)]
     report = tmp_path / "resolve.json"
-    command = [sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed", "--quiet"]
-    command += ["--report", str(report), "--only-binary=:all:", "--python-version", "3.10", "--implementation", "cp"]
-    command += ["--abi", "cp310", "--abi", "abi3", "--abi", "none", *platforms, *requirements]
+    command = [sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed", "--quiet", "--no-deps"]
+    command += ["--require-hashes", "--report", str(report), "--only-binary=:all:", "--python-version", "3.10"]
+    command += ["--implementation", "cp", "--abi", "cp310", "--abi", "abi3", "--abi", "none", *platforms]
+    command += ["-r", str(pins)]
     env = {**os.environ, "PIP_DISABLE_PIP_VERSION_CHECK": "1"}
     done = subprocess.run(command, capture_output=True, text=True, timeout=600, env=env, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
-    installed = {item["metadata"]["name"].lower(): item for item in json.loads(report.read_text())["install"]}
+    installed = {
+        canonicalize_name(item["metadata"]["name"]): item for item in json.loads(report.read_text())["install"]
+    }
+    pinned = [line.split("==")[0] for line in pins.read_text().splitlines() if line.strip()]
+    assert sorted(installed) == sorted(pinned)  # every pin, nothing more
     for requirement in ("numpy", "onnxruntime", "opencv-python-headless", "mavsdk", "scipy", "pydantic", "pyyaml"):
         assert requirement in installed, sorted(installed)
     for name, item in installed.items():  # every wheel is one the Jetson can load
         wheel = item["download_info"]["url"].rsplit("/", 1)[-1]
         assert wheel.endswith("-any.whl") or "aarch64" in wheel, (name, wheel)
-    # Nothing of the SITL, the training or the developer tools reaches the drone.
-    for forbidden in ("pymavlink", "pyrender", "jsbsim", "torch", "pytest", "trimesh", "matplotlib"):
-        assert forbidden not in installed
+
+
+def test_the_container_and_the_jetson_install_the_drone_lock() -> None:
+    dockerfile = (REPO_ROOT / "deploy" / "container" / "Dockerfile").read_text()
+    install = INSTALL.read_text()
+    for text in (dockerfile, install):
+        assert "--require-hashes" in text
+        assert "requirements/drone.lock" in text
+        assert "--no-deps --no-build-isolation" in text  # the project itself adds nothing unlocked
+        assert "--upgrade pip" not in text
 
 
 def test_the_systemd_unit_verifies_and_cannot_loop_a_vehicle_into_takeoffs(tmp_path: Path) -> None:
@@ -146,6 +166,8 @@ def test_the_github_workflow_tests_on_push_and_gates_a_nightly_campaign() -> Non
     assert (REPO_ROOT / "mission_configs" / "campaigns" / "baselines" / "smoke.json").is_file()
     upload = next(step for step in nightly if step.get("uses", "").startswith("actions/upload-artifact"))
     assert upload["if"] == "always()"
+    latest = [step.get("run", "") for step in workflow["jobs"]["latest-releases"]["steps"]]
+    assert "make test-latest" in latest  # the newest releases, tested apart from the lock
 
 
 def test_tensorrt_gets_fp16_and_a_persistent_engine_cache_and_the_others_nothing(tmp_path: Path) -> None:

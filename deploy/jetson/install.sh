@@ -4,7 +4,8 @@
 #   sudo deploy/jetson/install.sh [--cpu-only] [--no-service] [--prefix DIR] [--dry-run]
 #
 # What it does, idempotently (a second run changes nothing that is already right):
-#   1. a virtualenv in PREFIX/venv with the companion's dependencies only (no SITL, no training packages);
+#   1. a virtualenv in PREFIX/venv with the companion's dependencies only (no SITL, no training packages), the
+#      versions of requirements/drone.lock with their hashes;
 #   2. onnxruntime with the CUDA and TensorRT execution providers from the Jetson AI Lab index for JetPack 6
 #      (ORT_INDEX_URL, see deploy/README.md); with --cpu-only, or when that index cannot be reached, PyPI's CPU
 #      build: the companion then logs its CPU fallback at every start;
@@ -21,8 +22,8 @@ SERVICE=1
 DRY_RUN=0
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 
-usage() {
-    sed -n '2,16p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+usage() {  # the comment block above `set -euo pipefail`
+    sed -n '2,/^set /{/^#/p}' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
 }
 
 while [ $# -gt 0 ]; do
@@ -66,16 +67,20 @@ if [ ! -x "$venv/bin/python" ]; then
     say "creating $venv"
     run "$python" -m venv "$venv"
 fi
-run "$venv/bin/python" -m pip install --quiet --upgrade pip
-# The companion alone: `pip install .` without extras pulls exactly pyproject.toml's [project.dependencies].
+# The companion alone, from the drone's lock: every distribution pinned and hashed (pip, setuptools and wheel
+# included), the versions CI tested; the project itself then adds nothing unlocked.
+run "$venv/bin/python" -m pip install --quiet --require-hashes --no-deps -r "$REPO/requirements/drone.lock"
 run mkdir -p "$PREFIX/src"
 run cp -r "$REPO/companion" "$REPO/models" "$REPO/mission_configs" "$REPO/pyproject.toml" "$REPO/README.md" "$PREFIX/src/"
-run "$venv/bin/python" -m pip install --quiet "$PREFIX/src"
+run "$venv/bin/python" -m pip install --quiet --no-deps --no-build-isolation "$PREFIX/src"
+run "$venv/bin/python" -m pip check
 
 # -- onnxruntime with the GPU providers -------------------------------------------------------------------------------
 if [ "$CPU_ONLY" -eq 0 ]; then
+    # The one package outside the lock (the Jetson AI Lab index is not PyPI, so the lock has no hash of it): --no-deps,
+    # its dependencies are the locked CPU build's; importing it below (the providers line) says if they fall short.
     say "onnxruntime-gpu from $ORT_INDEX_URL"
-    if run "$venv/bin/python" -m pip install --quiet --extra-index-url "$ORT_INDEX_URL" onnxruntime-gpu; then
+    if run "$venv/bin/python" -m pip install --quiet --no-deps --extra-index-url "$ORT_INDEX_URL" onnxruntime-gpu; then
         # Two onnxruntime distributions in one venv shadow each other: keep only the GPU one.
         run "$venv/bin/python" -m pip uninstall --quiet --yes onnxruntime || true
         run "$venv/bin/python" -m pip install --quiet --force-reinstall --no-deps --extra-index-url "$ORT_INDEX_URL" \
