@@ -31,7 +31,7 @@ class SimCamera:
             float(rng.uniform(scenario.sun_azimuth_deg.low, scenario.sun_azimuth_deg.high)),
             float(rng.uniform(scenario.ambient.low, scenario.ambient.high)),
         )
-        self.park = Park(config.seed, roi_side_m=scenario.roi_side_m)
+        self.park = Park(config.seed, roi_side_m=scenario.roi_side_m, ground=scenario.ground)
         self.crowd = Crowd(scenario, config.seed)
         self.weather = WeatherSchedule(scenario, config.seed)
         self.intrinsics = PinholeCamera.from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)

@@ -45,7 +45,7 @@ from sitl.render.camera import Light, WorldRenderer
 from sitl.render.meshes import head_height_m
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
-from sitl.world.scenario import ScenarioConfig, Style, WeatherKind
+from sitl.world.scenario import GroundKind, ScenarioConfig, Style, WeatherKind
 from sitl.world.weather import WeatherSchedule, apply_weather
 
 
@@ -86,11 +86,14 @@ def generate(
     frames_per_scene: int = 8,
     first: int = 0,
     altitude_range_m: tuple[float, float] = (8.0, 40.0),
+    ground: GroundKind = GroundKind.PROCEDURAL,
 ) -> list[GeneratedFrame]:
     """Render frames ``first .. first + frames - 1`` of ``split`` into ``out_dir/<split>`` (module docstring).
 
     ``altitude_range_m`` is the (lowest, highest) camera altitude in metres, drawn uniformly; the default 8-40 m
-    gives the frames the shipped models were trained and evaluated on, 2-40 m adds the final descent.
+    gives the frames the shipped models were trained and evaluated on, 2-40 m adds the final descent. ``ground``
+    ``real`` paints the parks' ground from the real frames held out from training (``sitl/world/ground.py``): the
+    held-out split's real-ground variant.
     """
     lo_m, hi_m = altitude_range_m
     if not (math.isfinite(lo_m) and math.isfinite(hi_m) and 2.0 <= lo_m < hi_m <= 120.0):
@@ -113,7 +116,7 @@ def generate(
                 moving_fraction=0.2, weather=WEATHER[split], style=STYLE[split], child_fraction=0.15
             )
             crowd = Crowd(scenario, seed)
-            park = Park(seed, style=STYLE[split])
+            park = Park(seed, style=STYLE[split], ground=ground)
             light_rng = np.random.default_rng([seed, 8])
             light = Light.from_angles(
                 float(light_rng.uniform(20, 80)), float(light_rng.uniform(0, 360)), float(light_rng.uniform(0.3, 0.7))
@@ -208,9 +211,21 @@ def main() -> int:
         metavar=("LOW", "HIGH"),
         help="camera altitude range in metres (default 8 40; 2 40 adds the final descent)",
     )
+    parser.add_argument(
+        "--ground",
+        choices=[g.value for g in GroundKind],
+        default=GroundKind.PROCEDURAL.value,
+        help="the parks' ground (real: the real frames held out from training)",
+    )
     args = parser.parse_args()
     written = generate(
-        args.out, Split(args.split), args.frames, args.seed, first=args.first, altitude_range_m=tuple(args.altitude_m)
+        args.out,
+        Split(args.split),
+        args.frames,
+        args.seed,
+        first=args.first,
+        altitude_range_m=tuple(args.altitude_m),
+        ground=GroundKind(args.ground),
     )
     heads = sum(f.heads for f in written)
     sys.stdout.write(f"wrote {len(written)} frames, {heads} visible heads, to {args.out / args.split}\n")

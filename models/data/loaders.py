@@ -256,12 +256,37 @@ def load_yolo_people(image_dir: Path, label_dir: Path, person_classes: tuple[int
     return out
 
 
+def load_real_ground_heldout(root: Path) -> list[BoxedImage]:
+    """The held-out frames of a derived real-ground folder (``models/data/real_ground.py``: ``index.json`` with
+    ``gsd_m_per_px`` and ``frames``): nobody in them, so no boxes; never trained on."""
+    path = root / "index.json"
+    data = _read_json(path)
+    frames = data.get("frames") if isinstance(data, dict) else None
+    if not isinstance(frames, list):
+        raise DatasetError(path, "expected an object with a 'frames' list")
+    out = []
+    for entry in frames:
+        if not isinstance(entry, dict) or "name" not in entry or "split" not in entry:
+            raise DatasetError(path, "each frame needs 'name' and 'split'")
+        if entry["split"] != "heldout":
+            continue
+        image_path = root / f"{entry['name']}.jpg"
+        if not image_path.is_file():
+            raise DatasetError(image_path, "frame listed in index.json is missing")
+        out.append(BoxedImage(image_path, np.zeros((0, 4), np.float64), None))
+    if not out:
+        raise DatasetError(path, "no held-out frame")
+    return out
+
+
 def load_real_set(root: Path) -> list[BoxedImage]:
     """A folder of real frames in any layout above: ``boxes.json`` (SDD reference), ``annotations/*.json`` with
-    images beside them or in ``images/`` or a folder named like the file (COCO, HIT-UAV), or ``images/`` with
-    ``labels/`` (YOLO, class 0 = person)."""
+    images beside them or in ``images/`` or a folder named like the file (COCO, HIT-UAV), ``images/`` with
+    ``labels/`` (YOLO, class 0 = person), or a derived real-ground folder (``index.json``: its held-out frames)."""
     if (root / "boxes.json").is_file():
         return load_sdd_reference(root)
+    if (root / "index.json").is_file():
+        return load_real_ground_heldout(root)
     annotation_files = sorted((root / "annotations").glob("*.json")) if (root / "annotations").is_dir() else []
     if annotation_files:
         out: list[BoxedImage] = []

@@ -22,6 +22,9 @@ class Architecture(str, enum.Enum):
     """The paper's: three single-layer head columns (9x9, 7x7, 5x5) at full resolution, then a 6-layer backbone."""
     LITE = "lite"
     """Ours: strided stem to stride 4, then depthwise-separable dilated blocks; about 15x fewer operations."""
+    LITE_WIDE = "lite-wide"
+    """The same design, wider and deeper (64 channels, six blocks, receptive field about 110 px): twice the
+    operations of ``lite``, for real ground (issue 32)."""
 
 
 def _conv_bn_relu(
@@ -125,9 +128,35 @@ class Lite(nn.Module):
         return self.body(x)
 
 
+class LiteWide(nn.Module):
+    """``Lite`` widened and deepened: the same stem, then depthwise-separable blocks at stride 4 with dilations
+    1, 2, 3, 4, 2, 1 (64 channels, then 32), a 1x1 head made non-negative. More context (about 110 px) to tell a
+    person from a bush, a pipe or a patch of gravel of the same size."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            _conv_bn_relu(3, 16, 3, stride=2),
+            _conv_bn_relu(16, 32, 3, stride=2),
+            _SeparableBlock(32, 64, 1),
+            _SeparableBlock(64, 64, 2),
+            _SeparableBlock(64, 64, 3),
+            _SeparableBlock(64, 64, 4),
+            _SeparableBlock(64, 64, 2),
+            _SeparableBlock(64, 32, 1),
+            _density_head(32),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 3, H, W) -> (N, 1, H/4, W/4)."""
+        return self.body(x)
+
+
 def build(architecture: Architecture) -> nn.Module:
     """A freshly initialised network."""
-    return Ccnn() if architecture is Architecture.CCNN else Lite()
+    if architecture is Architecture.CCNN:
+        return Ccnn()
+    return LiteWide() if architecture is Architecture.LITE_WIDE else Lite()
 
 
 def parameter_count(model: nn.Module) -> int:

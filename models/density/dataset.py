@@ -4,12 +4,21 @@ Each sample is a random crop of a random frame, rescaled (altitude), flipped and
 recoloured, veiled (low contrast towards one colour), blurred, noised and JPEG-compressed (real cameras), with
 procedural hard negatives
 (``models/data/distractors.py``) pasted away from the people.
+
+With real ground (``models/data/real_ground.py``, the training frames only), a share of the samples is real:
+
+- **real negatives**: a crop of real ground at a GSD drawn in the companion's working range, nobody in it;
+- **composites**: the synthetic crop rescaled to such a GSD and its people (mask, soft edge, a shadow) pasted onto a
+  real crop of the same size and GSD, the heads kept.
+
+Both then go through the same colour, blur, noise and JPEG augmentation as every sample.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,18 +30,25 @@ from torch.utils.data import Dataset
 
 from models.data.distractors import paste
 from models.data.images import read_bgr, read_mask
+from models.data.real_ground import RealGround, composite, ground_crop
 from models.density.preprocess import OUTPUT_STRIDE, to_input
+
+# The GSDs the model sees in the companion: frames finer than perception.model.min_gsd_m_per_px (0.045) are shrunk to
+# it, and 40 m (the highest search altitude) over a 90-degree 640 px camera gives 0.125 m/px.
+WORKING_GSD_M_PER_PX = (0.045, 0.13)
 
 
 @dataclass(frozen=True)
 class LabelledFrame:
-    """One frame in memory: BGR image (H, W, 3) uint8, person mask (H, W) bool, heads (K, 2) (u, v) pixels."""
+    """One frame in memory: BGR image (H, W, 3) uint8, person mask (H, W) bool, heads (K, 2) (u, v) pixels, and
+    its nadir ground sampling distance (altitude over the focal length in pixels, m/px; 0 when unknown)."""
 
     stem: str
     image_bgr: npt.NDArray[np.uint8]
     person_mask: npt.NDArray[np.bool_]
     heads_px: npt.NDArray[np.float32]
     altitude_m: float
+    gsd_m_per_px: float = 0.0
 
 
 def load_frames(split_dir: Path, limit: int | None = None, last: int | None = None) -> list[LabelledFrame]:
@@ -56,7 +72,10 @@ def load_frames(split_dir: Path, limit: int | None = None, last: int | None = No
         mask = read_mask(split_dir / f"{stem}.mask.png")
         label = json.loads(label_path.read_text(encoding="utf-8"))
         heads = np.asarray(label["heads"], np.float32).reshape(-1, 2)
-        frames.append(LabelledFrame(stem, image, mask, heads, float(label["altitude_m"])))
+        altitude_m = float(label["altitude_m"])
+        fx_px = float(label.get("camera", {}).get("fx_px", 0.0))
+        gsd = altitude_m / fx_px if fx_px > 0 else 0.0
+        frames.append(LabelledFrame(stem, image, mask, heads, altitude_m, gsd))
     return frames
 
 
@@ -79,6 +98,10 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         Paste procedural hard negatives (``models/data/distractors.py``); False for the ablation without them.
     scale_range : (float, float)
         Crops are rescaled by a factor drawn log-uniformly in this range (another altitude, another lens).
+    real_ground : sequence of RealGround
+        Real frames with nobody in them (never the held-out ones); empty: synthetic samples only.
+    real_negative_fraction, composite_fraction : float
+        Shares of the samples that are real negatives and composites (module docstring); the rest are synthetic.
     """
 
     def __init__(
@@ -90,9 +113,25 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         augment: bool = True,
         distractors: bool = True,
         scale_range: tuple[float, float] = (0.7, 1.4),
+        real_ground: Sequence[RealGround] = (),
+        real_negative_fraction: float = 0.0,
+        composite_fraction: float = 0.0,
     ) -> None:
         if not 0.1 <= scale_range[0] <= scale_range[1] <= 10.0:
             raise ValueError(f"scale_range must satisfy 0.1 <= low <= high <= 10, got {scale_range}")
+        if not (
+            real_negative_fraction >= 0.0
+            and composite_fraction >= 0.0
+            and real_negative_fraction + composite_fraction <= 1.0
+        ):
+            raise ValueError("real_negative_fraction and composite_fraction must be >= 0 and add up to at most 1")
+        if (real_negative_fraction or composite_fraction) and not real_ground:
+            raise ValueError("real negatives and composites need real_ground frames")
+        if composite_fraction and any(f.gsd_m_per_px <= 0 for f in frames):
+            raise ValueError("composites need every frame's gsd_m_per_px (the label's camera.fx_px)")
+        self.real_ground = list(real_ground)
+        self.real_negative_fraction = real_negative_fraction
+        self.composite_fraction = composite_fraction
         self.scale_range = scale_range
         if crop_px % OUTPUT_STRIDE:
             raise ValueError(f"crop_px must be a multiple of {OUTPUT_STRIDE}, got {crop_px}")
@@ -116,8 +155,24 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         )
         image, mask, heads = frame.image_bgr, frame.person_mask, frame.heads_px
         c = self.crop_px
+        kind = "synthetic"
+        if self.augment and self.real_ground:
+            draw = rng.random()
+            if draw < self.real_negative_fraction:
+                kind = "negative"
+            elif draw < self.real_negative_fraction + self.composite_fraction:
+                kind = "composite"
+        if kind == "negative":
+            ground = self.real_ground[int(rng.integers(len(self.real_ground)))]
+            real = ground_crop(ground, rng, c, _log_uniform(rng, WORKING_GSD_M_PER_PX))
+            none = np.zeros((0, 2), np.float32)
+            real, none = _augment(real, np.zeros((c, c), np.bool_), none, rng, False)
+            return torch.from_numpy(to_input(real)), torch.from_numpy(none)
         if self.augment:
-            scale = math.exp(rng.uniform(math.log(self.scale_range[0]), math.log(self.scale_range[1])))
+            if kind == "composite":  # the people at a GSD of the working range (upsampled by at most 1.4)
+                scale = min(1.4, frame.gsd_m_per_px / _log_uniform(rng, WORKING_GSD_M_PER_PX))
+            else:
+                scale = math.exp(rng.uniform(math.log(self.scale_range[0]), math.log(self.scale_range[1])))
             h, w = image.shape[:2]
             new_w, new_h = max(c, round(w * scale)), max(c, round(h * scale))
             sx, sy = new_w / w, new_h / h
@@ -138,9 +193,17 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         mask = mask[y0 : y0 + c, x0 : x0 + c]
         heads = heads - np.array([x0, y0], np.float32)
         heads = heads[(heads[:, 0] >= 0) & (heads[:, 0] < c) & (heads[:, 1] >= 0) & (heads[:, 1] < c)]
+        if kind == "composite":
+            gsd = frame.gsd_m_per_px / scale
+            ground = self.real_ground[int(rng.integers(len(self.real_ground)))]
+            image = composite(image, mask, ground_crop(ground, rng, c, gsd), rng, gsd)
         if self.augment:
-            image, heads = _augment(image, mask, heads, rng, self.distractors)
+            image, heads = _augment(image, mask, heads, rng, self.distractors and kind == "synthetic")
         return torch.from_numpy(to_input(image)), torch.from_numpy(np.ascontiguousarray(heads, np.float32))
+
+
+def _log_uniform(rng: np.random.Generator, bounds: tuple[float, float]) -> float:
+    return math.exp(rng.uniform(math.log(bounds[0]), math.log(bounds[1])))
 
 
 def _augment(

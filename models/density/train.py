@@ -30,6 +30,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
+from models.data.real_ground import TRAIN, RealGround, load_ground
 from models.density.architectures import Architecture, build, parameter_count
 from models.density.calibration import fit_floor_and_scale
 from models.density.dataset import CrowdCrops, LabelledFrame, collate, load_frames
@@ -64,6 +65,28 @@ def validate(model: torch.nn.Module, frames: list[LabelledFrame], device: torch.
         "false_occupied": false_occupied,
         "occupancy_score": false_occupied + 10.0 * max(0.0, 0.99 - recall),
     }
+
+
+def real_ground_occupied(
+    model: torch.nn.Module, ground: list[RealGround], device: torch.device, threshold: float = OCCUPANCY_THRESHOLD
+) -> float:
+    """Median occupied share of the cells of whole real frames with nobody in them, at their GSD and at twice it
+    (the deployed threshold, no dilation)."""
+    model.eval()
+    shares = []
+    with torch.no_grad():
+        for frame in ground:
+            for factor in (1.0, 0.5):
+                image = frame.image_bgr
+                if factor != 1.0:
+                    image = np.asarray(cv2.resize(image, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA))
+                h, w = image.shape[:2]
+                image = image[: h - h % OUTPUT_STRIDE, : w - w % OUTPUT_STRIDE]
+                x = torch.from_numpy(to_input(np.ascontiguousarray(image)))[None].to(device)
+                density = model(x)[0, 0].cpu().numpy()
+                shares.append(float((density >= threshold).mean()))
+    model.train()
+    return float(np.median(shares)) if shares else math.nan
 
 
 def occupancy_scores(
@@ -111,14 +134,25 @@ def train(
     validate_every: int = 500,
     distractors: bool = True,
     scale_range: tuple[float, float] = (0.7, 1.4),
+    real_ground_dir: Path | None = None,
+    real_negative_fraction: float = 0.0,
+    composite_fraction: float = 0.0,
 ) -> dict[str, Any]:
-    """Train and save; returns the training log (also written to ``out_dir/training.json``)."""
+    """Train and save; returns the training log (also written to ``out_dir/training.json``).
+
+    With ``real_ground_dir`` (``models/data/real_ground.py``), its *training* frames give the real negatives and the
+    composites' backgrounds; the held-out frames are never read here.
+    """
     start = time.monotonic()
     torch.manual_seed(seed)
     device = torch.device(device_name or ("cuda" if torch.cuda.is_available() else "cpu"))
     frames = load_frames(data_dir / "train", limit_frames)
     n_val = min(val_frames, max(1, len(frames) // 10))
     train_frames, val_set = frames[:-n_val], frames[-n_val:]
+    ground = load_ground(TRAIN, real_ground_dir) if real_ground_dir is not None else []
+    # Every tenth real frame (number ending in 2) is validation: never trained on, watched during training.
+    real_val = [g for g in ground if g.name.endswith("2")]
+    ground = [g for g in ground if not g.name.endswith("2")]
     dataset = CrowdCrops(
         train_frames,
         crop_px,
@@ -126,6 +160,9 @@ def train(
         seed=seed,
         distractors=distractors,
         scale_range=scale_range,
+        real_ground=ground,
+        real_negative_fraction=real_negative_fraction,
+        composite_fraction=composite_fraction,
     )
     loader = DataLoader(
         dataset,
@@ -152,6 +189,11 @@ def train(
         "sigma_px": sigma_px,
         "distractors": distractors,
         "scale_range": list(scale_range),
+        "real_ground": None if real_ground_dir is None else str(real_ground_dir),
+        "real_ground_frames": [g.name for g in ground],
+        "real_ground_validation_frames": [g.name for g in real_val],
+        "real_negative_fraction": real_negative_fraction,
+        "composite_fraction": composite_fraction,
         "seed": seed,
         "train_frames": len(train_frames),
         "val_frames": len(val_set),
@@ -181,13 +223,15 @@ def train(
             running, count, step = running + loss_value, count + 1, step + 1
             if step % validate_every == 0 or step == steps:
                 metrics = validate(model, val_set, device)
+                if real_val:
+                    metrics["real_val_occupied"] = real_ground_occupied(model, real_val, device)
                 entry = {"step": step, "loss": running / count, **metrics, "elapsed_s": time.monotonic() - start}
                 log["history"].append(entry)
                 logger.info(
                     "step %d loss %.3f val MAE %.2f bias %+.2f calibrated MAE %.2f head recall %.3f "
-                    "false-occupied %.3f",
+                    "false-occupied %.3f real ground occupied %.4f",
                     *(step, entry["loss"], metrics["count_mae"], metrics["bias"], metrics["count_mae_calibrated"]),
-                    *(metrics["head_recall"], metrics["false_occupied"]),
+                    *(metrics["head_recall"], metrics["false_occupied"], metrics.get("real_val_occupied", math.nan)),
                 )
                 running, count = 0.0, 0
                 if best is None or metrics[select_by] < best[0]:
@@ -225,6 +269,9 @@ def main() -> int:
     parser.add_argument(
         "--scale-range", type=float, nargs=2, default=(0.7, 1.4), metavar=("LOW", "HIGH"), help="crop rescale range"
     )
+    parser.add_argument("--real-ground", type=Path, default=None, help="a real-ground folder (its training frames)")
+    parser.add_argument("--real-negatives", type=float, default=0.0, help="share of samples that are real ground")
+    parser.add_argument("--composites", type=float, default=0.0, help="share of synthetic people on real ground")
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
@@ -245,6 +292,9 @@ def main() -> int:
         validate_every=args.validate_every,
         distractors=not args.no_distractors,
         scale_range=tuple(args.scale_range),
+        real_ground_dir=args.real_ground,
+        real_negative_fraction=args.real_negatives,
+        composite_fraction=args.composites,
     )
     sys.stdout.write(
         f"{args.arch}: {log['parameters']} parameters, {args.steps} steps in {log['wall_s']:.0f} s on {log['device']}, "

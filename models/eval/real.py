@@ -1,11 +1,12 @@
 """How a density model does on real aerial frames with annotated people: safety, availability and counts.
 
 Every real set (a folder in any layout :func:`models.data.loaders.load_real_set` reads; by default every folder of
-``../shared/datasets``) is scored at its native scale and at half scale, per altitude band when the set records the
-altitude. Frames larger than the model's input are covered by overlapping input-sized tiles at the scale being
-scored, their density averaged where tiles overlap. Occupancy is the companion's own
-:class:`~companion.perception.occupancy.OccupancyMapper` with the perception config's thresholds and **no
-dilation**. Per frame:
+``../shared/datasets`` and the Caliterra frames held out from training, ``sitl/world/ground/caliterra``, stored at
+0.045 m/px so that its scales 1 and 0.5 are 0.045 and 0.09 m/px) is scored at its native scale and at half scale,
+per altitude band when the set records the altitude. Frames larger than the model's input are covered by
+overlapping input-sized tiles at the scale being scored, their density averaged where tiles overlap. Occupancy is
+the companion's own :class:`~companion.perception.occupancy.OccupancyMapper` with the perception config's thresholds
+and **no dilation**. Per frame:
 
 - **person recall** (the safety side): an annotated box is found when at least one occupied density cell overlaps it;
 - **false-occupied fraction** (availability): occupied share of the person-free cells, the cells that overlap no box
@@ -46,6 +47,7 @@ from companion.perception.occupancy import OccupancyMapper
 from companion.perception.projection import OCCUPIED
 from models.data.images import read_bgr
 from models.data.loaders import BoxedImage, DatasetError, load_real_set
+from sitl.world.ground import GROUND_DIR
 
 F64Array = npt.NDArray[np.float64]
 U8Image = npt.NDArray[np.uint8]
@@ -359,7 +361,9 @@ def main() -> int:
     parser.add_argument("--overlays", type=Path, default=Path("runs/eval/real"))
     args = parser.parse_args()
     try:
-        loaded = {folder.name: load_real_set(folder) for folder in args.data or []} or default_sets(args.datasets)
+        loaded = {folder.name: load_real_set(folder) for folder in args.data or []}
+        if not loaded:  # every set under --datasets, and the real ground held out from training (in the repository)
+            loaded = {**default_sets(args.datasets), GROUND_DIR.name: load_real_set(GROUND_DIR)}
     except DatasetError as exc:
         sys.stderr.write(f"error: {exc}\n")
         return 2

@@ -15,7 +15,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from sitl.world.scenario import Style
+from sitl.world.ground import real_ground_texture
+from sitl.world.scenario import GroundKind, Style
 
 U8Image = npt.NDArray[np.uint8]
 
@@ -120,6 +121,9 @@ class Park:
     paint : bool
         False: the layout only (the same objects, from the same random draws, in about a tenth of the time); the
         ground texture is then a 1 x 1 placeholder. For ground-truth questions such as what lies under a touchdown.
+    ground : GroundKind
+        The texture: painted from the seed, or real photographs (``sitl/world/ground.py``). The objects are the same
+        for both (the procedural texture's random draws are made either way).
     """
 
     def __init__(
@@ -130,13 +134,18 @@ class Park:
         texture_res_m: float = 0.05,
         style: Style = Style.ANY,
         paint: bool = True,
+        ground: GroundKind = GroundKind.PROCEDURAL,
     ) -> None:
         rng = np.random.default_rng([seed, 5])
         self.style = style
         self.extent_m = extent_m
         self.texture_res_m = texture_res_m
         self.painted = paint
-        self.ground_bgr = self._ground(rng, paint)
+        self.ground = ground
+        self.ground_bgr = self._ground(rng, paint and ground is GroundKind.PROCEDURAL)
+        if paint and ground is GroundKind.REAL:
+            size = round(2 * extent_m / texture_res_m)
+            self.ground_bgr = real_ground_texture(np.random.default_rng([seed, 6]), size, texture_res_m)
         self.objects = self._objects(rng, roi_side_m / 2)
 
     def _ground(self, rng: np.random.Generator, paint: bool) -> U8Image:

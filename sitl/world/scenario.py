@@ -41,6 +41,16 @@ class Style(str, enum.Enum):
     """The other grass colours, cool clothing hues, and three body types training never sees."""
 
 
+class GroundKind(str, enum.Enum):
+    """What the park's ground is made of."""
+
+    PROCEDURAL = "procedural"
+    """Grass colours with noise, sand, a plaza, a court and paths, painted from the seed."""
+    REAL = "real"
+    """Real drone photographs (CC0 Caliterra frames held out from training, ``sitl/world/ground.py``): dirt, gravel,
+    grass and machinery, the ground real cameras see and synthetic-only models misread."""
+
+
 class WalkerKind(str, enum.Enum):
     """How moving people move."""
 
@@ -92,6 +102,7 @@ class ScenarioConfig(StrictModel):
     ambient: Range = Field(default_factory=lambda: _range(0.3, 0.7), description="Ambient light fraction.")
     start_altitude_m: Range = Field(default_factory=lambda: _range(15.0, 40.0))
     style: Style = Field(default=Style.ANY, description="Appearance family (datasets: a train/held-out style split).")
+    ground: GroundKind = Field(default=GroundKind.PROCEDURAL, description="The park's ground texture.")
 
     @model_validator(mode="after")
     def _feasible(self) -> ScenarioConfig:

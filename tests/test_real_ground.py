@@ -1,0 +1,97 @@
+"""Real ground (CC0 Caliterra frames): the derived files, the split, crops at a GSD, composites, the SITL's texture."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from models.data.real_ground import (
+    EXCLUDED,
+    GROUND_DIR,
+    HELDOUT,
+    STORED_GSD_M_PER_PX,
+    TRAIN,
+    RealGround,
+    composite,
+    frame_names,
+    ground_crop,
+    load_ground,
+    split_of,
+)
+from sitl.world.park import Park
+from sitl.world.scenario import GroundKind, ScenarioConfig
+
+pytestmark = pytest.mark.unit
+
+
+def test_the_split_holds_out_every_fifth_frame_by_name() -> None:
+    assert split_of("IMG_9354") == HELDOUT
+    assert split_of("IMG_9359") == HELDOUT
+    assert split_of("IMG_9355") == TRAIN
+    assert split_of("IMG_9430") == TRAIN
+    with pytest.raises(ValueError, match="without a number"):
+        split_of("IMG_")
+
+
+def test_the_derived_frames_are_all_there_with_their_licence_and_split() -> None:
+    index = json.loads((GROUND_DIR / "index.json").read_text())
+    assert index["licence"].startswith("CC0")
+    assert index["gsd_m_per_px"] == STORED_GSD_M_PER_PX
+    names = [f["name"] for f in index["frames"]]
+    assert len(names) == len(set(names)) == 74
+    assert not set(EXCLUDED) & set(names)  # the frame with a possible worker is left out
+    for frame in index["frames"]:
+        assert frame["split"] == split_of(frame["name"])
+        assert (GROUND_DIR / f"{frame['name']}.jpg").is_file()
+    assert len(frame_names(HELDOUT)) == 16
+    assert (GROUND_DIR / "SOURCES.md").is_file()
+
+
+def test_a_ground_crop_has_the_asked_size_and_scale() -> None:
+    # A ground whose brightness grows by one level every 4 px: a crop's spread of levels tells the ground it spans.
+    ramp = np.repeat((np.arange(1024) // 4).astype(np.uint8)[None, :], 1024, axis=0)
+    ground = RealGround("ramp", np.repeat(ramp[:, :, None], 3, axis=2), STORED_GSD_M_PER_PX)
+    rng = np.random.default_rng(1)
+    fine = ground_crop(ground, rng, 64, STORED_GSD_M_PER_PX)
+    coarse = ground_crop(ground, rng, 64, 4 * STORED_GSD_M_PER_PX)
+    assert fine.shape == coarse.shape == (64, 64, 3)
+    assert fine.dtype == np.uint8
+    assert int(fine.max()) - int(fine.min()) == pytest.approx(16, abs=2)  # 64 px of ground
+    assert int(coarse.max()) - int(coarse.min()) == pytest.approx(64, abs=3)  # 256 px of ground
+    real = ground_crop(load_ground(HELDOUT)[0], rng, 96, 0.09)
+    assert real.shape == (96, 96, 3)
+
+
+def test_a_composite_keeps_the_people_and_casts_a_shadow_on_the_real_ground() -> None:
+    rng = np.random.default_rng(3)
+    size = 64
+    background = np.full((size, size, 3), 120, np.uint8)
+    people = np.full((size, size, 3), 30, np.uint8)  # synthetic ground, dark
+    people[28:36, 28:36] = (20, 40, 220)  # a red person
+    mask = np.zeros((size, size), np.bool_)
+    mask[28:36, 28:36] = True
+    out = composite(people, mask, background, rng, gsd_m_per_px=0.05)
+    assert out.shape == background.shape
+    # The person is there, its red kept (brightness moved towards the ground's, at most by 25 %).
+    centre = out[31, 31].astype(int)
+    assert centre[2] > 150
+    assert centre[0] < 60
+    # Far from the person the real ground is untouched; somewhere near it a shadow darkens it.
+    assert (out[:4, :4] == 120).all()
+    assert int(out[~mask].min()) < 110
+    # Nobody: the background as it was.
+    assert np.array_equal(composite(people, np.zeros_like(mask), background, rng, 0.05), background)
+
+
+def test_the_sitl_paints_real_ground_from_the_held_out_frames_with_the_same_objects() -> None:
+    real = Park(11, ground=GroundKind.REAL)
+    painted = Park(11)
+    assert real.objects == painted.objects  # the layout does not depend on the texture
+    assert real.ground_bgr.shape == painted.ground_bgr.shape
+    assert not np.array_equal(real.ground_bgr, painted.ground_bgr)
+    assert np.array_equal(Park(11, ground=GroundKind.REAL).ground_bgr, real.ground_bgr)  # one seed, one texture
+    # The real texture has a photograph's spread of colours, not a few flat paints.
+    assert len(np.unique(real.ground_bgr.reshape(-1, 3)[::97], axis=0)) > 1000
+    assert ScenarioConfig.model_validate({"ground": "real"}).ground is GroundKind.REAL
