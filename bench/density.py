@@ -1,6 +1,7 @@
 """Latency of the shipped density models per 640x480 frame, on one and on two CPU threads.
 
-Run: ``.venv/bin/python bench/density.py [--frames N] [--out bench/results/density.json]``.
+Run: ``.venv/bin/python bench/density.py [--frames N] [--model NAME=PATH.onnx ...] [--out bench/results/density.json]``
+(``--model`` adds a candidate, e.g. a freshly trained network, beside the shipped ones).
 Times ``OnnxDensityModel.predict`` (preprocessing included: colour conversion, normalisation, layout) on rendered
 frames of the held-out style, after a warm-up. Prints median and p95 per variant and thread count, the model's
 parameters and file size, and writes them as JSON with the machine's context.
@@ -29,6 +30,7 @@ VARIANTS = {
     "slz-lite (default)": "models/density/slz_lite.onnx",
     "slz-lite int8": "models/density/slz_lite_int8.onnx",
     "slz-ccnn (paper)": "models/density/slz_ccnn.onnx",
+    "slz-lite-wide-real": "models/density/slz_lite_wide_real.onnx",
     "blob placeholder": "models/blob_detector/blob_detector.onnx",
 }
 
@@ -49,13 +51,20 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=200)
     parser.add_argument("--warmup", type=int, default=10)
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "density.json")
+    parser.add_argument("--model", action="append", default=[], help="NAME=PATH.onnx: also time this model")
     args = parser.parse_args()
+    variants = dict(VARIANTS)
+    for spec in args.model:
+        name, _, rel = spec.partition("=")
+        if not rel:
+            parser.error(f"--model wants NAME=PATH, got {spec!r}")
+        variants[name] = rel
     cv2.setNumThreads(1)
     frames = frames_for_bench(8)
     report: dict[str, object] = {"frame": "640x480 BGR", "frames": args.frames, "machine": machine_context()}
     rows = []
-    for name, rel in VARIANTS.items():
-        path = REPO_ROOT / rel
+    for name, rel in variants.items():
+        path = Path(rel) if Path(rel).is_absolute() else REPO_ROOT / rel
         if not path.is_file():
             sys.stdout.write(f"{name}: {rel} not found, skipped\n")
             continue
@@ -83,10 +92,10 @@ def main() -> int:
     machine = report["machine"]
     assert isinstance(machine, dict)
     sys.stdout.write(f"density models, 640x480 frames, {args.frames} runs each, {machine['cpu_model']}\n")
-    sys.stdout.write(f"{'variant':<22}{'threads':>8}{'median ms':>12}{'p95 ms':>10}{'params':>10}{'bytes':>10}\n")
+    sys.stdout.write(f"{'variant':<26}{'threads':>8}{'median ms':>12}{'p95 ms':>10}{'params':>10}{'bytes':>10}\n")
     for r in rows:
         sys.stdout.write(
-            f"{r['variant']:<22}{r['threads']:>8}{r['median_ms']:>12.2f}{r['p95_ms']:>10.2f}"
+            f"{r['variant']:<26}{r['threads']:>8}{r['median_ms']:>12.2f}{r['p95_ms']:>10.2f}"
             f"{r['parameters'] or '-':>10}{r['bytes']:>10}\n"
         )
     save_report(report, args.out)

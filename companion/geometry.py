@@ -85,6 +85,22 @@ def R_world_body_from_quaternion(q_wxyz: npt.ArrayLike) -> F64Array:
     )
 
 
+def quaternion_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> F64Array:
+    """Unit quaternion ``[w, x, y, z]`` (MAVLink order, body FRD to world NED) from ZYX Euler angles, by PX4's
+    closed form (independent of :func:`R_world_body_from_euler`'s matrix product; a test checks they agree)."""
+    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
+    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    return np.array(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
+
+
 def make_transform(R: npt.ArrayLike, t: npt.ArrayLike) -> F64Array:
     """Homogeneous transform (4, 4) from a rotation (3, 3) and a translation (3,)."""
     T = np.eye(4)

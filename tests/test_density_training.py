@@ -21,7 +21,7 @@ from models.density.dataset import CrowdCrops, load_frames, turn_and_flip  # noq
 from models.density.export import Calibrated, calibrate, export, load_checkpoint, parity  # noqa: E402
 from models.density.losses import LossKind, bayesian_loss, mse_loss, point_density_target  # noqa: E402
 from models.density.onnx_files import CONTRACT_KEY, read_metadata  # noqa: E402
-from models.density.quantize import calibration_frames, quantize  # noqa: E402
+from models.density.quantize import calibration_frames, quantize, to_float16  # noqa: E402
 from models.density.train import train  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -150,3 +150,11 @@ def test_train_export_and_onnxruntime_parity(tiny_set: Path, tmp_path: Path) -> 
     int8 = OnnxDensityModel(int8_path)
     assert int8.contract == runner.contract
     assert int8.predict(frames[0]).values.shape == (120, 160)
+    # FP16: same contract, float32 in and out, the float32 model's map within half precision.
+    fp16_path = tmp_path / "lite_fp16.onnx"
+    to_float16(onnx_path, fp16_path)
+    fp16 = OnnxDensityModel(fp16_path)
+    assert fp16.contract == runner.contract
+    half = fp16.predict(frames[0]).values
+    assert half.dtype == np.float32
+    assert float(np.abs(half - density.values).max()) <= 1e-2 * max(1.0, float(np.abs(density.values).max()))

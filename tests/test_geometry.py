@@ -17,24 +17,10 @@ from companion.geometry import (
     invert_transform,
     make_transform,
     polygon_centroid_ne_m,
+    quaternion_from_euler,
 )
 
 pytestmark = pytest.mark.unit
-
-
-def quaternion_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """ZYX Euler -> [w, x, y, z], the formula PX4 uses (independent of the matrix code under test)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array(
-        [
-            cr * cp * cy + sr * sp * sy,
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-        ]
-    )
 
 
 @pytest.mark.parametrize(("roll", "pitch", "yaw"), [(0.0, 0.0, 0.0), (0.3, -0.2, 2.5), (-0.7, 0.4, -1.2)])

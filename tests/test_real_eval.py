@@ -14,6 +14,8 @@ import pytest
 
 from companion.perception.config import OccupancyConfig
 from companion.perception.density import DensityMap, OnnxDensityModel
+from models.data.loaders import load_real_set
+from models.data.real_ground import GROUND_DIR, HELDOUT, frame_names
 from models.eval import real
 from models.eval.real import (
     RealFrameScore,
@@ -136,6 +138,7 @@ def test_a_whole_run_scores_every_model_on_the_same_frames(tmp_path: Path, monke
         "real",
         *("--model", f"shipped={SHIPPED}", "--model", "placeholder=models/blob_detector/blob_detector.onnx"),
         *("--datasets", str(tmp_path / "datasets"), "--out", str(out), "--overlays", str(tmp_path / "overlays")),
+        "--no-real-ground",
     ]
     monkeypatch.setattr(sys, "argv", argv)
     assert real.main() == 0
@@ -160,6 +163,13 @@ def test_a_whole_run_scores_every_model_on_the_same_frames(tmp_path: Path, monke
 
 
 def test_a_run_without_any_set_says_so(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    argv = ["real", "--model", f"shipped={SHIPPED}", "--datasets", str(tmp_path / "nothing")]
+    argv = ["real", "--model", f"shipped={SHIPPED}", "--datasets", str(tmp_path / "nothing"), "--no-real-ground"]
     monkeypatch.setattr(sys, "argv", argv)
     assert real.main() == 2
+
+
+def test_the_real_ground_held_out_from_training_is_a_real_set_with_nobody_in_it() -> None:
+    frames = load_real_set(GROUND_DIR)
+    assert len(frames) == len(frame_names(HELDOUT)) == 16
+    assert all(f.boxes_xyxy.shape == (0, 4) for f in frames)
+    assert {f.image_path.stem for f in frames} == set(frame_names(HELDOUT))

@@ -18,9 +18,11 @@ Derived files (``sitl/world/ground/caliterra/``, written by :func:`prepare`; the
 1333x1000 px), JPEG quality 85, and ``index.json`` (source, licence, GSD, split of each frame). About 12 MB.
 
 **Split**: frames whose number ends in 4 or 9 (every fifth by name: ``IMG_9354``, ``IMG_9359``, ...) are held out:
-never trained on, scored by ``make eval-real`` at 0.045 and 0.09 m/px. Consecutive frames overlap by about 80 %, so
-the held-out frames show ground the training frames also show (from another position, in other light): they test the
-site's kinds of ground, not an unseen site. SDD (another site, people annotated) is the independent real check.
+never trained on, scored by ``make eval-real`` at 0.045 and 0.09 m/px. Of the rest, frames whose number ends in 2 are
+validation (:func:`is_validation`): never trained on either, they choose checkpoints and the occupancy threshold.
+Consecutive frames overlap by about 80 %, so the held-out frames show ground the training frames also show (from
+another position, in other light): they test the site's kinds of ground, not an unseen site. SDD (another site,
+people annotated) is the independent real check.
 
 Use: :func:`load_ground` (frames of a split in memory), :func:`ground_crop` (a random square crop at a requested
 GSD), :func:`composite` (synthetic people, their masks and shadows, pasted onto a real crop).
@@ -64,6 +66,7 @@ __all__ = [
     "prepare",
     "read_index",
     "split_of",
+    "split_validation",
 ]
 
 U8Image = npt.NDArray[np.uint8]
@@ -107,6 +110,17 @@ def prepare(source_dir: Path, out_dir: Path = GROUND_DIR) -> dict[str, object]:
     }
     (out_dir / "index.json").write_text(json.dumps(index, indent=1) + "\n", encoding="utf-8")
     return index
+
+
+def is_validation(name: str) -> bool:
+    """Real validation frames: training-split frames whose number ends in 2 (every tenth by name). Never trained on;
+    watched during training and used to choose the occupancy threshold (``models/eval/threshold.py``)."""
+    return split_of(name) == TRAIN and name.endswith("2")
+
+
+def split_validation(frames: list[RealGround]) -> tuple[list[RealGround], list[RealGround]]:
+    """(training, validation) frames of a list of training-split frames (:func:`is_validation`)."""
+    return [f for f in frames if not is_validation(f.name)], [f for f in frames if is_validation(f.name)]
 
 
 def ground_crop(ground: RealGround, rng: np.random.Generator, size_px: int, gsd_m_per_px: float) -> U8Image:

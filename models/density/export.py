@@ -8,12 +8,18 @@ Run::
 The ONNX file carries the ``slz.contract`` metadata that ``companion.perception.density.OnnxDensityModel`` reads, and
 ``slz.training`` (architecture, parameters, loss, steps, validation MAE). onnxruntime's output must match PyTorch's
 within ``--tolerance`` (default 1e-4, absolute, per density cell) on random inputs and on real frames.
+
+``--operating-threshold T`` bakes the network's chosen occupancy threshold into the file: ``scale * relu(density -
+floor)`` with ``scale = 0.01 / (T - floor)``, so that the perception config's threshold (0.01 people per cell) is
+occupied exactly where the network reaches ``T``, and the floor (fitted on ``--calibrate`` frames, below ``T``)
+leaves the counts.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -27,7 +33,7 @@ import torch
 
 from models.data.images import frame_paths, read_bgr
 from models.density.architectures import Architecture, build
-from models.density.calibration import FLOORS, fit_floor_and_scale
+from models.density.calibration import FLOORS, fit_floor_and_scale, fit_floor_for_threshold
 from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, set_metadata
 from models.density.preprocess import INPUT_HEIGHT_PX, INPUT_WIDTH_PX, contract, to_input
 
@@ -54,11 +60,14 @@ def calibrate(
     For each candidate floor the scale is the ratio of true to predicted totals; the pair with the lowest mean
     absolute count error wins. Fit on training-split frames only.
     """
-    maps = []
-    with torch.no_grad():
-        for image, _ in frames:
-            maps.append(model(torch.from_numpy(to_input(image))[None])[0, 0].numpy())
+    maps = density_maps(model, [image for image, _ in frames])
     return fit_floor_and_scale(maps, [k for _, k in frames], floors or FLOORS)
+
+
+def density_maps(model: torch.nn.Module, images_bgr: list[np.ndarray]) -> list[np.ndarray]:
+    """The network's density map (h, w), people per cell, of each (H, W, 3) BGR frame."""
+    with torch.no_grad():
+        return [model(torch.from_numpy(to_input(image))[None])[0, 0].numpy() for image in images_bgr]
 
 
 def load_checkpoint(path: Path) -> tuple[torch.nn.Module, dict[str, Any]]:
@@ -118,9 +127,46 @@ def main() -> int:
         "--calibrate", type=Path, default=None, help="training split folder: fit floor and scale on its last frames"
     )
     parser.add_argument("--calibrate-frames", type=int, default=40)
+    parser.add_argument(
+        "--operating-threshold",
+        type=float,
+        default=None,
+        help="the raw network's occupancy threshold (models/eval/threshold.py): exported so that the perception "
+        "config's threshold (--deployed-threshold) is occupied exactly where this one is; the floor, below it, is "
+        "fitted on --calibrate frames",
+    )
+    parser.add_argument("--deployed-threshold", type=float, default=0.01)
     args = parser.parse_args()
     model, log = load_checkpoint(args.checkpoint)
-    if args.calibrate is not None:
+    if args.operating_threshold is not None:
+        floor, scale, mae = 0.0, args.deployed_threshold / args.operating_threshold, math.nan
+        frames_used = 0  # no floor fitted: the count error is unknown (null in the metadata)
+        if args.calibrate is not None:
+            from models.density.dataset import load_frames
+
+            labelled = load_frames(args.calibrate, last=args.calibrate_frames)
+            frames_used = len(labelled)
+            maps = density_maps(model, [f.image_bgr for f in labelled])
+            floor, scale, mae = fit_floor_for_threshold(
+                maps, [len(f.heads_px) for f in labelled], args.operating_threshold, args.deployed_threshold
+            )
+        model = Calibrated(model, floor, scale).eval()
+        log = {
+            **log,
+            "calibration": {
+                "floor": floor,
+                "scale": scale,
+                "frames": frames_used,
+                "count_mae": None if math.isnan(mae) else mae,
+                "operating_threshold": args.operating_threshold,
+                "deployed_threshold": args.deployed_threshold,
+            },
+        }
+        sys.stdout.write(
+            f"occupied at {args.deployed_threshold:g} where the network reaches {args.operating_threshold:g}: "
+            f"floor {floor:.5f}, scale {scale:.3f}, count MAE {mae:.2f} on {frames_used} training frames\n"
+        )
+    elif args.calibrate is not None:
         from models.density.dataset import load_frames
 
         labelled = load_frames(args.calibrate, last=args.calibrate_frames)

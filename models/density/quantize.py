@@ -1,12 +1,18 @@
-"""INT8 static quantization of an exported density model with onnxruntime's quantization tools.
+"""Lower-precision copies of an exported density model, for boards with INT8 or FP16 kernels (a Jetson's TensorRT).
 
-Calibrated on training frames (never held-out ones): QDQ format, per-channel signed INT8 weights, unsigned INT8
-activations, MinMax calibration. The contract and training metadata are carried over, plus ``slz.quantization``.
+- ``--precision int8`` (default): onnxruntime static quantization calibrated on training frames (never held-out
+  ones): QDQ format, per-channel signed INT8 weights, unsigned INT8 activations, MinMax calibration.
+- ``--precision fp16``: weights and arithmetic in float16 (onnxruntime's converter); the input and output stay
+  float32, so the contract is unchanged.
+
+The contract and training metadata are carried over, plus ``slz.quantization``.
 
 Run::
 
     .venv/bin/python -m models.density.quantize --model models/density/slz_lite.onnx \
         --out models/density/slz_lite_int8.onnx --calibration data/synth/train --frames 64
+    .venv/bin/python -m models.density.quantize --precision fp16 --model models/density/slz_lite.onnx \
+        --out runs/slz_lite_fp16.onnx
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import numpy.typing as npt
+import onnx
 from onnxruntime.quantization import (
     CalibrationDataReader,
     CalibrationMethod,
@@ -81,13 +88,29 @@ def quantize(model: Path, out: Path, frames: list[Path]) -> None:
     set_metadata(out, {**metadata, QUANTIZATION_KEY: json.dumps(summary)})
 
 
+def to_float16(model: Path, out: Path) -> None:
+    """Write the FP16 model: float16 weights and arithmetic, float32 input and output."""
+    from onnxruntime.transformers.float16 import convert_float_to_float16
+
+    metadata = read_metadata(model)
+    half = convert_float_to_float16(onnx.load(str(model)), keep_io_types=True)
+    onnx.save(half, str(out))
+    summary = {"format": "float16", "weights": "float16", "activations": "float16", "io": "float32"}
+    set_metadata(out, {**metadata, QUANTIZATION_KEY: json.dumps(summary)})
+
+
 def main() -> int:
-    parser = argparse.ArgumentParser(description="INT8 static quantization of an SLZ density model.")
+    parser = argparse.ArgumentParser(description="INT8 or FP16 copies of an SLZ density model.")
     parser.add_argument("--model", type=Path, required=True)
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--precision", choices=["int8", "fp16"], default="int8")
     parser.add_argument("--calibration", type=Path, default=Path("data/synth/train"))
     parser.add_argument("--frames", type=int, default=64)
     args = parser.parse_args()
+    if args.precision == "fp16":
+        to_float16(args.model, args.out)
+        sys.stdout.write(f"{args.out}: {args.out.stat().st_size} bytes, float16\n")
+        return 0
     frames = calibration_frames(args.calibration, args.frames)
     quantize(args.model, args.out, frames)
     sys.stdout.write(f"{args.out}: {args.out.stat().st_size} bytes, calibrated on {len(frames)} frames\n")

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
-from models.data.real_ground import TRAIN, RealGround, load_ground
+from models.data.real_ground import TRAIN, RealGround, load_ground, split_validation
 from models.density.architectures import Architecture, build, parameter_count
 from models.density.calibration import fit_floor_and_scale
 from models.density.dataset import CrowdCrops, LabelledFrame, collate, load_frames
@@ -140,6 +140,8 @@ def train(
 ) -> dict[str, Any]:
     """Train and save; returns the training log (also written to ``out_dir/training.json``).
 
+    ``out_dir/model.pt`` is the checkpoint with the best validation score, ``out_dir/last.pt`` the last one.
+
     With ``real_ground_dir`` (``models/data/real_ground.py``), its *training* frames give the real negatives and the
     composites' backgrounds; the held-out frames are never read here.
     """
@@ -151,8 +153,7 @@ def train(
     train_frames, val_set = frames[:-n_val], frames[-n_val:]
     ground = load_ground(TRAIN, real_ground_dir) if real_ground_dir is not None else []
     # Every tenth real frame (number ending in 2) is validation: never trained on, watched during training.
-    real_val = [g for g in ground if g.name.endswith("2")]
-    ground = [g for g in ground if not g.name.endswith("2")]
+    ground, real_val = split_validation(ground)
     dataset = CrowdCrops(
         train_frames,
         crop_px,
@@ -246,6 +247,10 @@ def train(
     log["wall_s"] = time.monotonic() - start
     out_dir.mkdir(parents=True, exist_ok=True)
     torch.save({"architecture": arch.value, "state_dict": best[1], "log": log}, out_dir / "model.pt")
+    last = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}  # the end of the schedule, too
+    torch.save(
+        {"architecture": arch.value, "state_dict": last, "log": {**log, "selected_by": "last"}}, out_dir / "last.pt"
+    )
     (out_dir / "training.json").write_text(json.dumps(log, indent=2) + "\n", encoding="utf-8")
     return log
 

@@ -359,11 +359,16 @@ def main() -> int:
     parser.add_argument("--scales", type=float, nargs="+", default=list(SCALES))
     parser.add_argument("--out", type=Path, default=Path("models/eval/results/real"))
     parser.add_argument("--overlays", type=Path, default=Path("runs/eval/real"))
+    parser.add_argument(
+        "--no-real-ground", action="store_true", help="without --data: leave out the held-out real ground"
+    )
     args = parser.parse_args()
     try:
         loaded = {folder.name: load_real_set(folder) for folder in args.data or []}
         if not loaded:  # every set under --datasets, and the real ground held out from training (in the repository)
-            loaded = {**default_sets(args.datasets), GROUND_DIR.name: load_real_set(GROUND_DIR)}
+            loaded = default_sets(args.datasets)
+            if not args.no_real_ground:
+                loaded[GROUND_DIR.name] = load_real_set(GROUND_DIR)
     except DatasetError as exc:
         sys.stderr.write(f"error: {exc}\n")
         return 2

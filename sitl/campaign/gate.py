@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from sitl.campaign.spec import CampaignSpec
-from sitl.campaign.stats import mcnemar_exact
+from sitl.campaign.stats import holm, mcnemar_exact
 
 BASELINE_FORMAT = "slz-campaign-baseline/1"
 GATED: dict[str, bool] = {"success": True, "warning_1m": False, "warning_1_5m": False}
@@ -124,17 +124,6 @@ def read_baseline(path: Path) -> dict[str, Any]:
     if not isinstance(baseline, dict) or baseline.get("format") != BASELINE_FORMAT:
         raise GateError(f"{path} is not a campaign baseline (format {BASELINE_FORMAT!r})")
     return baseline
-
-
-def holm(p_values: list[float]) -> list[float]:
-    """Holm's step-down adjustment (monotone, capped at 1)."""
-    order = sorted(range(len(p_values)), key=lambda i: p_values[i])
-    adjusted = [1.0] * len(p_values)
-    running = 0.0
-    for rank, i in enumerate(order):
-        running = max(running, min(1.0, (len(p_values) - rank) * p_values[i]))
-        adjusted[i] = running
-    return adjusted
 
 
 def check_against(

@@ -8,33 +8,18 @@ JSBSim is an optional dependency (no aarch64 wheel): install the ``sitl`` extra.
 
 from __future__ import annotations
 
-import math
 import os
 from typing import Any
 
 import numpy as np
 
+from companion.geometry import quaternion_from_euler
 from sitl.dynamics.base import Airframe, DynamicsError, F64Array, VehicleState
 from sitl.geodesy import geodetic_to_ned
 
 FT_M = 0.3048
 MOTORS = ("FR", "AL", "FL", "AR")
 ARM_M = 0.1651
-
-
-def quaternion_from_euler(roll: float, pitch: float, yaw: float) -> F64Array:
-    """ZYX Euler angles -> ``[w, x, y, z]``."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array(
-        [
-            cr * cp * cy + sr * sp * sy,
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-        ]
-    )
 
 
 class JsbsimF450:
