@@ -111,15 +111,15 @@ class Lite(nn.Module):
     non-negative (see ``_density_head``).
     """
 
+    BLOCKS: tuple[tuple[int, int, int], ...] = ((32, 48, 1), (48, 48, 2), (48, 48, 3), (48, 32, 1))
+    """The separable blocks after the stem: (input channels, output channels, dilation); the last gives 32."""
+
     def __init__(self) -> None:
         super().__init__()
         self.body = nn.Sequential(
             _conv_bn_relu(3, 16, 3, stride=2),
             _conv_bn_relu(16, 32, 3, stride=2),
-            _SeparableBlock(32, 48, 1),
-            _SeparableBlock(48, 48, 2),
-            _SeparableBlock(48, 48, 3),
-            _SeparableBlock(48, 32, 1),
+            *(_SeparableBlock(c_in, c_out, dilation) for c_in, c_out, dilation in self.BLOCKS),
             _density_head(32),
         )
 
@@ -128,28 +128,12 @@ class Lite(nn.Module):
         return self.body(x)
 
 
-class LiteWide(nn.Module):
+class LiteWide(Lite):
     """``Lite`` widened and deepened: the same stem, then depthwise-separable blocks at stride 4 with dilations
     1, 2, 3, 4, 2, 1 (64 channels, then 32), a 1x1 head made non-negative. More context (about 110 px) to tell a
     person from a bush, a pipe or a patch of gravel of the same size."""
 
-    def __init__(self) -> None:
-        super().__init__()
-        self.body = nn.Sequential(
-            _conv_bn_relu(3, 16, 3, stride=2),
-            _conv_bn_relu(16, 32, 3, stride=2),
-            _SeparableBlock(32, 64, 1),
-            _SeparableBlock(64, 64, 2),
-            _SeparableBlock(64, 64, 3),
-            _SeparableBlock(64, 64, 4),
-            _SeparableBlock(64, 64, 2),
-            _SeparableBlock(64, 32, 1),
-            _density_head(32),
-        )
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """(N, 3, H, W) -> (N, 1, H/4, W/4)."""
-        return self.body(x)
+    BLOCKS = ((32, 64, 1), (64, 64, 2), (64, 64, 3), (64, 64, 4), (64, 64, 2), (64, 32, 1))
 
 
 def build(architecture: Architecture) -> nn.Module:

@@ -172,7 +172,7 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
             if kind == "composite":  # the people at a GSD of the working range (upsampled by at most 1.4)
                 scale = min(1.4, frame.gsd_m_per_px / _log_uniform(rng, WORKING_GSD_M_PER_PX))
             else:
-                scale = math.exp(rng.uniform(math.log(self.scale_range[0]), math.log(self.scale_range[1])))
+                scale = _log_uniform(rng, self.scale_range)
             h, w = image.shape[:2]
             new_w, new_h = max(c, round(w * scale)), max(c, round(h * scale))
             sx, sy = new_w / w, new_h / h

@@ -23,7 +23,7 @@ import math
 import sys
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -36,6 +36,9 @@ from models.density.architectures import Architecture, build
 from models.density.calibration import FLOORS, fit_floor_and_scale, fit_floor_for_threshold
 from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, set_metadata
 from models.density.preprocess import INPUT_HEIGHT_PX, INPUT_WIDTH_PX, contract, to_input
+
+if TYPE_CHECKING:
+    from models.density.dataset import LabelledFrame
 
 OPSET = 17
 
@@ -138,14 +141,14 @@ def main() -> int:
     parser.add_argument("--deployed-threshold", type=float, default=0.01)
     args = parser.parse_args()
     model, log = load_checkpoint(args.checkpoint)
+    labelled: list[LabelledFrame] = []
+    if args.calibrate is not None:
+        from models.density.dataset import load_frames
+
+        labelled = load_frames(args.calibrate, last=args.calibrate_frames)
     if args.operating_threshold is not None:
         floor, scale, mae = 0.0, args.deployed_threshold / args.operating_threshold, math.nan
-        frames_used = 0  # no floor fitted: the count error is unknown (null in the metadata)
-        if args.calibrate is not None:
-            from models.density.dataset import load_frames
-
-            labelled = load_frames(args.calibrate, last=args.calibrate_frames)
-            frames_used = len(labelled)
+        if args.calibrate is not None:  # else no floor fitted: the count error is unknown (null in the metadata)
             maps = density_maps(model, [f.image_bgr for f in labelled])
             floor, scale, mae = fit_floor_for_threshold(
                 maps, [len(f.heads_px) for f in labelled], args.operating_threshold, args.deployed_threshold
@@ -156,7 +159,7 @@ def main() -> int:
             "calibration": {
                 "floor": floor,
                 "scale": scale,
-                "frames": frames_used,
+                "frames": len(labelled),
                 "count_mae": None if math.isnan(mae) else mae,
                 "operating_threshold": args.operating_threshold,
                 "deployed_threshold": args.deployed_threshold,
@@ -164,12 +167,9 @@ def main() -> int:
         }
         sys.stdout.write(
             f"occupied at {args.deployed_threshold:g} where the network reaches {args.operating_threshold:g}: "
-            f"floor {floor:.5f}, scale {scale:.3f}, count MAE {mae:.2f} on {frames_used} training frames\n"
+            f"floor {floor:.5f}, scale {scale:.3f}, count MAE {mae:.2f} on {len(labelled)} training frames\n"
         )
     elif args.calibrate is not None:
-        from models.density.dataset import load_frames
-
-        labelled = load_frames(args.calibrate, last=args.calibrate_frames)
         floor, scale, mae = calibrate(model, [(f.image_bgr, len(f.heads_px)) for f in labelled])
         model = Calibrated(model, floor, scale).eval()
         log = {**log, "calibration": {"floor": floor, "scale": scale, "frames": len(labelled), "count_mae": mae}}

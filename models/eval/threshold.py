@@ -39,7 +39,7 @@ import numpy as np
 from companion.perception.config import OccupancyConfig, load_perception_config
 from companion.perception.density import DensityMap, OnnxDensityModel, input_scale, predict_downscaled
 from models.data.images import read_bgr, read_mask
-from models.data.real_ground import GROUND_DIR, TRAIN, is_validation, load_ground
+from models.data.real_ground import GROUND_DIR, TRAIN, RealGround, is_validation, load_ground
 from models.eval.metrics import frame_gsd_m_per_px, score_frame, summarise
 from models.eval.real import occupied_cells, tiled_density
 
@@ -86,11 +86,16 @@ def synthetic_frames(model: OnnxDensityModel, split_dir: Path, min_gsd_m_per_px:
     return out
 
 
-def real_densities(model: OnnxDensityModel, root: Path) -> dict[float, list[DensityMap]]:
-    """Densities of the real validation frames at every scale of :data:`REAL_SCALES`."""
+def real_validation_frames(root: Path) -> list[RealGround]:
+    """The real validation frames of a real-ground folder (:func:`models.data.real_ground.is_validation`)."""
     frames = [g for g in load_ground(TRAIN, root) if is_validation(g.name)]
     if not frames:
         raise FileNotFoundError(f"no real validation frame (training-split number ending in 2) in {root}")
+    return frames
+
+
+def real_densities(model: OnnxDensityModel, frames: list[RealGround]) -> dict[float, list[DensityMap]]:
+    """Densities of the real validation frames at every scale of :data:`REAL_SCALES`."""
     out: dict[float, list[DensityMap]] = {s: [] for s in REAL_SCALES}
     for frame in frames:
         for scale in REAL_SCALES:
@@ -176,12 +181,13 @@ def main() -> int:
     if not path or not ref_path or not ref_threshold:
         parser.error("--model wants NAME=PATH and --reference NAME=PATH@THRESHOLD")
     config = load_perception_config(args.config)
-    gsd = float(load_ground(TRAIN, args.real_ground)[0].gsd_m_per_px)
+    real_frames = real_validation_frames(args.real_ground)
+    gsd = real_frames[0].gsd_m_per_px
 
     def measure(model_path: str) -> tuple[list[_Synthetic], dict[float, list[DensityMap]]]:
         model = OnnxDensityModel(model_path)
         synthetic = synthetic_frames(model, args.synthetic, config.model.min_gsd_m_per_px)
-        return synthetic, real_densities(model, args.real_ground)
+        return synthetic, real_densities(model, real_frames)
 
     ref_synthetic, ref_real = measure(ref_path)
     reference = scores_at(float(ref_threshold), ref_synthetic, ref_real, config.occupancy, gsd)
