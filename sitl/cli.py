@@ -90,7 +90,13 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             sys.stderr.write("\nslz campaign: interrupted; the same command resumes it\n")
             return 130
-    summary = build_report(spec, results, out)
+    previous = None
+    if args.compare_with is not None:
+        if not args.compare_with.is_file():
+            sys.stderr.write(f"slz campaign: --compare-with {args.compare_with}: no such results file\n")
+            return 2
+        previous = (str(args.compare_with), read_results(args.compare_with))
+    summary = build_report(spec, results, out, previous)
     for name, cell in summary["cells"].items():
         success = cell["success"]
         sys.stdout.write(
@@ -274,6 +280,13 @@ def register(subcommands: Any) -> None:
         type=Path,
         metavar="BASELINE",
         help="regression gate: exit 1 when a strategy is significantly worse than this baseline on the same scenes",
+    )
+    campaign.add_argument(
+        "--compare-with",
+        type=Path,
+        metavar="RESULTS",
+        help="report: compare each cell's success with an earlier flight of the same spec (its results.jsonl), "
+        "mission by mission (McNemar)",
     )
     campaign.add_argument("--alpha", type=float, default=0.05, help="gate: family false-alarm rate (default 0.05)")
     campaign.add_argument("--write-baseline", type=Path, metavar="PATH", help="write this campaign as a baseline")

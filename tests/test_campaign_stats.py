@@ -405,7 +405,7 @@ def _results(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[dict[str, 
                 nearest_person_mean_m=0.5 if bad else 4.0, nearest_person_min_m=0.3 if bad else 4.0, zone_iou=0.8,
                 time_to_land_s=40.0, path_length_m=30.0, reselections=0, aborts=0, failsafes=0,
                 touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0, obstacle_kind="bench",
-                touched_obstacle=False, people_cells=[],
+                touched_obstacle=False, people_cells=[], hold_cause=None, zones_chosen=1,
             ).to_json()
         )  # fmt: skip
     return rows

@@ -26,7 +26,7 @@ from companion.perception.density import DensityMap
 from companion.perception.occupancy import OccupancyImage
 from companion.perception.pipeline import FrameResult
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
-from companion.perception.selection import Target
+from companion.perception.selection import BiggestPolicy, Target
 from companion.perception.tracking import TrackedZone
 
 pytestmark = pytest.mark.unit
@@ -66,7 +66,9 @@ def _frame(t_s: float, tracks: list[TrackedZone], target: Target | None, head_pl
 
 
 def _guidance(**overrides: object) -> LandingGuidance:
-    return LandingGuidance(GuidanceConfig.model_validate(overrides), FENCE, FOOTPRINT_M, min_zone_radius_m=1.0)
+    return LandingGuidance(
+        GuidanceConfig.model_validate(overrides), FENCE, FOOTPRINT_M, min_zone_radius_m=1.0, policy=BiggestPolicy()
+    )
 
 
 def _fly(state: VehicleState, setpoint_alt: float, n: float, e: float, t: float) -> VehicleState:
@@ -260,9 +262,14 @@ def test_used_up_reselections_hold_and_never_land() -> None:
     g.on_frame(_frame(0.2, [zone], target, occupied), state)
     assert g.on_frame(_frame(0.25, [zone], target, occupied), state).phase is LandingPhase.SEARCH
     climbed = VehicleState(0.3, state.north_m, state.east_m, -(14.0 + g.config.climb_back_m), 0.0)
-    assert g.on_frame(_frame(0.3, [zone], target, _map()), climbed).phase is LandingPhase.DESCENT
-    g.on_frame(_frame(0.35, [zone], target, occupied), climbed)
-    last = g.on_frame(_frame(0.4, [zone], target, occupied), climbed)
+    # The refused zone is not chosen again; one 5 m away is.
+    assert g.on_frame(_frame(0.3, [zone], target, _map()), climbed).target is None
+    other, other_target = _track(4, 0.2, 5.0, 3.0), Target(0.2, 5.0, 3.0, 4)
+    over_other = VehicleState(0.35, 0.2, 5.0, climbed.down_m, 0.0)
+    assert g.on_frame(_frame(0.35, [zone, other], other_target, _map()), over_other).phase is LandingPhase.DESCENT
+    occupied_other = _map(person_at=(0.5, 5.3))
+    g.on_frame(_frame(0.4, [other], other_target, occupied_other), over_other)
+    last = g.on_frame(_frame(0.45, [other], other_target, occupied_other), over_other)
     assert last.phase is LandingPhase.FAILSAFE
     assert last.kind is CommandKind.HOLD  # not the configured land: the map just refused a landing here
 
@@ -303,7 +310,7 @@ def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
 
 
 def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
-    g = _guidance()
+    g = _guidance(commitment={"refused_radius_m": 0.0})  # the climb alone, without the refused point's exclusion
     state = _descending_over(g, 5.0)
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(g.config.unsafe_frames_to_abort):

@@ -177,6 +177,23 @@ def test_zones_lie_inside_the_landing_area_and_its_edge_bounds_them_like_a_perso
     assert ZoneFinder(ZoneConfig(n_proposals=1)).find(everything_free)[0].radius_m > 10.0
 
 
+def test_the_geofence_bounds_zones_like_the_landing_area_and_both_apply() -> None:
+    everything_free = occupancy_with_free_discs([(0.0, 0.0, 100.0)])
+    fence = [(-12.0, -8.0), (-12.0, 12.0), (6.0, 12.0), (6.0, -8.0)]  # 18 m x 20 m inside the 30 m x 40 m grid
+    zones = ZoneFinder(ZoneConfig(n_proposals=10), fence_ne_m=fence).find(everything_free)
+    assert zones[0].radius_m == pytest.approx(9.0, abs=GRID.resolution_m)  # half the fence's short side
+    boundary = PolygonLine(fence)
+    for zone in zones:
+        assert boundary.inside(zone.north_m, zone.east_m)
+        assert boundary.distance_m(zone.north_m, zone.east_m) >= zone.radius_m - GRID.resolution_m / 2 - 1e-9
+    # With a landing area as well, a zone lies inside both: the L's corner zone is cut by the fence's south edge.
+    both = ZoneConfig(n_proposals=10, vehicle_radius_m=0.5, margin_m=0.5, landing_area_ne_m=L_SHAPE)
+    for zone in ZoneFinder(both, fence_ne_m=fence).find(everything_free):
+        for edges in (PolygonLine(fence), PolygonLine(L_SHAPE)):
+            assert edges.inside(zone.north_m, zone.east_m)
+            assert edges.distance_m(zone.north_m, zone.east_m) >= zone.radius_m - GRID.resolution_m / 2 - 1e-9
+
+
 class PolygonLine:
     """Brute-force reference: point-in-polygon and distance to the polygon's edges."""
 

@@ -152,7 +152,7 @@ class FlightApp:
         self.report = GroundReport(link, self.dry_run)
         zones = config.perception.zones
         self.guidance = LandingGuidance(
-            config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m
+            config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m, pipeline.policy
         )
         # The search area's centre for the blind random baseline (the paper's ROI): the geofence's centroid.
         self._area_centre_ne_m = polygon_centroid_ne_m(config.geofence.polygon_ne_m)

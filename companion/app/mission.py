@@ -220,7 +220,7 @@ def validate_for_flight(path: str | Path, never_arm: bool = False) -> tuple[Miss
             str(path),
             ["start.arm_and_takeoff: must be false with --never-arm (the systemd unit): the pilot takes off"],
         )
-    return config, SlzPipeline.from_config(config.perception)
+    return config, SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
 
 
 # What a simulated camera must share with perception.camera, or every projection is silently wrong.

@@ -126,9 +126,11 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
         raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
     config = config_from_header(header["config"])
     frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in records if r["kind"] == RecordKind.FRAME}
-    pipeline = SlzPipeline.from_config(config.perception)
+    pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
     zones = config.perception.zones
-    guidance = LandingGuidance(config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m)
+    guidance = LandingGuidance(
+        config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m, pipeline.policy
+    )
     report = ReplayReport()
     results: dict[int, FrameResult] = {}
     video = VideoWriter(video_path, video_rate_hz) if video_path is not None else None

@@ -11,13 +11,17 @@
 
 - **search**: hold position (never below ``search_altitude_m``, climbing to it if lower) until the pipeline
   selects a target; with none for ``search_timeout_s``, fly a bounded expanding-square pattern inside the geofence.
-- **approach**: fly horizontally towards the target's centre at constant altitude; the target follows the selection
-  policy frame by frame (the paper's loop), so a better zone may take over.
+- **approach**: fly horizontally towards the target's centre at constant altitude. The target is committed
+  (:mod:`companion.guidance.commitment`): the selection policy chooses once, and the choice stands until the zone
+  fails a check (lost, shrunk, out of the fence, a person seen in its footprint) or a rival is better by a stated
+  margin for a stated time and reachable in the time left. The paper re-applied the policy at every frame, and over a
+  view that moves with the vehicle the biggest zone changed with it: the vehicle chased zones until its time ran out.
 - **descent**: once within ``capture_radius_m`` of the centre, the landing point is locked (a point on the ground,
   refined by the target's track while it is seen near it) and the vehicle descends towards ``approach_height_m``
   above ground (the paper: 2 m above the zone). When for ``unsafe_frames_to_abort`` frames in a row a person is seen
   inside the footprint around the landing point, or the tracked zone is narrower than ``min_zone_radius_m``, the
-  vehicle climbs back by ``climb_back_m`` and searches again; a new descent starts only once it is back up there.
+  vehicle climbs back by ``climb_back_m`` and searches again; a new descent starts only once it is back up there,
+  and zones near the refused point are not chosen for a while (``commitment.refused_memory_s``).
   Below ``blind_altitude_m`` the head plane is too close to the camera to see the whole zone, and below
   ``perception_min_altitude_m`` (4.5 m, the same) the maps are not trusted at all (the whole view then lies within the
   footprint and its margin): the descent continues on the last map that saw the whole footprint free.
@@ -37,14 +41,14 @@ import enum
 import math
 from dataclasses import dataclass
 
-import numpy as np
 from pydantic import Field, model_validator
 
 from companion.config import StrictModel
+from companion.guidance.commitment import CommitmentConfig, TargetCommitment
+from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence
 from companion.perception.pipeline import FrameResult
-from companion.perception.projection import HeadPlaneOccupancy
-from companion.perception.selection import Target
+from companion.perception.selection import SelectionContext, SelectionPolicy, Target
 from companion.vehicle.link import Setpoint
 
 
@@ -119,6 +123,9 @@ class GuidanceConfig(StrictModel):
         description="Vehicle time from the start of the search to a landing decision; used up: hold (the pilot or "
         "the operator decides). On the vehicle clock, so a lockstep mission ends the same way on any machine.",
     )
+    commitment: CommitmentConfig = Field(
+        default_factory=CommitmentConfig, description="How firmly a chosen zone is kept (issue 33)."
+    )
     blind_landing: bool = Field(
         default=False,
         description="Evaluation baseline only (the paper's 'random landing', with the random selection policy): "
@@ -189,36 +196,6 @@ class Decision:
     reason: str
 
 
-@dataclass(frozen=True)
-class FootprintView:
-    """What one head-plane map says about a disc: the known share of its cells, and whether any is occupied."""
-
-    known_fraction: float
-    occupied_seen: bool
-
-    @property
-    def clear(self) -> bool:
-        """Nothing occupied seen inside."""
-        return not self.occupied_seen
-
-
-def footprint_view(head_plane: HeadPlaneOccupancy, north_m: float, east_m: float, radius_m: float) -> FootprintView:
-    """Inspect the cells of a head-plane map within ``radius_m`` of a point."""
-    g = head_plane.grid
-    n = g.north_centres_m
-    e = g.east_centres_m
-    rows = np.nonzero(np.abs(n - north_m) <= radius_m)[0]
-    cols = np.nonzero(np.abs(e - east_m) <= radius_m)[0]
-    total = math.pi * radius_m**2 / g.resolution_m**2
-    if not len(rows) or not len(cols):
-        return FootprintView(0.0, False)
-    nn, ee = np.meshgrid(n[rows], e[cols], indexing="ij")
-    inside = np.hypot(nn - north_m, ee - east_m) <= radius_m
-    known = head_plane.known[np.ix_(rows, cols)] & inside
-    occupied = known & ~head_plane.free[np.ix_(rows, cols)]
-    return FootprintView(min(1.0, float(known.sum()) / max(total, 1.0)), bool(occupied.any()))
-
-
 class LandingGuidance:
     """The state machine (see the module docstring).
 
@@ -232,12 +209,20 @@ class LandingGuidance:
         Vehicle radius including propellers plus the safety margin: the disc that must be free to land.
     min_zone_radius_m : float
         Smallest zone a descent may continue over.
+    policy : SelectionPolicy
+        The mission's selection policy: it chooses the zone to commit to, and scores rivals.
     """
 
     def __init__(
-        self, config: GuidanceConfig, geofence: Geofence, footprint_radius_m: float, min_zone_radius_m: float
+        self,
+        config: GuidanceConfig,
+        geofence: Geofence,
+        footprint_radius_m: float,
+        min_zone_radius_m: float,
+        policy: SelectionPolicy,
     ) -> None:
         self.config = config
+        self.commitment = TargetCommitment(config.commitment, policy, geofence, footprint_radius_m, min_zone_radius_m)
         self.geofence = geofence
         self.footprint_radius_m = footprint_radius_m
         self.min_zone_radius_m = min_zone_radius_m
@@ -298,6 +283,8 @@ class LandingGuidance:
 
     def _abort_descent(self, state: VehicleState, reason: str) -> Decision:
         self.reselections += 1
+        if self._locked is not None:
+            self.commitment.refuse(self._locked.north_m, self._locked.east_m, state.t_s, reason)
         self._locked = None
         self._landing_map_s = None
         self._last_target_s = state.t_s
@@ -359,9 +346,8 @@ class LandingGuidance:
             self._enter(self._resume_phase, state.t_s)
         if self.phase is LandingPhase.DESCENT:
             return self._descent(result, state)
-        target = result.target
-        if target is not None and not self.geofence.contains_ne(target.north_m, target.east_m):
-            target = None  # a zone outside the fence cannot be landed on: as if none was selected
+        target, event = self._choose(result, state)
+        note = "" if event is None else f"; {event}"
         if target is None:
             since = state.t_s - (self._last_target_s if self._last_target_s is not None else state.t_s)
             if since < c.search_timeout_s:
@@ -369,14 +355,14 @@ class LandingGuidance:
                     state,
                     LandingPhase.SEARCH,
                     None,
-                    "no target yet: hold",
+                    "no target yet: hold" + note,
                     state.north_m,
                     state.east_m,
                     self._search_altitude_m,
                 )
             n, e = self._search_waypoint(state)
             return self._setpoint(
-                state, LandingPhase.SEARCH, None, "no target: search pattern", n, e, self._search_altitude_m
+                state, LandingPhase.SEARCH, None, "no target: search pattern" + note, n, e, self._search_altitude_m
             )
         self._last_target_s = state.t_s
         self._search_origin = None
@@ -397,11 +383,31 @@ class LandingGuidance:
             LandingPhase.APPROACH,
             target,
             f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)"
-            + ("" if self._reclimb_m is None else f", climbing back to {self._reclimb_m:.1f} m first"),
+            + ("" if self._reclimb_m is None else f", climbing back to {self._reclimb_m:.1f} m first")
+            + note,
             target.north_m,
             target.east_m,
             max(state.altitude_m, c.land_altitude_m, self._reclimb_m or 0.0),
         )
+
+    def _choose(self, result: FrameResult, state: VehicleState) -> tuple[Target | None, str | None]:
+        """The committed target after this frame, and what changed in the commitment (for the log)."""
+        c = self.config
+        proposed = result.target
+        if proposed is not None and proposed.track_id is None:  # the blind baseline's point: drawn once, kept
+            inside = self.geofence.contains_ne(proposed.north_m, proposed.east_m)
+            return (proposed, None) if inside else (None, "the point lies outside the geofence")
+        elapsed_s = state.t_s - (self._started_s if self._started_s is not None else state.t_s)
+        choice = self.commitment.choose(
+            result.tracks,
+            result.head_plane,
+            SelectionContext(result.t_s, state.north_m, state.east_m),
+            altitude_m=state.altitude_m,
+            trusted=state.altitude_m >= c.perception_min_altitude_m,
+            time_left_s=c.mission_time_limit_s - elapsed_s,
+            descent_rate_mps=c.descent_rate_limit_mps,
+        )
+        return choice.target, choice.event
 
     def _descent(self, result: FrameResult, state: VehicleState) -> Decision:
         c = self.config
@@ -419,6 +425,7 @@ class LandingGuidance:
             and trusted
             and not blind
             and math.hypot(track.north_m - locked.north_m, track.east_m - locked.east_m) <= c.capture_radius_m
+            and self.commitment.inside_fence(track.north_m, track.east_m)  # never refined to beyond the fence
         )
         if seen:
             assert track is not None

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
 
@@ -113,15 +113,23 @@ class SlzPipeline:
         self.policy = policy
 
     @classmethod
-    def from_config(cls, config: PerceptionConfig, density_model: DensityModel | None = None) -> SlzPipeline:
-        """Build every stage from one config; the ONNX model is loaded unless ``density_model`` is given."""
+    def from_config(
+        cls,
+        config: PerceptionConfig,
+        density_model: DensityModel | None = None,
+        fence_ne_m: Sequence[tuple[float, float]] | None = None,
+    ) -> SlzPipeline:
+        """Build every stage from one config; the ONNX model is loaded unless ``density_model`` is given.
+
+        ``fence_ne_m``, the mission's geofence polygon (north_m, east_m), bounds the zones as the landing area does.
+        """
         camera, T_body_camera = camera_from_config(config.camera)
         model = density_model or OnnxDensityModel.from_config(config.model)
         return cls(
             density_model=model,
             occupancy=OccupancyMapper(config.occupancy),
             projector=HeadPlaneProjector(camera, T_body_camera, config.projection),
-            zone_finder=ZoneFinder(config.zones),
+            zone_finder=ZoneFinder(config.zones, fence_ne_m),
             tracker=ZoneTracker(config.tracking),
             policy=make_policy(config.selection, config.zones.landing_area_ne_m),
             min_gsd_m_per_px=config.model.min_gsd_m_per_px,

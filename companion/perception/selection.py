@@ -61,6 +61,11 @@ class SelectionPolicy(Protocol):
         """The target for this frame."""
         ...
 
+    def score(self, track: TrackedZone, context: SelectionContext) -> float:
+        """How good a track is under this policy (higher is better; what :meth:`select` maximises), for the
+        margin a rival must beat a committed target by (``companion.guidance.commitment``)."""
+        ...
+
     def reset(self) -> None:
         """Forget any state (a new mission)."""
         ...
@@ -81,6 +86,10 @@ class BiggestPolicy:
             return None
         return _target(min(tracks, key=lambda t: (-t.radius_m, t.track_id)))
 
+    def score(self, track: TrackedZone, context: SelectionContext) -> float:
+        """The radius, m."""
+        return track.radius_m
+
     def reset(self) -> None:
         """Stateless."""
 
@@ -95,6 +104,10 @@ class OldestPolicy:
         if not tracks:
             return None
         return _target(min(tracks, key=lambda t: (t.created_s, t.track_id)))
+
+    def score(self, track: TrackedZone, context: SelectionContext) -> float:
+        """The track's age at the frame, s."""
+        return context.t_s - track.created_s
 
     def reset(self) -> None:
         """Stateless."""
@@ -118,6 +131,10 @@ class NearestPolicy:
                 ),
             )
         )
+
+    def score(self, track: TrackedZone, context: SelectionContext) -> float:
+        """Minus the horizontal distance to the vehicle, m."""
+        return -math.hypot(track.north_m - context.vehicle_north_m, track.east_m - context.vehicle_east_m)
 
     def reset(self) -> None:
         """Stateless."""
@@ -153,6 +170,10 @@ class RandomPolicy:
                 north_m, east_m = centre[0] + float(dn), centre[1] + float(de)
             self._chosen = Target(north_m, east_m, 0.0, None)
         return self._chosen
+
+    def score(self, track: TrackedZone, context: SelectionContext) -> float:
+        """Zero: the blind baseline does not rate zones."""
+        return 0.0
 
     def _in_area(self, polygon: npt.NDArray[np.float64]) -> tuple[float, float]:
         """A uniform point of the polygon: uniform points of its bounding box until one falls inside."""

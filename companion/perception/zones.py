@@ -12,6 +12,7 @@ against the nearby samples.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -85,23 +86,27 @@ class ZoneFinder:
     nearest non-free sample (or to a zone already drawn) less half a cell, the midpoint between the last free
     and the first non-free sample. The grid's outer ring counts as not free: nothing is known beyond it. With a
     landing area (``ZoneConfig.landing_area_ne_m``), samples outside it count as not free too, so every zone lies
-    inside the area (to within half a cell) and its edge bounds a zone's radius as a person would.
+    inside the area (to within half a cell) and its edge bounds a zone's radius as a person would. The geofence
+    (``fence_ne_m``, the same polygon the guidance clamps setpoints to) bounds zones the same way: ground the vehicle
+    may not fly over is no landing zone, and a zone that reached across the fence overstated its radius.
 
     The centre is refined below the cell size: a parabola through the distance map at the maximum and its
     neighbours gives a sub-cell offset, and the radius is computed exactly at both the cell and the refined
     centre against the nearby samples; the larger exact radius wins, so refinement never overstates free space.
     """
 
-    def __init__(self, config: ZoneConfig) -> None:
+    def __init__(self, config: ZoneConfig, fence_ne_m: Sequence[tuple[float, float]] | None = None) -> None:
         self.config = config
-        self._area_ne_m = None if config.landing_area_ne_m is None else np.asarray(config.landing_area_ne_m, np.float64)
+        self._bounds_ne_m = [
+            np.asarray(polygon, np.float64) for polygon in (config.landing_area_ne_m, fence_ne_m) if polygon is not None
+        ]
 
     def find(self, occupancy: HeadPlaneOccupancy) -> list[Zone]:
         """Zones of one head-plane occupancy map, largest first."""
         grid = occupancy.grid
         free = occupancy.free.astype(np.uint8)
-        if self._area_ne_m is not None:
-            free &= landing_area_mask(self._area_ne_m, grid)
+        for polygon in self._bounds_ne_m:
+            free &= landing_area_mask(polygon, grid)
         free[[0, -1], :] = 0
         free[:, [0, -1]] = 0
         dist = np.asarray(cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_5), dtype=np.float32)

@@ -28,7 +28,7 @@ from sitl.config import SitlConfig
 from sitl.mission import body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
-METRICS_VERSION = 4
+METRICS_VERSION = 5
 """Incremented when a definition changes what stored results hold; :func:`stale` says which of them it changes.
 
 1. The first campaigns.
@@ -41,6 +41,9 @@ METRICS_VERSION = 4
    30 m ROI in the SITL), no longer around the vehicle's position at its first frame, which put some points outside
    the crowd and some outside the geofence (a search until the time limit). Earlier results of the random policy are
    stale; no other result changes.
+5. Adds why a mission without a touchdown held (``hold_cause``, from the flight log: :func:`hold_cause`) and how many
+   times the landing zone was chosen (``zones_chosen``: commitments and switches, issue 33). Nothing else changes;
+   earlier results are not stale (they lack the two fields).
 """
 
 
@@ -97,6 +100,12 @@ class MissionMetrics:
     people_cells: list[list[int]]
     """People at touchdown (or at the companion's last record) on a 1 m grid over [-20, 20) m: ``[row, col, count]``
     of the occupied cells (row from north -20 m, col from east -20 m), for the report's touchdown-over-density plots."""
+    hold_cause: str | None
+    """Why a mission without a touchdown ended (:data:`HOLD_CAUSES`); None after a touchdown."""
+    zones_chosen: int
+    """How many times the companion chose a landing zone: its first commitment, each commitment after a release, and
+    each switch to a rival (``reselections`` counts changes of the target's track id, which a zone that the tracker
+    lost and found again also makes)."""
     metrics_version: int = METRICS_VERSION
     """The definitions these were computed with (:data:`METRICS_VERSION`)."""
 
@@ -129,6 +138,65 @@ def _final_descent(flight: list[dict[str, Any]]) -> tuple[float | None, dict[str
         if decision["kind"] == "land":
             return start, target
     return last_command_t, None
+
+
+HOLD_CAUSES = {
+    "person in the footprint": "every descent allowed was aborted, the last one for a person seen in the footprint",
+    "no fresh free map": "every descent allowed was aborted, the last one because no recent map saw the footprint free",
+    "zone shrank": "every descent allowed was aborted, the last one because the zone shrank below the footprint",
+    "nothing free": "the time limit, with no zone chosen in its last 30 s: nothing free in view",
+    "time limit while searching": "the time limit, searching between zones (a zone chosen in the last 30 s)",
+    "time limit while approaching": "the time limit on the way to a chosen zone",
+    "time limit while descending": "the time limit during a descent",
+    "perception silent": "no processed frame for the failsafe's time",
+    "pilot took over": "the flight mode left offboard without the companion",
+    "other": "anything else (the log's reason is in the result)",
+}
+"""The kinds of :func:`hold_cause`, each with what it means."""
+
+NOTHING_FREE_WINDOW_S = 30.0
+
+
+def hold_cause(decisions: list[dict[str, Any]], reason: str) -> str:
+    """Why a mission without a touchdown ended, from its decisions (flight-log records) and its final reason.
+
+    A hold is a decision the log explains: the descents allowed (``guidance.max_reselections``) were all aborted, and
+    the last abort names why; or the time limit came, and the phase it came in says whether nothing was free to choose
+    or the vehicle was on its way.
+    """
+    if "re-selections used up" in reason:
+        if "person seen inside the footprint" in reason:
+            return "person in the footprint"
+        if "no map saw the footprint free" in reason:
+            return "no fresh free map"
+        if "shrank" in reason:
+            return "zone shrank"
+        return "other"
+    if "perception silent" in reason:
+        return "perception silent"
+    if "pilot took over" in reason:
+        return "pilot took over"
+    if "no landing within" not in reason:
+        return "other"
+    flying = [d for d in decisions if d.get("source") == "frame"]
+    if not flying:
+        return "nothing free"
+    end_s = float(flying[-1]["t_s"])
+    recent = [d for d in flying if float(d["t_s"]) >= end_s - NOTHING_FREE_WINDOW_S]
+    if not any(d["decision"]["target"] is not None for d in recent):
+        return "nothing free"
+    phase = flying[-1]["decision"]["phase"]
+    return {"approach": "time limit while approaching", "descent": "time limit while descending"}.get(
+        phase, "time limit while searching"
+    )
+
+
+def zones_chosen(decisions: list[dict[str, Any]]) -> int:
+    """Commitments and switches in the decisions' reasons (:mod:`companion.guidance.commitment`)."""
+    return sum(
+        d["decision"]["reason"].count("committed to zone") + d["decision"]["reason"].count("switched from zone")
+        for d in decisions
+    )
 
 
 def mission_metrics(
@@ -221,6 +289,8 @@ def mission_metrics(
         obstacle_kind=obstacle_kind,
         touched_obstacle=obstacle_m < vehicle_radius_m,
         people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else {})),
+        hold_cause=None if down is not None else hold_cause(decisions, str(end.get("reason", ""))),
+        zones_chosen=zones_chosen(decisions),
     )
 
 

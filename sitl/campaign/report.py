@@ -10,6 +10,7 @@ infrastructure reasons (``error``) are counted and left out.
 
 from __future__ import annotations
 
+import collections
 import csv
 import itertools
 import json
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from companion.app.recorder import read_log
-from sitl.campaign.metrics import park_layout, stale, with_obstacles
+from sitl.campaign.metrics import HOLD_CAUSES, park_layout, stale, with_obstacles
 from sitl.campaign.provenance import Segment, SegmentLog, segments
 from sitl.campaign.spec import CampaignSpec
 from sitl.campaign.stats import (
@@ -75,13 +76,56 @@ def _values(rows: list[dict[str, Any]], key: str) -> list[float]:
 
 
 def cell_summary(rows: list[dict[str, Any]], errors: int, seed: int) -> dict[str, Any]:
-    """Every metric of one cell with its interval."""
+    """Every metric of one cell with its interval, and its holds counted by cause."""
     out: dict[str, Any] = {"missions": len(rows), "errors": errors}
     for key in RATES:
         out[key] = asdict(wilson(sum(1 for r in rows if r[key]), len(rows)))
     for k, key in enumerate(MEANS):
         out[key] = asdict(bootstrap_mean(_values(rows, key), seed + k))
+    out["holds"] = dict(sorted(collections.Counter(hold_kind(r) for r in rows if not r["landed"]).items()))
+    out["landed_unsafe"] = sum(1 for r in rows if r["landed"] and not r["success"])
     return out
+
+
+def hold_kind(result: dict[str, Any]) -> str:
+    """A hold's cause (metrics version 5: :func:`sitl.campaign.metrics.hold_cause`); for an earlier result, its
+    final reason, marked as such."""
+    cause = result.get("hold_cause")
+    if cause is not None:
+        return str(cause)
+    reason = str(result.get("reason", ""))
+    return f"(before version 5) {reason.split(':')[0].split(';')[0]}"
+
+
+def against_previous(
+    spec: CampaignSpec, results: list[dict[str, Any]], previous: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
+    """Each cell's success against an earlier flight of the same spec, mission by mission (the same scenes and start
+    poses): exact two-sided McNemar test, Holm-adjusted over the cells."""
+    now = {r["mission_id"]: r for r in results if "error" not in r}
+    before = {r["mission_id"]: r for r in previous if "error" not in r}
+    rows: list[dict[str, Any]] = []
+    tests = []
+    for condition, strategy in spec.cell_names():
+        ids = sorted(
+            m for m in set(now) & set(before) if now[m]["condition"] == condition and now[m]["strategy"] == strategy
+        )
+        test = mcnemar_exact([bool(before[m]["success"]) for m in ids], [bool(now[m]["success"]) for m in ids])
+        tests.append(test)
+        rows.append(
+            {
+                "cell": f"{condition}/{strategy}",
+                "pairs": test.n_pairs,
+                "before": sum(bool(before[m]["success"]) for m in ids),
+                "now": sum(bool(now[m]["success"]) for m in ids),
+                "only_before": test.only_a,
+                "only_now": test.only_b,
+                "p": test.p_value,
+            }
+        )
+    for row, p_holm in zip(rows, holm([t.p_value for t in tests]), strict=True):
+        row["p_holm"] = p_holm
+    return rows
 
 
 def completed(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -108,8 +152,16 @@ def completed(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[dict[st
     return out
 
 
-def build_report(spec: CampaignSpec, results: list[dict[str, Any]], out_dir: Path) -> dict[str, Any]:
-    """Write ``report.md``, ``results.csv``, ``summary.json`` and the plots into ``out_dir``; returns the summary."""
+def build_report(
+    spec: CampaignSpec,
+    results: list[dict[str, Any]],
+    out_dir: Path,
+    previous: tuple[str, list[dict[str, Any]]] | None = None,
+) -> dict[str, Any]:
+    """Write ``report.md``, ``results.csv``, ``summary.json`` and the plots into ``out_dir``; returns the summary.
+
+    ``previous``, a name and the results of an earlier flight of the same spec, adds a paired comparison with it.
+    """
     results = completed(spec, results)
     good = [r for r in results if "error" not in r]
     policies = {plan.mission_id: plan.strategy.policy.value for plan in spec.missions()}
@@ -156,6 +208,9 @@ def build_report(spec: CampaignSpec, results: list[dict[str, Any]], out_dir: Pat
         "cells": cells,
         "paired": paired,
         "paper": against_paper,
+        "previous": None
+        if previous is None
+        else {"name": previous[0], "cells": against_previous(spec, good, completed(spec, previous[1]))},
         "flown": {
             "wall_s": wall_s,
             "missions_per_hour": 3600.0 * len(good) / wall_s if wall_s > 0 else None,
@@ -298,7 +353,9 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
             f"| {p(paper[3])} | {_fmt(cell['zone_area_m2']['value'])} | {p(paper[4])} "
             f"| {_fmt(cell['nearest_person_mean_m']['value'])} | {p(paper[5])} | {_fmt(cell['zone_iou']['value'], 3)} |"
         )
+    lines += _holds_markdown(summary["cells"])
     lines += _paper_test_markdown(summary["paper"])
+    lines += _previous_markdown(summary["previous"])
     lines += [
         "",
         "## Paired comparisons (same scenes and start poses)",
@@ -315,6 +372,51 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
     lines += _flown_markdown(summary["flown"])
     lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({p})" for p in plots] + [""]
     return "\n".join(lines)
+
+
+def _holds_markdown(cells: dict[str, Any]) -> list[str]:
+    lines = [
+        "",
+        "## Missions without a touchdown, by cause",
+        "",
+        "| condition / strategy | missions | held | causes | landed with a person in the footprint |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for name, cell in cells.items():
+        holds = cell.get("holds", {})
+        causes = ", ".join(f"{kind}: {n}" for kind, n in holds.items()) or "none"
+        lines.append(
+            f"| {name} | {cell['missions']} | {sum(holds.values())} | {causes} | {cell.get('landed_unsafe', 0)} |"
+        )
+    lines += [
+        "",
+        "Causes (metrics version 5, from each flight log): "
+        + "; ".join(f"*{kind}*: {text}" for kind, text in HOLD_CAUSES.items())
+        + ". Results of earlier versions show their final reason.",
+    ]
+    return lines
+
+
+def _previous_markdown(previous: dict[str, Any] | None) -> list[str]:
+    if previous is None:
+        return []
+    lines = [
+        "",
+        f"## Against {previous['name']} (same scenes and start poses, mission by mission)",
+        "",
+        "| condition / strategy | pairs | success before | now | only before | only now | McNemar p | Holm p |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in previous["cells"]:
+        lines.append(
+            f"| {r['cell']} | {r['pairs']} | {r['before']} | {r['now']} | {r['only_before']} | {r['only_now']} "
+            f"| {r['p']:.3g} | {r['p_holm']:.3g} |"
+        )
+    lines += [
+        "",
+        "Exact two-sided McNemar test on the discordant pairs of each cell, Holm-adjusted over the cells.",
+    ]
+    return lines
 
 
 def _paper_test_markdown(rows: list[dict[str, Any]]) -> list[str]:

@@ -1,0 +1,40 @@
+"""The disc a landing needs, on one head-plane map: how much of it is known, and whether a person is seen in it."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.perception.projection import HeadPlaneOccupancy
+
+
+@dataclass(frozen=True)
+class FootprintView:
+    """What one head-plane map says about a disc: the known share of its cells, and whether any is occupied."""
+
+    known_fraction: float
+    occupied_seen: bool
+
+    @property
+    def clear(self) -> bool:
+        """Nothing occupied seen inside."""
+        return not self.occupied_seen
+
+
+def footprint_view(head_plane: HeadPlaneOccupancy, north_m: float, east_m: float, radius_m: float) -> FootprintView:
+    """Inspect the cells of a head-plane map within ``radius_m`` of a point."""
+    g = head_plane.grid
+    n = g.north_centres_m
+    e = g.east_centres_m
+    rows = np.nonzero(np.abs(n - north_m) <= radius_m)[0]
+    cols = np.nonzero(np.abs(e - east_m) <= radius_m)[0]
+    total = math.pi * radius_m**2 / g.resolution_m**2
+    if not len(rows) or not len(cols):
+        return FootprintView(0.0, False)
+    nn, ee = np.meshgrid(n[rows], e[cols], indexing="ij")
+    inside = np.hypot(nn - north_m, ee - east_m) <= radius_m
+    known = head_plane.known[np.ix_(rows, cols)] & inside
+    occupied = known & ~head_plane.free[np.ix_(rows, cols)]
+    return FootprintView(min(1.0, float(known.sum()) / max(total, 1.0)), bool(occupied.any()))
