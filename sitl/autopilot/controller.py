@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sitl.dynamics.base import Airframe, F64Array, VehicleState
-from sitl.dynamics.rigid_body import GRAVITY_MPS2, cross3, quaternion_to_matrix
+from sitl.dynamics.rigid_body import GRAVITY_MPS2, quaternion_to_matrix
 
 
 @dataclass(frozen=True)
@@ -80,16 +80,16 @@ class CascadedController:
         pos = np.array(airframe.rotor_positions_frd_m)
         extent = float(np.max(np.abs(pos)))
         # Normalized rotor thrust t_i = c + roll_i * tau_r + pitch_i * tau_p + yaw_i * tau_y.
-        self._roll = -pos[:, 1] / extent
-        self._pitch = pos[:, 0] / extent
-        self._yaw = np.array(airframe.rotor_yaw_sign, dtype=np.float64)
+        self._roll = tuple(float(v) for v in -pos[:, 1] / extent)
+        self._pitch = tuple(float(v) for v in pos[:, 0] / extent)
+        self._yaw = tuple(float(v) for v in airframe.rotor_yaw_sign)
         self.reset()
 
     def reset(self) -> None:
         """Clear integrators and memories (on arming, or when landed)."""
         self._vel_integral = np.zeros(3)
-        self._rate_integral = np.zeros(3)
-        self._last_rate_error = np.zeros(3)
+        self._rate_integral: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self._last_rate_error: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._thrust_vector = np.array([0.0, 0.0, -self.airframe.hover_thrust])
         self._yaw_sp = math.nan
         self.collective = 0.0
@@ -150,63 +150,81 @@ class CascadedController:
             self._yaw_sp = yaw
 
     # -- inner loops ------------------------------------------------------------------------------------
+    # Scalar arithmetic: they run at every physics step (400 Hz), where numpy's per-call overhead on 3-vectors and
+    # 3x3 matrices was most of their cost (issue 34).
     def update_attitude(self, state: VehicleState, dt_s: float, integrate: bool = True) -> F64Array:
         """Attitude and rate loops plus the mixer; returns ESC commands (4,) in [0, 1]."""
         g, lim = self.gains, self.limits
-        R = quaternion_to_matrix(state.quaternion_wxyz)
-        thrust = self._thrust_vector
-        norm = float(np.linalg.norm(thrust))
-        z_b = -thrust / norm if norm > 1e-6 else np.array([0.0, 0.0, 1.0])
-        yaw = self._yaw_sp if not math.isnan(self._yaw_sp) else math.atan2(R[1, 0], R[0, 0])
-        x_c = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        y_b = cross3(z_b, x_c)
-        y_norm = float(np.linalg.norm(y_b))
-        y_b = y_b / y_norm if y_norm > 1e-6 else R[:, 1]
-        x_b = cross3(y_b, z_b)
-        R_sp = np.column_stack([x_b, y_b, z_b])
-        # Geometric attitude error (Lee et al.), in the body frame.
-        E = R_sp.T @ R - R.T @ R_sp
-        e_R = 0.5 * np.array([E[2, 1], E[0, 2], E[1, 0]])
-        rate_sp = -np.array(g.att_p) * e_R
+        qw, qx, qy, qz = (float(v) for v in state.quaternion_wxyz)
+        # R (body -> world) by columns: c0 = body x, c1 = body y, c2 = body z, in the world frame.
+        c0 = (1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy + qw * qz), 2 * (qx * qz - qw * qy))
+        c1 = (2 * (qx * qy - qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz + qw * qx))
+        c2 = (2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy))
+        tx, ty, tz = (float(v) for v in self._thrust_vector)
+        norm = math.sqrt(tx * tx + ty * ty + tz * tz)
+        z_b = (-tx / norm, -ty / norm, -tz / norm) if norm > 1e-6 else (0.0, 0.0, 1.0)
+        yaw = self._yaw_sp if not math.isnan(self._yaw_sp) else math.atan2(c0[1], c0[0])
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        y_b = (-z_b[2] * sy, z_b[2] * cy, z_b[0] * sy - z_b[1] * cy)  # z_b x (cos yaw, sin yaw, 0)
+        y_norm = math.sqrt(y_b[0] * y_b[0] + y_b[1] * y_b[1] + y_b[2] * y_b[2])
+        y_b = (y_b[0] / y_norm, y_b[1] / y_norm, y_b[2] / y_norm) if y_norm > 1e-6 else c1
+        x_b = _cross(y_b, z_b)
+        # Geometric attitude error (Lee et al.) in the body frame: e_R = vee(R_sp^T R - R^T R_sp) / 2.
+        e_x = 0.5 * (_dot(z_b, c1) - _dot(c2, y_b))
+        e_y = 0.5 * (_dot(x_b, c2) - _dot(c0, z_b))
+        e_z = 0.5 * (_dot(y_b, c0) - _dot(c1, x_b))
         rp_max, y_max = math.radians(lim.rate_max_roll_pitch_dps), math.radians(lim.rate_max_yaw_dps)
-        rate_sp = np.clip(rate_sp, [-rp_max, -rp_max, -y_max], [rp_max, rp_max, y_max])
-
-        rate_err = rate_sp - state.rates_frd_radps
-        d_err = (rate_err - self._last_rate_error) / dt_s if dt_s > 0 else np.zeros(3)
-        self._last_rate_error = rate_err
-        torque = np.array(g.rate_p) * rate_err + np.array(g.rate_i) * self._rate_integral + np.array(g.rate_d) * d_err
+        (kx, ky, kz) = g.att_p
+        rate_sp = (
+            min(max(-kx * e_x, -rp_max), rp_max),
+            min(max(-ky * e_y, -rp_max), rp_max),
+            min(max(-kz * e_z, -y_max), y_max),
+        )
+        rates = state.rates_frd_radps
+        err = tuple(rate_sp[i] - float(rates[i]) for i in range(3))
+        last = self._last_rate_error
+        d_err = tuple((err[i] - last[i]) / dt_s for i in range(3)) if dt_s > 0 else (0.0, 0.0, 0.0)
+        self._last_rate_error = err
+        integral = self._rate_integral
+        torque = tuple(g.rate_p[i] * err[i] + g.rate_i[i] * integral[i] + g.rate_d[i] * d_err[i] for i in range(3))
         if integrate:
-            self._rate_integral = np.clip(self._rate_integral + rate_err * dt_s, -0.3, 0.3)
+            self._rate_integral = tuple(min(max(integral[i] + err[i] * dt_s, -0.3), 0.3) for i in range(3))
 
-        collective = max(0.0, float(-thrust @ R[:, 2]))  # thrust along the current body axis
+        collective = max(0.0, -(tx * c2[0] + ty * c2[1] + tz * c2[2]))  # thrust along the current body axis
         self.collective = collective
         return self._mix(collective, torque)
 
-    def _mix(self, collective: float, torque: F64Array) -> F64Array:
+    def _mix(self, collective: float, torque: F64Array | tuple[float, ...]) -> F64Array:
         """Allocate collective thrust and torques to rotors; yaw only gets the headroom left."""
-        rp = collective + self._roll * torque[0] + self._pitch * torque[1]
-        low, high = float(rp.min()), float(rp.max())
+        t_roll, t_pitch, t_yaw = (float(v) for v in torque)
+        rp = [collective + r * t_roll + p * t_pitch for r, p in zip(self._roll, self._pitch, strict=True)]
+        low, high = min(rp), max(rp)
         if high - low > 1.0:  # cannot fit roll/pitch: scale them down around the collective
             scale = 1.0 / (high - low)
-            rp = collective + (rp - collective) * scale
-            low, high = float(rp.min()), float(rp.max())
+            rp = [collective + (v - collective) * scale for v in rp]
+            low, high = min(rp), max(rp)
         if low < 0.0:
-            rp -= low
+            rp = [v - low for v in rp]
         elif high > 1.0:
-            rp -= high - 1.0
-        yaw = self._yaw * torque[2]
-        headroom_up = 1.0 - rp
-        headroom_down = rp
+            rp = [v - (high - 1.0) for v in rp]
+        yaw = [s * t_yaw for s in self._yaw]
         limit = math.inf
-        for y, up, down in zip(yaw, headroom_up, headroom_down, strict=True):
+        for y, v in zip(yaw, rp, strict=True):
             if y > 0:
-                limit = min(limit, up / y)
+                limit = min(limit, (1.0 - v) / y)
             elif y < 0:
-                limit = min(limit, down / -y)
+                limit = min(limit, v / -y)
         scale = min(1.0, limit)
-        thrust: F64Array = np.clip(rp + yaw * scale, 0.0, 1.0)
+        thrust = [min(max(v + y * scale, 0.0), 1.0) for v, y in zip(rp, yaw, strict=True)]
         f = self.airframe.thrust_model_factor
         if f <= 1e-6:
-            return thrust
-        commands: F64Array = (-(1.0 - f) + np.sqrt((1.0 - f) ** 2 + 4.0 * f * thrust)) / (2.0 * f)
-        return commands
+            return np.array(thrust)
+        return np.array([(-(1.0 - f) + math.sqrt((1.0 - f) ** 2 + 4.0 * f * t)) / (2.0 * f) for t in thrust])
+
+
+def _dot(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])

@@ -43,11 +43,6 @@ ROTOR_LAYOUT = ((1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0))
 ROTOR_YAW_SIGN = (1.0, 1.0, -1.0, -1.0)
 
 
-def cross3(a: F64Array, b: F64Array) -> F64Array:
-    """Cross product of two 3-vectors (numpy's general ``np.cross`` costs ten times more on this size)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
 def quaternion_to_matrix(q: F64Array) -> F64Array:
     """Rotation matrix (3, 3) of a unit quaternion ``[w, x, y, z]``."""
     w, x, y, z = q
@@ -61,31 +56,36 @@ def quaternion_to_matrix(q: F64Array) -> F64Array:
 
 
 class RigidBodyQuadrotor:
-    """The default dynamics backend (see the module docstring)."""
+    """The default dynamics backend (see the module docstring).
+
+    The state is kept in Python floats and a step is scalar arithmetic: on 3- and 4-vectors, numpy's per-call
+    overhead was most of a step's cost. The model and its order of integration are the same as the numpy version's
+    (issue 34: results may change in the last bits of rounding).
+    """
 
     min_rate_hz = 200.0
 
     def __init__(self, params: RigidBodyParameters | None = None, home_position_ned_m: F64Array | None = None) -> None:
         self.params = p = params or RigidBodyParameters()
-        self._inertia = np.array(p.inertia_kgm2)
-        self._rotors = np.array([(sx * p.arm_m, sy * p.arm_m) for sx, sy in ROTOR_LAYOUT])
-        self._yaw_sign = np.array(ROTOR_YAW_SIGN)
+        self._rotors = tuple((sx * p.arm_m, sy * p.arm_m) for sx, sy in ROTOR_LAYOUT)
         lx, ly, lz = p.leg_offset_frd_m
-        self._legs = np.array([(lx, ly, lz), (lx, -ly, lz), (-lx, ly, lz), (-lx, -ly, lz)])
+        self._legs = ((lx, ly, lz), (lx, -ly, lz), (-lx, ly, lz), (-lx, -ly, lz))
         home = np.zeros(3) if home_position_ned_m is None else np.asarray(home_position_ned_m, dtype=np.float64)
         self._ground_down_m = float(home[2])
-        self._pos = home.copy()
-        self._pos[2] = self._ground_down_m - lz + p.mass_kg * GRAVITY_MPS2 / (4 * p.leg_stiffness_npm)  # at rest
-        self._vel = np.zeros(3)
-        self._q = np.array([1.0, 0.0, 0.0, 0.0])
-        self._omega = np.zeros(3)
-        self._rotor_speed = np.zeros(4)
-        self._commands = np.zeros(4)
-        self._wind = np.zeros(3)
-        self._acc = np.zeros(3)
+        at_rest_m = self._ground_down_m - lz + p.mass_kg * GRAVITY_MPS2 / (4 * p.leg_stiffness_npm)
+        self._pos = (float(home[0]), float(home[1]), at_rest_m)
+        self._vel = (0.0, 0.0, 0.0)
+        self._q = (1.0, 0.0, 0.0, 0.0)
+        self._omega = (0.0, 0.0, 0.0)
+        self._rotor_speed = (0.0, 0.0, 0.0, 0.0)
+        self._commands = (0.0, 0.0, 0.0, 0.0)
+        self._wind = (0.0, 0.0, 0.0)
+        self._acc = (0.0, 0.0, 0.0)
         self._on_ground = True
+        self._alpha_dt_s = math.nan
+        self._alpha = 0.0
         self._airframe = Airframe(
-            rotor_positions_frd_m=tuple((float(x), float(y)) for x, y in self._rotors),
+            rotor_positions_frd_m=self._rotors,
             rotor_yaw_sign=ROTOR_YAW_SIGN,
             thrust_model_factor=1.0,
             hover_thrust=p.mass_kg * GRAVITY_MPS2 / (4 * p.max_thrust_per_rotor_n),
@@ -100,65 +100,102 @@ class RigidBodyQuadrotor:
     def state(self) -> VehicleState:
         """A copy of the true state."""
         return VehicleState(
-            self._pos.copy(), self._vel.copy(), self._q.copy(), self._omega.copy(), self._acc.copy(), self._on_ground
+            np.array(self._pos),
+            np.array(self._vel),
+            np.array(self._q),
+            np.array(self._omega),
+            np.array(self._acc),
+            self._on_ground,
         )
 
     def set_motor_commands(self, commands: F64Array) -> None:
         """ESC commands (4,), clipped to [0, 1]; NaN counts as 0."""
-        self._commands = np.clip(np.nan_to_num(np.asarray(commands, dtype=np.float64)), 0.0, 1.0)
+        c1, c2, c3, c4 = (0.0 if math.isnan(c) else min(max(c, 0.0), 1.0) for c in map(float, commands))
+        self._commands = (c1, c2, c3, c4)
 
     def set_wind(self, wind_ned_mps: F64Array) -> None:
         """Wind velocity in world NED."""
-        self._wind = np.asarray(wind_ned_mps, dtype=np.float64).reshape(3).copy()
+        w = np.asarray(wind_ned_mps, dtype=np.float64).reshape(3)
+        self._wind = (float(w[0]), float(w[1]), float(w[2]))
 
     def step(self, dt_s: float) -> None:
         """Advance by ``dt_s`` (semi-implicit Euler)."""
         p = self.params
-        alpha = 1.0 - math.exp(-dt_s / p.motor_time_constant_s)
-        self._rotor_speed += alpha * (self._commands - self._rotor_speed)
-        thrust = p.max_thrust_per_rotor_n * self._rotor_speed**2
-        R = quaternion_to_matrix(self._q)
+        if dt_s != self._alpha_dt_s:
+            self._alpha_dt_s, self._alpha = dt_s, 1.0 - math.exp(-dt_s / p.motor_time_constant_s)
+        alpha = self._alpha
+        w1, w2, w3, w4 = (w + alpha * (c - w) for w, c in zip(self._rotor_speed, self._commands, strict=True))
+        self._rotor_speed = (w1, w2, w3, w4)
+        t_max = p.max_thrust_per_rotor_n
+        t1, t2, t3, t4 = t_max * w1 * w1, t_max * w2 * w2, t_max * w3 * w3, t_max * w4 * w4
+        (x1, y1), (x2, y2), (x3, y3), (x4, y4) = self._rotors
+        qw, qx, qy, qz = self._q
+        # R: body -> world, as quaternion_to_matrix.
+        r00, r01, r02 = 1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)
+        r10, r11, r12 = 2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)
+        r20, r21, r22 = 2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)
 
         # Body-frame torque: r x F for each rotor with F = (0, 0, -T), plus drag torques, plus angular drag.
-        torque = np.array(
-            [
-                -float(self._rotors[:, 1] @ thrust),
-                float(self._rotors[:, 0] @ thrust),
-                p.torque_coefficient_m * float(self._yaw_sign @ thrust),
-            ]
-        )
-        torque -= p.angular_drag_nmsprad * self._omega
-        force_world = R @ np.array([0.0, 0.0, -float(thrust.sum())])
-        force_world += -p.linear_drag_nspm * (self._vel - self._wind)
-        force_world[2] += p.mass_kg * GRAVITY_MPS2
+        ox, oy, oz = self._omega
+        drag = p.angular_drag_nmsprad
+        s1, s2, s3, s4 = ROTOR_YAW_SIGN
+        tau_x = -(y1 * t1 + y2 * t2 + y3 * t3 + y4 * t4) - drag * ox
+        tau_y = (x1 * t1 + x2 * t2 + x3 * t3 + x4 * t4) - drag * oy
+        tau_z = p.torque_coefficient_m * (s1 * t1 + s2 * t2 + s3 * t3 + s4 * t4) - drag * oz
+        total = t1 + t2 + t3 + t4
+        vx, vy, vz = self._vel
+        k = p.linear_drag_nspm
+        wind_n, wind_e, wind_d = self._wind
+        fx = -r02 * total - k * (vx - wind_n)
+        fy = -r12 * total - k * (vy - wind_e)
+        fz = -r22 * total - k * (vz - wind_d) + p.mass_kg * GRAVITY_MPS2
 
         # Ground contact at the four legs (ground plane: down = ground_down_m).
-        legs_world = self._pos + self._legs @ R.T
-        penetration = legs_world[:, 2] - self._ground_down_m
-        touching = penetration > 0.0
-        self._on_ground = bool(touching.any())
-        if self._on_ground:
-            omega_world = R @ self._omega
-            for i in np.nonzero(touching)[0]:
-                r_world = legs_world[i] - self._pos
-                v_point = self._vel + cross3(omega_world, r_world)
-                normal = max(0.0, p.leg_stiffness_npm * penetration[i] + p.leg_damping_nspm * v_point[2])
-                v_t = v_point[:2]
-                speed_t = math.hypot(v_t[0], v_t[1])
-                friction = -p.friction_coefficient * normal * v_t / max(speed_t, 0.05)
-                f = np.array([friction[0], friction[1], -normal])
-                force_world += f
-                torque += R.T @ cross3(r_world, f)
+        px, py, pz = self._pos
+        on_ground = False
+        for lx, ly, lz in self._legs:
+            rx = r00 * lx + r01 * ly + r02 * lz  # the leg in the world frame, from the centre of mass
+            ry = r10 * lx + r11 * ly + r12 * lz
+            rz = r20 * lx + r21 * ly + r22 * lz
+            penetration = pz + rz - self._ground_down_m
+            if penetration <= 0.0:
+                continue
+            on_ground = True
+            owx = r00 * ox + r01 * oy + r02 * oz  # angular velocity in the world frame
+            owy = r10 * ox + r11 * oy + r12 * oz
+            owz = r20 * ox + r21 * oy + r22 * oz
+            v_px = vx + (owy * rz - owz * ry)
+            v_py = vy + (owz * rx - owx * rz)
+            v_pz = vz + (owx * ry - owy * rx)
+            normal = max(0.0, p.leg_stiffness_npm * penetration + p.leg_damping_nspm * v_pz)
+            scale = -p.friction_coefficient * normal / max(math.hypot(v_px, v_py), 0.05)
+            gx, gy, gz = scale * v_px, scale * v_py, -normal
+            fx, fy, fz = fx + gx, fy + gy, fz + gz
+            cx, cy, cz = ry * gz - rz * gy, rz * gx - rx * gz, rx * gy - ry * gx  # r x f, world frame
+            tau_x += r00 * cx + r10 * cy + r20 * cz  # ... in the body frame (R^T)
+            tau_y += r01 * cx + r11 * cy + r21 * cz
+            tau_z += r02 * cx + r12 * cy + r22 * cz
+        self._on_ground = on_ground
 
-        self._acc = force_world / p.mass_kg
-        self._vel += self._acc * dt_s
-        self._pos += self._vel * dt_s
-        omega_dot = (torque - cross3(self._omega, self._inertia * self._omega)) / self._inertia
-        self._omega += omega_dot * dt_s
-        wx, wy, wz = self._omega
-        w, x, y, z = self._q
-        dq = 0.5 * np.array(
-            [-x * wx - y * wy - z * wz, w * wx + y * wz - z * wy, w * wy - x * wz + z * wx, w * wz + x * wy - y * wx]
+        m = p.mass_kg
+        ax, ay, az = fx / m, fy / m, fz / m
+        self._acc = (ax, ay, az)
+        vx, vy, vz = vx + ax * dt_s, vy + ay * dt_s, vz + az * dt_s
+        self._vel = (vx, vy, vz)
+        self._pos = (px + vx * dt_s, py + vy * dt_s, pz + vz * dt_s)
+        ix, iy, iz = p.inertia_kgm2
+        hx, hy, hz = ix * ox, iy * oy, iz * oz  # angular momentum, body frame
+        ox, oy, oz = (
+            ox + (tau_x - (oy * hz - oz * hy)) / ix * dt_s,
+            oy + (tau_y - (oz * hx - ox * hz)) / iy * dt_s,
+            oz + (tau_z - (ox * hy - oy * hx)) / iz * dt_s,
         )
-        self._q = self._q + dq * dt_s
-        self._q /= float(np.linalg.norm(self._q))
+        self._omega = (ox, oy, oz)
+        qw, qx, qy, qz = (
+            qw + 0.5 * (-qx * ox - qy * oy - qz * oz) * dt_s,
+            qx + 0.5 * (qw * ox + qy * oz - qz * oy) * dt_s,
+            qy + 0.5 * (qw * oy - qx * oz + qz * ox) * dt_s,
+            qz + 0.5 * (qw * oz + qx * oy - qy * ox) * dt_s,
+        )
+        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self._q = (qw / norm, qx / norm, qy / norm, qz / norm)
