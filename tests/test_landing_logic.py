@@ -12,6 +12,7 @@ import pytest
 
 from companion.config import ConfigError, validate_config
 from companion.geometry import Pose
+from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import (
     CommandKind,
@@ -20,7 +21,6 @@ from companion.guidance.landing import (
     LandingGuidance,
     LandingPhase,
     VehicleState,
-    footprint_view,
 )
 from companion.perception.density import DensityMap
 from companion.perception.occupancy import OccupancyImage
