@@ -1,0 +1,115 @@
+"""Why missions held (metrics version 5, issue 33), counted in the report, and a table against its earlier flight."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, hold_cause, zones_chosen
+from sitl.campaign.report import against_previous, build_report, hold_kind
+from sitl.campaign.spec import CampaignSpec, load_campaign_spec
+
+pytestmark = pytest.mark.unit
+
+USED_UP = "person seen inside the footprint; 6 re-selections used up: hold"
+TIME_LIMIT = "no landing within 300 s of the start: hold"
+
+
+def _decision(t_s: float, phase: str, reason: str, target: bool) -> dict[str, Any]:
+    return {
+        "kind": "decision",
+        "t_s": t_s,
+        "source": "frame",
+        "decision": {"phase": phase, "reason": reason, "target": {"track_id": 1} if target else None},
+    }
+
+
+def test_each_hold_is_explained_by_kind_from_the_flight_log() -> None:
+    searching = [_decision(float(t), "search", "no target: search pattern", False) for t in range(300)]
+    assert hold_cause(searching, TIME_LIMIT) == "nothing free"
+    chosen_late = [*searching[:-10], _decision(295.0, "approach", "approach target 1; committed to zone 1", True)]
+    assert hold_cause(chosen_late, TIME_LIMIT) == "time limit while approaching"
+    descending = [*chosen_late, _decision(299.0, "descent", "descend over zone 1", True)]
+    assert hold_cause(descending, TIME_LIMIT) == "time limit while descending"
+    between = [*chosen_late, _decision(299.0, "search", "no target yet: hold; released: zone 1 not seen", False)]
+    assert hold_cause(between, TIME_LIMIT) == "time limit while searching"
+    assert hold_cause(searching, USED_UP) == "person in the footprint"
+    no_map = "no map saw the footprint free in the last 12 s; 6 re-selections used up: hold"
+    assert hold_cause([], no_map) == "no fresh free map"
+    assert hold_cause([], "zone 3 shrank to 0.80 m; 6 re-selections used up: hold") == "zone shrank"
+    assert hold_cause([], "perception silent 5.0 s: land") == "perception silent"
+    assert hold_cause([], "something new") == "other"
+    assert {hold_cause(searching, r) for r in (TIME_LIMIT, USED_UP, "x")} <= set(HOLD_CAUSES)
+
+
+def test_choices_are_counted_from_the_reasons_not_from_the_trackers_ids() -> None:
+    log = [
+        _decision(1.0, "approach", "approach target 1; committed to zone 1 (biggest, r=4.0 m)", True),
+        _decision(2.0, "approach", "approach target 7; zone 1 seen again as zone 7 (IoU 0.70)", True),
+        _decision(9.0, "approach", "approach target 9; switched from zone 7 to zone 9: biggest better", True),
+        _decision(12.0, "search", "released: zone 9 not seen for 3 s; committed to zone 12 (biggest)", True),
+    ]
+    assert zones_chosen(log) == 3
+
+
+def _spec(tmp_path: Path) -> CampaignSpec:
+    path = tmp_path / "holds.yaml"
+    path.write_text(
+        "campaign:\n  name: holds\n  master_seed: 3\n  runs: 8\n  mission_config: mission_configs/sitl.yaml\n"
+        "  conditions:\n    - name: static\n  strategies:\n    - {name: oldest, policy: oldest}\n"
+        "    - {name: nearest, policy: nearest}\n"
+    )
+    return load_campaign_spec(path)
+
+
+def _results(spec: CampaignSpec, over_a_person: set[str], held: dict[str, str | None]) -> list[dict[str, Any]]:
+    """Every mission lands safely except those ``over_a_person`` and those ``held`` (mission id: cause)."""
+    rows = []
+    for plan in spec.missions():
+        bad, hold = plan.mission_id in over_a_person, plan.mission_id in held
+        rows.append(
+            MissionMetrics(
+                plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed, "done",
+                TIME_LIMIT if hold else "landed", landed=not hold, success=not (bad or hold), warning_1m=bad,
+                warning_1_5m=bad, people_within_1m=int(bad), people_within_1_5m=int(bad), touchdown_nearest_m=4.0,
+                zone_area_m2=20.0, nearest_person_mean_m=4.0, nearest_person_min_m=4.0, zone_iou=0.8,
+                time_to_land_s=40.0, path_length_m=30.0, reselections=0, aborts=0, failsafes=0,
+                touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0, obstacle_kind="bench",
+                touched_obstacle=False, people_cells=[], hold_cause=held.get(plan.mission_id), zones_chosen=1,
+            ).to_json()
+        )  # fmt: skip
+    return rows
+
+
+def test_the_report_counts_holds_by_cause_and_compares_with_an_earlier_flight(tmp_path: Path) -> None:
+    spec = _spec(tmp_path)
+    oldest = [p.mission_id for p in spec.missions() if p.strategy.name == "oldest"]
+    before = _results(spec, set(oldest[:6]), {})  # six landings over a person before
+    now = _results(spec, set(), {oldest[0]: "nothing free", oldest[1]: "person in the footprint"})
+    earlier = next(r for r in now if r["mission_id"] == oldest[2])
+    earlier.update(landed=False, success=False, reason=TIME_LIMIT)
+    del earlier["hold_cause"]  # a result of metrics version 4
+    assert hold_kind(earlier) == "(before version 5) no landing within 300 s of the start"
+
+    cells = {r["cell"]: r for r in against_previous(spec, now, before)}
+    cell = cells["static/oldest"]
+    assert (cell["pairs"], cell["before"], cell["now"]) == (8, 2, 5)
+    assert (cell["only_before"], cell["only_now"]) == (0, 3)  # runs 3 to 5 improved; 0 to 2 held now
+    assert cell["p"] == pytest.approx(2.0 * 0.5**3)  # exact two-sided McNemar, all discordant pairs one way
+    assert cells["static/nearest"]["p"] == 1.0
+
+    summary = build_report(spec, now, tmp_path / "report", previous=("the old table", before))
+    assert summary["cells"]["static/oldest"]["holds"] == {
+        "(before version 5) no landing within 300 s of the start": 1,
+        "nothing free": 1,
+        "person in the footprint": 1,
+    }
+    assert summary["previous"]["cells"][0]["p_holm"] >= summary["previous"]["cells"][0]["p"]
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Missions without a touchdown, by cause" in text
+    held_row = "| static/oldest | 8 | 3 | (before version 5) no landing within 300 s of the start: 1, nothing free: 1"
+    assert held_row in text
+    assert "## Against the old table (same scenes and start poses, mission by mission)" in text
+    assert "| static/oldest | 8 | 2 | 5 | 0 | 3 | 0.25 |" in text
