@@ -1,4 +1,4 @@
-"""How fast and how clearly ``slz fly --dry-run`` refuses each hostile config file (tests/hostile_configs.py).
+"""How fast and how clearly ``slz fly --dry-run`` refuses each hostile config file (sitl/testing/hostile_configs.py).
 
 Run: ``.venv/bin/python bench/hostile_configs.py``. Each file runs in its own ``slz fly --dry-run`` process (the
 refusal must come before anything is started), timed from process start to exit; the load alone is also timed in
@@ -21,7 +21,7 @@ sys.path.insert(0, str(REPO_ROOT))
 from bench.machine import machine_context, save_report  # noqa: E402
 from companion.app.mission import load_mission_config  # noqa: E402
 from companion.config import ConfigError  # noqa: E402
-from tests.hostile_configs import fly_dry_run, hostile_configs  # noqa: E402
+from sitl.testing.hostile_configs import fly_dry_run, hostile_configs  # noqa: E402
 
 MAX_LOAD_S = 1.0
 

@@ -11,7 +11,7 @@ flood, then the control requests. Asserted, and printed with the machine's conte
 - the SITL process is alive, answers ``state``, and never failed to handle a message (``handler_errors`` 0);
 - the heartbeat gap on both links stayed under 1.5 s throughout;
 - neither link followed the stray sender;
-- afterwards a clean MAVSDK client (``tests/clients/mavsdk_flight.py square``) flies the offboard square: take-off
+- afterwards a clean MAVSDK client (``python -m sitl.testing.mavsdk_flight square``) flies the offboard square: take-off
   to 5 m, four corners each held within 0.3 m for 2 s, landing, disarm.
 """
 
@@ -35,8 +35,8 @@ from sitl.config import SitlConfig  # noqa: E402
 from sitl.fuzz import ControlFuzzer, MavlinkFuzzer  # noqa: E402
 from sitl.instances import lease_instance  # noqa: E402
 from sitl.process import SitlProcess  # noqa: E402
-from tests.sitl_tools import MavlinkPeer, wait_until  # noqa: E402
-from tests.test_sitl_mavsdk import Client  # noqa: E402
+from sitl.testing.helpers import MavlinkPeer, wait_until  # noqa: E402
+from sitl.testing.mavsdk_client import Client  # noqa: E402
 
 MAX_HEARTBEAT_GAP_S = 1.5
 PACE_PER_S = 4000.0  # paced phase: slow enough that the SITL's socket buffer never overflows

@@ -23,7 +23,7 @@ from typing import Any
 import pytest
 
 from sitl.campaign.runner import read_results
-from tests.sitl_tools import wait_until
+from sitl.testing.helpers import wait_until
 
 pytestmark = pytest.mark.sitl
 

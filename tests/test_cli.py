@@ -44,7 +44,7 @@ def test_check_config_and_fly_accept_every_shipped_config(name: str, tmp_path: P
 
 def bad_configs(tmp_path: Path) -> dict[str, tuple[Path, list[str]]]:
     """Ten bad mission configs (and the extra arguments both commands get)."""
-    from tests.hostile_configs import hostile_configs
+    from sitl.testing.hostile_configs import hostile_configs
 
     chosen = [
         "empty",

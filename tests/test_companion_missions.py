@@ -23,7 +23,7 @@ from companion.app.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from sitl.instances import leased_instance
 from sitl.mission import MissionResult, MissionSpec, fly, read_truth, touchdown
-from tests.sitl_tools import ListeningGroundStation, free_udp_port
+from sitl.testing.helpers import ListeningGroundStation, free_udp_port
 
 pytestmark = pytest.mark.sitl
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from sitl.process import SitlProcess
-from tests.sitl_tools import sitl_mission_yaml
+from sitl.testing.helpers import sitl_mission_yaml
 
 pytestmark = pytest.mark.sitl
 

@@ -10,7 +10,7 @@ from companion.app.mission import load_mission_config
 from companion.config import ConfigError
 from companion.perception.config import load_perception_config
 from sitl.campaign.spec import load_campaign_spec
-from tests.hostile_configs import REPO_ROOT, HostileConfig, fly_dry_run, hostile_configs
+from sitl.testing.hostile_configs import REPO_ROOT, HostileConfig, fly_dry_run, hostile_configs
 
 pytestmark = pytest.mark.unit
 

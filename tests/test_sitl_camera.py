@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.camera.frames import CameraError, SitlFrameSource, open_frame_source
 from sitl.process import SitlProcess
-from tests.sitl_tools import LockstepClient, state_when
+from sitl.testing.helpers import LockstepClient, state_when
 
 pytestmark = pytest.mark.sitl
 

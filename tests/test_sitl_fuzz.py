@@ -19,8 +19,8 @@ import pytest
 from sitl.config import SitlConfig
 from sitl.fuzz import ControlFuzzer, MavlinkFuzzer
 from sitl.process import SitlProcess
-from tests.sitl_tools import MavlinkPeer, free_udp_port, wait_until
-from tests.test_sitl_mavsdk import Client
+from sitl.testing.helpers import MavlinkPeer, free_udp_port, wait_until
+from sitl.testing.mavsdk_client import Client
 
 pytestmark = pytest.mark.sitl
 

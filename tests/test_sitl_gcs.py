@@ -21,7 +21,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl.autopilot.modes import FlightMode
 from sitl.geodesy import ned_to_geodetic
 from sitl.process import SitlProcess
-from tests.sitl_tools import GroundStation, free_udp_port, state_when, wait_until
+from sitl.testing.helpers import GroundStation, free_udp_port, state_when, wait_until
 
 pytestmark = pytest.mark.sitl
 

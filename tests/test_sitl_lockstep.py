@@ -14,7 +14,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.process import SitlProcess
-from tests.sitl_tools import LockstepClient, position_setpoint, wait_until
+from sitl.testing.helpers import LockstepClient, position_setpoint, wait_until
 
 pytestmark = pytest.mark.sitl
 

@@ -10,8 +10,8 @@ import pytest
 
 from sitl.geodesy import ned_to_geodetic
 from sitl.process import SitlProcess
+from sitl.testing.helpers import free_udp_port, wait_until
 from tests.mavproxy_client import MavProxy
-from tests.sitl_tools import free_udp_port, wait_until
 
 pytestmark = pytest.mark.sitl
 pytest.importorskip("MAVProxy", reason="MAVProxy comes with the `dev` extra")

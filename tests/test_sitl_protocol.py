@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.params import ParamType
 from sitl.process import SitlProcess
-from tests.sitl_tools import MavlinkPeer, api_port, position_setpoint, state_when, wait_until
+from sitl.testing.helpers import MavlinkPeer, api_port, position_setpoint, state_when, wait_until
 
 pytestmark = pytest.mark.sitl
 

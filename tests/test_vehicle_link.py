@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from sitl.process import SitlProcess
-from tests.sitl_tools import api_port
+from sitl.testing.helpers import api_port
 
 pytestmark = pytest.mark.sitl
 

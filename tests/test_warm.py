@@ -20,8 +20,8 @@ import pytest
 from sitl.campaign.runner import fly_one
 from sitl.campaign.spec import load_campaign_spec
 from sitl.instances import leased_instance
+from sitl.testing.helpers import wait_until
 from sitl.warm import ServeProcess, ServeProcessError, WarmWorker
-from tests.sitl_tools import wait_until
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SMOKE = REPO_ROOT / "mission_configs" / "campaigns" / "smoke.yaml"

@@ -18,7 +18,7 @@ from sitl.process import SitlProcess
 
 T = TypeVar("T")
 
-SITL_MISSION_CONFIG = Path(__file__).resolve().parent.parent / "mission_configs" / "sitl.yaml"
+SITL_MISSION_CONFIG = Path(__file__).resolve().parents[2] / "mission_configs" / "sitl.yaml"
 
 
 def sitl_mission_yaml(instance: int) -> str:
