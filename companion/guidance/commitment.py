@@ -37,7 +37,7 @@ from companion.config import StrictModel
 from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence
 from companion.perception.projection import HeadPlaneOccupancy
-from companion.perception.selection import SelectionContext, SelectionPolicy, Target
+from companion.perception.selection import SelectionContext, SelectionPolicy, Target, target_of
 from companion.perception.tracking import TrackedZone
 from companion.perception.zones import circle_iou
 
@@ -246,13 +246,13 @@ class TargetCommitment:
                 return Choice(None, "; ".join(events) or None)
             self._commit(best, t_s)
             events.append(f"committed to zone {best.track_id} ({self.policy.name}, r={best.radius_m:.1f} m)")
-            return Choice(_target(best), "; ".join(events))
+            return Choice(target_of(best), "; ".join(events))
         switched_to = self._rival(committed, candidates, context, altitude_m, time_left_s, descent_rate_mps)
         if switched_to is not None:
             rival, event = switched_to
             events.append(event)
             committed = rival
-        return Choice(_target(committed), "; ".join(events) or None)
+        return Choice(target_of(committed), "; ".join(events) or None)
 
     def _follow(self, tracks: Sequence[TrackedZone], t_s: float, events: list[str]) -> TrackedZone | None:
         """The committed zone in this frame's tracks: its own track, else a track seen now that overlaps its last
@@ -338,7 +338,3 @@ class TargetCommitment:
         score_rival = self.policy.score(rival, context)
         score_committed = self.policy.score(committed, context)
         return score_rival - score_committed > self.config.switch_margin * abs(score_committed)
-
-
-def _target(track: TrackedZone) -> Target:
-    return Target(track.north_m, track.east_m, track.radius_m, track.track_id)

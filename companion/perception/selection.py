@@ -71,7 +71,8 @@ class SelectionPolicy(Protocol):
         ...
 
 
-def _target(track: TrackedZone) -> Target:
+def target_of(track: TrackedZone) -> Target:
+    """The target a tracked zone gives: its filtered circle and its id."""
     return Target(track.north_m, track.east_m, track.radius_m, track.track_id)
 
 
@@ -84,7 +85,7 @@ class BiggestPolicy:
         """The track with the largest radius."""
         if not tracks:
             return None
-        return _target(min(tracks, key=lambda t: (-t.radius_m, t.track_id)))
+        return target_of(min(tracks, key=lambda t: (-t.radius_m, t.track_id)))
 
     def score(self, track: TrackedZone, context: SelectionContext) -> float:
         """The radius, m."""
@@ -103,7 +104,7 @@ class OldestPolicy:
         """The track created first."""
         if not tracks:
             return None
-        return _target(min(tracks, key=lambda t: (t.created_s, t.track_id)))
+        return target_of(min(tracks, key=lambda t: (t.created_s, t.track_id)))
 
     def score(self, track: TrackedZone, context: SelectionContext) -> float:
         """The track's age at the frame, s."""
@@ -122,7 +123,7 @@ class NearestPolicy:
         """The closest track."""
         if not tracks:
             return None
-        return _target(
+        return target_of(
             min(
                 tracks,
                 key=lambda t: (
