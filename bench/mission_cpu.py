@@ -25,8 +25,8 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from bench.campaign_sample import NOT_METRICS, SPEC, differences  # noqa: E402
 from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.campaign.runner import fly_one  # noqa: E402
 from sitl.campaign.spec import load_campaign_spec  # noqa: E402
+from sitl.campaign.worker import fly_one  # noqa: E402
 from sitl.instances import leased_instance  # noqa: E402
 from sitl.warm import WarmWorker  # noqa: E402
 

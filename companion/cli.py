@@ -51,7 +51,8 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     from companion.app.flight_log import SCHEMA_VERSION, RecordKind
     from companion.app.mission import FrameFormat, OperatingMode, validate_for_flight
     from companion.app.recorder import FlightRecorder, prune_flights
-    from companion.camera.frames import CameraError, open_frame_source
+    from companion.camera.frames import CameraError
+    from companion.camera.sources import open_frame_source
     from companion.vehicle.link import VehicleError
     from companion.vehicle.lockstep import LockstepClient, LockstepError
     from companion.vehicle.mavsdk_link import MavsdkVehicleLink

@@ -134,8 +134,9 @@ def _campaign_replay(args: argparse.Namespace) -> int:
     from companion.app.replay import replay
     from sitl.campaign.metrics import mission_metrics, stale
     from sitl.campaign.report import completed
-    from sitl.campaign.runner import mission_spec, read_results
+    from sitl.campaign.runner import read_results
     from sitl.campaign.spec import CampaignSpec
+    from sitl.campaign.worker import mission_spec
     from sitl.instances import InstanceError
     from sitl.mission import fly
 

@@ -7,32 +7,48 @@ from __future__ import annotations
 
 import math
 import os
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from companion.vehicle.sim_control import Command, Event, RequestError, flag, lockstep_ack, number
-from sitl.autopilot.commander import ControlSource
+from sitl.autopilot.commander import Commander
+from sitl.autopilot.mavlink_link import MavlinkLink
+from sitl.autopilot.mavlink_server import MAX_SENDERS_REPORTED, MavlinkServer
 from sitl.autopilot.modes import FlightMode
-from sitl.config import MAX_WIND_MPS
+from sitl.autopilot.status import ControlSource
+from sitl.clock import SimClock
+from sitl.config import MAX_WIND_MPS, SitlConfig
+from sitl.control_channel import ControlChannel
+from sitl.dynamics.base import Dynamics
+from sitl.lockstep_gate import LockstepGate
 
-if TYPE_CHECKING:
-    from sitl.vehicle import SitlVehicle
 
-MAX_SENDERS_REPORTED = 32  # per counter in the `state` reply, which must fit one datagram
+class ControlledVehicle(Protocol):
+    """What the control channel's requests read and act on (:class:`sitl.vehicle.SitlVehicle` is one)."""
 
+    config: SitlConfig
+    clock: SimClock
+    commander: Commander
+    dynamics: Dynamics
+    lockstep: LockstepGate
+    links: list[MavlinkLink]
+    mavlink: MavlinkServer
+    control: ControlChannel | None
+    camera: Any
+    """The simulated camera (``sitl.sim_camera.SimCamera``), or None without one."""
+    camera_failed: bool
+    handler_errors: int
 
-def count_capped(counts: dict[str, int], key: str) -> None:
-    """Count one for ``key``; past MAX_SENDERS_REPORTED keys, new ones share the key ``"other"``."""
-    if key not in counts and len(counts) >= MAX_SENDERS_REPORTED:
-        key = "other"
-    counts[key] = counts.get(key, 0) + 1
+    def request_stop(self, *_: object) -> None:
+        """Stop at the next loop turn."""
+        ...
 
 
 class ControlRequests:
     """The control channel's requests for ``vehicle``."""
 
-    def __init__(self, vehicle: SitlVehicle) -> None:
+    def __init__(self, vehicle: ControlledVehicle) -> None:
         self.vehicle = vehicle
 
     def handle(self, request: dict[str, Any], addr: tuple[str, int]) -> None:

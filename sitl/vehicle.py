@@ -21,11 +21,12 @@ import numpy as np
 
 from companion.config import quote
 from companion.vehicle.sim_control import Event, Tick
-from sitl.autopilot.commander import Commander, LandedState, Severity
+from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MavlinkServer
 from sitl.autopilot.params import ParameterStore
+from sitl.autopilot.status import LandedState, Severity
 from sitl.autopilot.telemetry import (
     API_RATES_HZ,
     GCS_RATES_HZ,
@@ -39,7 +40,8 @@ from sitl.clock import SimClock
 from sitl.config import FaultKind, LinkName, SitlConfig
 from sitl.control_channel import ControlChannel
 from sitl.control_requests import ControlRequests
-from sitl.dynamics.base import DynamicsError, make_dynamics
+from sitl.dynamics.base import DynamicsError
+from sitl.dynamics.factory import make_dynamics
 from sitl.lockstep_gate import LockstepGate
 
 logger = logging.getLogger(__name__)
@@ -393,13 +395,14 @@ class SitlVehicle:
         while cmd.events:
             severity, text = cmd.events.popleft()
             self.statustext(text, severity)
-        if cmd.mission_changed:
-            cmd.mission_changed = False
+        nav = cmd.navigator
+        if nav.mission_changed:
+            nav.mission_changed = False
             state = self.dynamics.state()
             for link in self.links:
                 link.send(self.telemetry.build("MISSION_CURRENT", link.mav, self.clock.now_s, state, cmd, self.battery))
-        while cmd.mission_reached:
-            seq = cmd.mission_reached.popleft()
+        while nav.mission_reached:
+            seq = nav.mission_reached.popleft()
             for link in self.links:
                 link.send(link.mav.mission_item_reached_encode(seq))
 

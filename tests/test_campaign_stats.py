@@ -24,9 +24,10 @@ from sitl.campaign.metrics import (
     with_obstacles,
 )
 from sitl.campaign.report import PAPER_TABLE1, build_report, completed, paper_comparison, people_density
-from sitl.campaign.runner import CampaignError, error_result, missions_to_fly, worker_instances
+from sitl.campaign.runner import CampaignError, missions_to_fly, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, holm, mcnemar_exact, paired_mean_difference, rate_difference, wilson
+from sitl.campaign.worker import error_result
 from sitl.config import SitlConfig
 from sitl.world.park import ObjectKind
 

@@ -16,8 +16,8 @@ import pytest
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.guidance.commitment import CommitmentConfig
 from sitl.campaign.metrics import mission_metrics
-from sitl.campaign.runner import mission_spec
 from sitl.campaign.spec import load_campaign_spec
+from sitl.campaign.worker import mission_spec
 from sitl.instances import leased_instance
 from sitl.mission import fly
 

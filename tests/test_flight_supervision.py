@@ -157,6 +157,56 @@ def test_the_pilot_switching_mode_ends_commanding_at_once_and_for_good(app_and_l
     assert "pilot took over (mode POSCTL)" in app.outcome.reason
 
 
+class PilotRightAfterOffboardLink(FakeLink):
+    """The autopilot enters OFFBOARD and the pilot switches to POSCTL before the companion reads the telemetry: both
+    reports arrive in one batch, so the companion only ever sees POSCTL (and the entry counted). Until ``ack`` is set
+    the OFFBOARD request waits for its acknowledgement."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.requested = asyncio.Event()
+        self.ack = asyncio.Event()
+
+    async def start_offboard(self, setpoint: Setpoint) -> None:
+        self.commands.append(("start_offboard", setpoint))
+        self.requested.set()
+        await self.ack.wait()
+        self.status.offboard_entries += 1  # the report of OFFBOARD ...
+        self.status.mode = FlightMode.POSCTL  # ... and the pilot's, read together
+
+
+def test_a_pilot_who_takes_over_while_offboard_starts_gets_the_vehicle_and_keeps_it(
+    tmp_path: Path, config: PerceptionConfig
+) -> None:
+    mission = MissionConfig.model_validate(
+        {
+            "start": {"arm_and_takeoff": False},
+            "perception": config.model_dump(mode="json"),
+            "recorder": {"directory": str(tmp_path), "frame_every": 0},
+        }
+    )
+    link = PilotRightAfterOffboardLink()
+    app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
+    silence_s = app.config.guidance.hold_after_silence_s
+
+    async def flight() -> None:
+        handover = asyncio.create_task(tick(app, link, 1.0))  # the search starts: OFFBOARD requested
+        await asyncio.wait_for(link.requested.wait(), 5.0)
+        # Meanwhile the other loop decides too (the camera is silent: hold on the spot, a setpoint). It must not ask
+        # for OFFBOARD a second time while the first request is still out.
+        second = asyncio.create_task(tick(app, link, 1.0 + silence_s + 0.2))
+        await asyncio.sleep(0)
+        link.ack.set()
+        await asyncio.wait_for(asyncio.gather(handover, second), 5.0)
+        for k in range(10):  # the ticks that follow see the pilot's mode
+            await tick(app, link, 2.5 + 0.1 * k)
+
+    asyncio.run(flight())
+    assert [kind for kind, _ in link.commands] == ["start_offboard"]  # no second OFFBOARD, no setpoint after
+    assert app.outcome.phase == "yielded"
+    assert "pilot took over (mode POSCTL)" in app.outcome.reason
+
+
 def test_a_silent_camera_holds_after_t1_and_lands_after_t2(app_and_link: Any, tmp_path: Path) -> None:
     app, link = app_and_link
     t1 = app.config.guidance.hold_after_silence_s

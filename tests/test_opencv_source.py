@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from companion.camera.frames import CameraError, Frame, open_frame_source
+from companion.camera.frames import CameraError, Frame
+from companion.camera.sources import open_frame_source
 
 pytestmark = pytest.mark.unit
 

@@ -14,7 +14,8 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.camera.frames import CameraError, SitlFrameSource, open_frame_source
+from companion.camera.frames import CameraError, SitlFrameSource
+from companion.camera.sources import open_frame_source
 from sitl.process import SitlProcess
 from sitl.testing.helpers import LockstepClient, state_when
 

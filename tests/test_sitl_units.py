@@ -11,13 +11,15 @@ import numpy as np
 import pytest
 
 from companion.config import ConfigError, validate_config
-from sitl.autopilot.commander import Commander, LandedState, MavResult
+from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, Setpoint
 from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.params import ParamError, ParameterStore, ParamType, decode_value, encode_value
+from sitl.autopilot.status import LandedState, MavResult
 from sitl.autopilot.telemetry import StreamSchedule
 from sitl.config import SitlConfig
-from sitl.dynamics.base import DynamicsBackend, VehicleState, make_dynamics
+from sitl.dynamics.base import DynamicsBackend, VehicleState
+from sitl.dynamics.factory import make_dynamics
 from sitl.dynamics.rigid_body import RigidBodyQuadrotor, quaternion_to_matrix
 from sitl.geodesy import geodetic_to_ned, ned_to_geodetic
 

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from sitl.campaign.runner import fly_one
 from sitl.campaign.spec import load_campaign_spec
+from sitl.campaign.worker import fly_one
 from sitl.instances import leased_instance
 from sitl.testing.helpers import wait_until
 from sitl.warm import ServeProcess, ServeProcessError, WarmWorker

@@ -35,7 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from companion.app.mission import MissionConfig
-from companion.camera.frames import CameraError, Frame, open_frame_source
+from companion.camera.frames import CameraError, Frame
+from companion.camera.sources import open_frame_source
 from companion.perception.density import OnnxDensityModel
 from companion.perception.errors import PerceptionError
 from companion.vehicle.link import FlightMode, VehicleError

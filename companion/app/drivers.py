@@ -1,31 +1,90 @@
 """The two ways a flight is driven: by a simulator's lockstep ticks, or by the wall clock (a real vehicle, a SITL
-running free). Both hand frames to :meth:`FlightApp.on_frame` and vehicle states to :meth:`FlightApp.on_tick`; the
-supervision (takeover, touchdown, perception silence, lost link and camera, the stall watchdog) is the app's.
+running free). Both hand frames to :meth:`FlightLoop.on_frame` and vehicle states to :meth:`FlightLoop.on_tick`; the
+supervision (takeover, touchdown, perception silence, lost link and camera, the stall watchdog) is the flight's.
+
+A driver sees the flight through :class:`FlightLoop` alone (``companion.app.flight.FlightApp`` is one), so this module
+imports nothing of the app that runs it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import functools
-import time
-from typing import TYPE_CHECKING
+from collections.abc import AsyncIterator
+from typing import Protocol
 
 from companion.camera.frames import CameraError, Frame
+from companion.guidance.landing import VehicleState
 from companion.vehicle.link import VehicleError
 from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.sim_control import Tick
 
-if TYPE_CHECKING:
-    from companion.app.flight import FlightApp
-
 TICK_PERIOD_S = 0.1  # free running: how often the supervision looks at the vehicle (wall time)
+
+
+class FlightLoop(Protocol):
+    """What a driver needs of the flight it drives: its frames and vehicle states go in, its failsafes come out."""
+
+    done: asyncio.Event
+    """Set when the flight is over (the driver stops)."""
+
+    @property
+    def link_lost_after_s(self) -> float:
+        """Telemetry silence (s) after which the link counts as lost."""
+        ...
+
+    @property
+    def camera_is_lost(self) -> bool:
+        """The camera has failed in this flight (no more frames will come)."""
+        ...
+
+    def frames(self) -> AsyncIterator[Frame]:
+        """The camera's frames (an async generator: the driver closes it)."""
+        ...
+
+    def frame_missing(self) -> None:
+        """Count a frame the simulator announced that never came."""
+        ...
+
+    def camera_lost(self, exc: CameraError) -> None:
+        """The camera failed: record it (the perception-silence failsafe acts)."""
+        ...
+
+    def link_lost(self, silent_s: float) -> None:
+        """No telemetry for ``silent_s`` seconds: stop commanding and end the flight."""
+        ...
+
+    async def wait_for_pose(self, t_s: float, timeout_s: float) -> None:
+        """Until a pose stamped at vehicle time ``t_s`` (or later) has arrived; VehicleError after ``timeout_s``
+        seconds of wall time."""
+        ...
+
+    def telemetry_age_s(self) -> float | None:
+        """Wall seconds since the last telemetry arrived (None before the first)."""
+        ...
+
+    def vehicle_state(self) -> VehicleState | None:
+        """The vehicle at its newest pose (None before the first)."""
+        ...
+
+    async def on_frame(self, frame: Frame) -> None:
+        """Perceive and decide on one frame."""
+        ...
+
+    async def on_tick(self, state: VehicleState) -> None:
+        """Supervise at one vehicle state (start sequence, takeover, touchdown, silence)."""
+        ...
+
+    def take_tick_setpoint(self) -> tuple[float, float, float, float] | None:
+        """The position setpoint sent since the last call (north, east, down m NED; yaw rad), to acknowledge a lockstep
+        tick with; cleared by the call."""
+        ...
 
 
 class LockstepDriver:
     """One tick at a time with a simulator in lockstep: the same seed gives the same flight at any speed."""
 
-    def __init__(self, app: FlightApp, lockstep: LockstepClient) -> None:
+    def __init__(self, app: FlightLoop, lockstep: LockstepClient) -> None:
         self.app = app
         self.lockstep = lockstep
         self._early_frame: Frame | None = None
@@ -33,7 +92,7 @@ class LockstepDriver:
     async def _read_frames(self, queue: asyncio.Queue[Frame | None]) -> None:
         """Frames into ``queue`` (None once the camera is gone)."""
         app = self.app
-        frames = app.source.frames()
+        frames = app.frames()
         try:
             async for frame in frames:
                 queue.put_nowait(frame)
@@ -57,15 +116,15 @@ class LockstepDriver:
                 except asyncio.TimeoutError:
                     frame = None
                 if frame is None:  # the camera is gone (or silent past the deadline)
-                    if not app.outcome.camera_lost:
+                    if not app.camera_is_lost:
                         queue.put_nowait(None)
-                    app.outcome.frames_missing += 1
+                    app.frame_missing()
                     return None
             if frame.seq == tick.frame_seq:
                 return frame
             if frame.seq > tick.frame_seq:  # ours never came
                 self._early_frame = frame
-                app.outcome.frames_missing += 1
+                app.frame_missing()
                 return None
 
     async def run(self) -> None:
@@ -73,28 +132,23 @@ class LockstepDriver:
         app = self.app
         queue: asyncio.Queue[Frame | None] = asyncio.Queue()
         reader = asyncio.create_task(self._read_frames(queue), name="frames")
-        link_lost_after_s = app.config.vehicle.link_lost_after_s
+        link_lost_after_s = app.link_lost_after_s
         try:
             while not app.done.is_set():
                 tick = await self.lockstep.next_tick()
                 try:
-                    await app.link.wait_for(
-                        functools.partial(app.pose_reaches, tick.t_s),
-                        time.monotonic() + link_lost_after_s,
-                        "the tick's pose",
-                    )
+                    await app.wait_for_pose(tick.t_s, link_lost_after_s)
                 except VehicleError:
                     app.link_lost(link_lost_after_s)
                     return
-                if tick.frame_seq is not None and not app.outcome.camera_lost:
+                if tick.frame_seq is not None and not app.camera_is_lost:
                     frame = await self._frame_of(tick, queue)
                     if frame is not None:
                         await app.on_frame(frame)
                 state = app.vehicle_state()
                 if state is not None and not app.done.is_set():
                     await app.on_tick(state)
-                self.lockstep.ack(tick, app.tick_setpoint)
-                app.tick_setpoint = None
+                self.lockstep.ack(tick, app.take_tick_setpoint())
         finally:
             reader.cancel()
             await asyncio.gather(reader, return_exceptions=True)
@@ -103,13 +157,13 @@ class LockstepDriver:
 class FreeRunningDriver:
     """Frames as they arrive and ticks on the wall clock (a real vehicle, or a SITL that runs free)."""
 
-    def __init__(self, app: FlightApp) -> None:
+    def __init__(self, app: FlightLoop) -> None:
         self.app = app
 
     async def frames(self) -> None:
         """Every frame as it comes, until the flight is done or the camera is gone."""
         app = self.app
-        frames = app.source.frames()
+        frames = app.frames()
         try:
             async for frame in frames:
                 if app.done.is_set():
@@ -124,11 +178,11 @@ class FreeRunningDriver:
     async def ticks(self) -> None:
         """A decision tick every TICK_PERIOD_S of wall time, and the lost-link check."""
         app = self.app
-        link_lost_after_s = app.config.vehicle.link_lost_after_s
+        link_lost_after_s = app.link_lost_after_s
         while not app.done.is_set():
-            last_telemetry = app.link.status.last_telemetry_wall_s
-            if last_telemetry is not None and time.monotonic() - last_telemetry > link_lost_after_s:
-                app.link_lost(time.monotonic() - last_telemetry)
+            silent_s = app.telemetry_age_s()
+            if silent_s is not None and silent_s > link_lost_after_s:
+                app.link_lost(silent_s)
                 return
             state = app.vehicle_state()
             if state is not None:

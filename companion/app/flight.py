@@ -34,6 +34,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -59,6 +60,7 @@ TAKEOFF_RETRY_S = 1.0  # vehicle time between arming attempts while the autopilo
 START_TIMEOUT_S = 120.0  # vehicle time from the first tick to the start of the search
 START_TOLERANCE_M = 1.0  # horizontal distance to the start pose at which the search begins
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
+_OURS = (FlightMode.OFFBOARD, FlightMode.UNKNOWN)  # modes in which offboard setpoints are still the companion's
 
 
 class StartStage(str, enum.Enum):
@@ -162,6 +164,7 @@ class FlightApp:
         self._offboard = False
         self._commanding = not self.dry_run
         self._stop = threading.Event()
+        self._send_lock = asyncio.Lock()  # one command at a time (see _send)
         self.done = asyncio.Event()
         self._start_stage = StartStage.WAITING
         self._first_tick_t_s: float | None = None
@@ -202,17 +205,33 @@ class FlightApp:
                 self.done.set()  # after its command went out: ending cancels the tasks
 
     async def _send(self, decision: Decision) -> None:
-        if not self._commanding or decision.kind is CommandKind.NONE:
-            return
+        """Send one decision's command. One at a time: the frame and tick loops both decide, and a second command
+        must not start OFFBOARD again while the first waits for the autopilot to report it (the pilot may have taken
+        over in between: this flight never takes control back)."""
+        async with self._send_lock:
+            if not self._commanding or decision.kind is CommandKind.NONE:
+                return
+            mode = self.link.status.mode
+            if self._offboard and decision.kind is CommandKind.SETPOINT and mode not in _OURS:
+                return  # the pilot's mode since the last tick: nothing more goes out, and the next tick yields
+            await self._send_one(decision)
+
+    async def _send_one(self, decision: Decision) -> None:
         try:
             if decision.kind is CommandKind.SETPOINT:
                 sp = decision.setpoint
                 assert sp is not None
                 if not self._offboard:
+                    status = self.link.status
+                    entries = status.offboard_entries
                     await self.link.start_offboard(sp)
                     # Takeover detection starts only once the autopilot reports OFFBOARD (telemetry lags the ack).
+                    # An entry reported since the request confirms it too, though the pilot may have switched away
+                    # already: then the next tick sees the pilot's mode and yields.
                     await self.link.wait_for(
-                        lambda: self.link.status.mode is FlightMode.OFFBOARD, time.monotonic() + 3.0, "OFFBOARD"
+                        lambda: status.mode is FlightMode.OFFBOARD or status.offboard_entries > entries,
+                        time.monotonic() + 3.0,
+                        "OFFBOARD",
                     )
                     self._offboard = True
                 else:
@@ -322,7 +341,7 @@ class FlightApp:
             self.done.set()
             return
         status = self.link.status
-        if self._offboard and status.mode not in (FlightMode.OFFBOARD, FlightMode.UNKNOWN) and not self.dry_run:
+        if self._offboard and status.mode not in _OURS and not self.dry_run:
             self._offboard = False
             self._commanding = False  # never take control back in this flight
             mode = status.mode.value
@@ -399,7 +418,34 @@ class FlightApp:
         self._last_frame_t_s = state.t_s  # perception silence counts from here
         await self.apply(self.guidance.start(state), "start", state)
 
-    # -- drivers -------------------------------------------------------------------------------------------------------
+    # -- what the drivers see (companion.app.drivers.FlightLoop) ----------------------------------------------------
+    @property
+    def link_lost_after_s(self) -> float:
+        return self.config.vehicle.link_lost_after_s
+
+    @property
+    def camera_is_lost(self) -> bool:
+        return self.outcome.camera_lost
+
+    def frames(self) -> AsyncIterator[Frame]:
+        return self.source.frames()
+
+    def frame_missing(self) -> None:
+        self.outcome.frames_missing += 1
+
+    async def wait_for_pose(self, t_s: float, timeout_s: float) -> None:
+        await self.link.wait_for(
+            functools.partial(self.pose_reaches, t_s), time.monotonic() + timeout_s, "the tick's pose"
+        )
+
+    def telemetry_age_s(self) -> float | None:
+        last_telemetry = self.link.status.last_telemetry_wall_s
+        return None if last_telemetry is None else time.monotonic() - last_telemetry
+
+    def take_tick_setpoint(self) -> tuple[float, float, float, float] | None:
+        setpoint, self.tick_setpoint = self.tick_setpoint, None
+        return setpoint
+
     def camera_lost(self, exc: CameraError) -> None:
         self.outcome.camera_lost = True
         self.outcome.camera_fault = exc.fault.value

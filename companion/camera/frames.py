@@ -17,10 +17,9 @@ import json
 import math
 import struct
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Protocol
-from urllib.parse import urlparse
 
 import numpy as np
 import numpy.typing as npt
@@ -166,27 +165,3 @@ class SitlFrameSource:
             )
         image = np.frombuffer(payload, dtype=np.uint8).reshape(h, w, 3)
         return Frame(seq, t_capture_s, image, time.monotonic())
-
-
-def open_frame_source(
-    url: str, timeout_s: float = 10.0, vehicle_time_s: Callable[[], float] | None = None, latency_s: float = 0.0
-) -> FrameSource:
-    """A frame source from its URL.
-
-    ``sitl://HOST:PORT`` (frames carry their own capture times); ``v4l2:///dev/videoN``, ``rtsp://``, ``udp://``,
-    ``file:///path`` or a plain path go through OpenCV and need ``vehicle_time_s`` to stamp frames.
-    """
-    parsed = urlparse(url)
-    if parsed.scheme == "sitl":
-        if not parsed.hostname or not parsed.port:
-            raise CameraError(url, "expected sitl://HOST:PORT")
-        return SitlFrameSource(parsed.hostname, parsed.port, timeout_s)
-    if parsed.scheme in ("v4l2", "rtsp", "rtsps", "udp", "http", "https", "file", ""):
-        if vehicle_time_s is None:
-            raise CameraError(url, "this source needs the vehicle clock to stamp its frames")
-        from companion.camera.opencv_source import OpenCvFrameSource
-
-        return OpenCvFrameSource(url, vehicle_time_s, latency_s, timeout_s)
-    raise CameraError(
-        url, f"unsupported frame source scheme {parsed.scheme!r} (supported: sitl, v4l2, rtsp, udp, file)"
-    )

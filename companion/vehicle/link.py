@@ -61,6 +61,9 @@ class VehicleStatus:
     armable: bool = False
     local_position_ok: bool = False
     last_telemetry_wall_s: float | None = None
+    offboard_entries: int = 0
+    """Times the telemetry reported the autopilot entering OFFBOARD: a stay that the next report already ended (a
+    pilot who switched away at once) still counts, where ``mode`` shows only the latest."""
 
 
 class VehicleLink(Protocol):

@@ -156,7 +156,10 @@ class MavsdkVehicleLink:
         )
 
     def _on_mode(self, mode: Any) -> None:
-        self.status.mode = _MODES.get(getattr(mode, "name", str(mode)), FlightMode.OTHER)
+        new_mode = _MODES.get(getattr(mode, "name", str(mode)), FlightMode.OTHER)
+        if new_mode is FlightMode.OFFBOARD and self.status.mode is not FlightMode.OFFBOARD:
+            self.status.offboard_entries += 1
+        self.status.mode = new_mode
         self._count("flight_mode")
 
     def _on_armed(self, armed: bool) -> None:

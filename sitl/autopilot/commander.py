@@ -7,7 +7,6 @@ in the air without force), UNSUPPORTED (a mode this autopilot does not fly).
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
 from collections import deque
@@ -18,84 +17,13 @@ import numpy as np
 from companion.geometry import inside_polygon
 from sitl.autopilot.controller import Setpoint
 from sitl.autopilot.modes import FlightMode
+from sitl.autopilot.navigator import Navigator
 from sitl.autopilot.params import ParameterStore
+from sitl.autopilot.status import ControlSource, LandedState, MavResult, Severity
 from sitl.dynamics.base import F64Array, VehicleState
 from sitl.dynamics.rigid_body import quaternion_to_matrix
 
 logger = logging.getLogger(__name__)
-
-
-class MavResult(enum.IntEnum):
-    """MAV_RESULT values."""
-
-    ACCEPTED = 0
-    TEMPORARILY_REJECTED = 1
-    DENIED = 2
-    UNSUPPORTED = 3
-    FAILED = 4
-
-
-class LandedState(enum.IntEnum):
-    """MAV_LANDED_STATE values."""
-
-    ON_GROUND = 1
-    IN_AIR = 2
-    TAKEOFF = 3
-    LANDING = 4
-
-
-class Severity(enum.IntEnum):
-    """MAV_SEVERITY values: PX4 sends refusals and failsafes at CRITICAL (QGroundControl pops those up), progress at
-    INFO."""
-
-    EMERGENCY = 0
-    ALERT = 1
-    CRITICAL = 2
-    ERROR = 3
-    WARNING = 4
-    NOTICE = 5
-    INFO = 6
-    DEBUG = 7
-
-
-class NavCommand(enum.IntEnum):
-    """The mission items this autopilot flies (MAV_CMD ids)."""
-
-    WAYPOINT = 16
-    LOITER_UNLIM = 17
-    LOITER_TIME = 19
-    RETURN_TO_LAUNCH = 20
-    LAND = 21
-    TAKEOFF = 22
-
-
-@dataclass(frozen=True)
-class NavItem:
-    """One mission item as flown: local NED, NaN where the item leaves a coordinate to the vehicle (the position it
-    has when the item starts). The height is either ``down_m`` (an AMSL altitude, fixed in NED) or ``above_home_m``
-    (relative to home when the item starts), never both."""
-
-    seq: int
-    command: NavCommand
-    north_m: float
-    east_m: float
-    down_m: float = math.nan
-    above_home_m: float = math.nan
-    hold_s: float = 0.0
-    radius_m: float = math.nan  # NaN: NAV_ACC_RAD
-    yaw_rad: float = math.nan
-
-
-@dataclass(frozen=True)
-class Orbit:
-    """DO_ORBIT: a circle in local NED flown at ``speed_mps`` (positive: clockwise seen from above), facing its
-    centre."""
-
-    north_m: float
-    east_m: float
-    down_m: float
-    radius_m: float
-    speed_mps: float
 
 
 @dataclass(frozen=True)
@@ -131,15 +59,6 @@ class Fence:
 OBL_ACTIONS = {0: "land", 1: "hold", 2: "rtl"}  # COM_OBL_ACT
 RCL_ACTIONS = {1: "hold", 2: "rtl", 3: "land"}  # NAV_RCL_ACT (0: none, never triggered)
 GF_ACTIONS = {1: "warn", 2: "hold", 3: "rtl", 4: "land", 5: "land"}  # 4 (terminate) is flown as land: no parachute
-
-
-class ControlSource(enum.Enum):
-    """Who asked for a mode change."""
-
-    MAVLINK = "mavlink"
-    PILOT = "pilot"
-    FAILSAFE = "failsafe"
-    AUTOPILOT = "autopilot"
 
 
 @dataclass(frozen=True)
@@ -181,34 +100,24 @@ class Commander:
         self.failsafe_since_s = math.nan
         self._armed_at_s = math.nan
         self._landed_since_s = math.nan
-        self._hold_ned_m = self.home_ned_m.copy()
-        self._hold_yaw_rad = math.nan
-        self._rtl_phase = 0
-        self._braking = False
-        self._now_s = 0.0
+        self.hold_ned_m = self.home_ned_m.copy()
+        self.hold_yaw_rad = math.nan
+        self.braking = False
+        self.now_s = 0.0
         self._state: VehicleState | None = None
         self.takeoff_altitude_m = float(params["MIS_TAKEOFF_ALT"])
         self.changed = False  # set on every arm/mode change, cleared by whoever announces it
-        self.mission: list[NavItem] = []
-        self.mission_current = 0
-        self.mission_reached: deque[int] = deque(maxlen=32)  # items reached, for MISSION_ITEM_REACHED
-        self.mission_changed = False  # the current item changed: MISSION_CURRENT at once
-        self._item_target_ned = np.full(3, math.nan)
-        self._item_arrived_s = math.nan
-        self._item_landing = False
         self.fence = Fence()
         self._fence_breached = False
-        self.orbit: Orbit | None = None
-        self._orbit_angle_rad = 0.0
-        self._orbit_last_s = math.nan
+        self.navigator = Navigator(self)  # mission, orbit, go-to, return home
 
     # -- helpers ---------------------------------------------------------------------------------------------
-    def _event(self, text: str, severity: Severity = Severity.INFO) -> None:
+    def event(self, text: str, severity: Severity = Severity.INFO) -> None:
         logger.info(text)
         self.events.append((severity, text))
         self.changed = True
 
-    def _position(self) -> F64Array:
+    def position(self) -> F64Array:
         source = self._state.position_ned_m if self._state is not None else self.home_ned_m
         return np.array(source, dtype=np.float64)
 
@@ -220,15 +129,15 @@ class Commander:
 
     def altitude_above_home_m(self) -> float:
         """Height of the vehicle above home, m."""
-        return float(self.home_ned_m[2] - self._position()[2])
+        return float(self.home_ned_m[2] - self.position()[2])
 
     def _capture_hold(self) -> None:
-        self._hold_ned_m = self._position()
-        self._hold_yaw_rad = self._yaw()
+        self.hold_ned_m = self.position()
+        self.hold_yaw_rad = self._yaw()
 
     def offboard_stream_ok(self) -> bool:
         """A valid setpoint arrived within COM_OF_LOSS_T."""
-        return self.offboard is not None and self._now_s - self.offboard.received_s <= self.params["COM_OF_LOSS_T"]
+        return self.offboard is not None and self.now_s - self.offboard.received_s <= self.params["COM_OF_LOSS_T"]
 
     # -- requests --------------------------------------------------------------------------------------------
     def arm(self, force: bool = False) -> MavResult:
@@ -238,13 +147,13 @@ class Commander:
         if not force:
             problem = self.prearm_problem()
             if problem:
-                self._event(f"Arming denied: {problem}", Severity.CRITICAL)
+                self.event(f"Arming denied: {problem}", Severity.CRITICAL)
                 return MavResult.DENIED
         self.armed = True
-        self._armed_at_s = self._now_s
+        self._armed_at_s = self.now_s
         self._landed_since_s = math.nan
         self._capture_hold()
-        self._event("Armed")
+        self.event("Armed")
         return MavResult.ACCEPTED
 
     def prearm_problem(self) -> str | None:
@@ -253,7 +162,7 @@ class Commander:
             return "not landed"
         if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL, FlightMode.ORBIT):
             return f"mode {self.mode.px4_name} is not armable"
-        if self.mode is FlightMode.AUTO_MISSION and not self.mission:
+        if self.mode is FlightMode.AUTO_MISSION and not self.navigator.mission:
             return "no mission"
         if self._outside_fence():
             return "vehicle outside the geofence"
@@ -268,25 +177,23 @@ class Commander:
         if not self.armed:
             return MavResult.ACCEPTED
         if self.landed_state is not LandedState.ON_GROUND and not force:
-            self._event("Disarming denied: in the air", Severity.CRITICAL)
+            self.event("Disarming denied: in the air", Severity.CRITICAL)
             return MavResult.DENIED
         self.armed = False
-        if self.mission and self.mission_current >= len(self.mission):
-            self.mission_current = 0  # as PX4: a finished mission starts over at the next arming
-            self.mission_changed = True
-        self._event(reason)
+        self.navigator.disarmed()
+        self.event(reason)
         return MavResult.ACCEPTED
 
     def set_mode(self, mode: FlightMode, source: ControlSource = ControlSource.MAVLINK) -> MavResult:
         """Switch mode; OFFBOARD needs a live setpoint stream; the pilot's switch always wins."""
         if mode is FlightMode.OFFBOARD and not self.offboard_stream_ok() and source is not ControlSource.FAILSAFE:
-            self._event("Offboard rejected: no setpoint stream", Severity.CRITICAL)
+            self.event("Offboard rejected: no setpoint stream", Severity.CRITICAL)
             return MavResult.TEMPORARILY_REJECTED
-        if mode is FlightMode.AUTO_MISSION and not self.mission:
-            self._event("Mission rejected: no mission uploaded", Severity.CRITICAL)
+        if mode is FlightMode.AUTO_MISSION and not self.navigator.mission:
+            self.event("Mission rejected: no mission uploaded", Severity.CRITICAL)
             return MavResult.DENIED
-        if mode is FlightMode.ORBIT and (self.orbit is None or not self.armed):
-            self._event("Orbit rejected: use the orbit command in the air", Severity.CRITICAL)
+        if mode is FlightMode.ORBIT and (self.navigator.orbit is None or not self.armed):
+            self.event("Orbit rejected: use the orbit command in the air", Severity.CRITICAL)
             return MavResult.TEMPORARILY_REJECTED
         if mode is FlightMode.AUTO_TAKEOFF and not self.armed:
             return MavResult.TEMPORARILY_REJECTED
@@ -296,14 +203,12 @@ class Commander:
             self.failsafe = None
         self.mode = mode
         self._capture_hold()
-        self._rtl_phase = 0
-        self._braking = mode in (FlightMode.POSCTL, FlightMode.AUTO_LOITER)
+        self.braking = mode in (FlightMode.POSCTL, FlightMode.AUTO_LOITER)
         if mode is FlightMode.AUTO_TAKEOFF:
-            self._hold_ned_m = self._position()
+            self.hold_ned_m = self.position()
             self.takeoff_altitude_m = self.params["MIS_TAKEOFF_ALT"]  # unless NAV_TAKEOFF names another
-        if mode is FlightMode.AUTO_MISSION:
-            self._start_item()
-        self._event(f"Mode {mode.px4_name} ({source.value})")
+        self.navigator.mode_entered(mode)
+        self.event(f"Mode {mode.px4_name} ({source.value})")
         return MavResult.ACCEPTED
 
     def takeoff(self, altitude_m: float) -> MavResult:
@@ -345,22 +250,22 @@ class Commander:
             return False, "velocity beyond 50 m/s"
         if math.isinf(yaw_rad):
             return False, "infinite yaw"
-        self.offboard = OffboardSetpoint(position_ned_m.copy(), velocity_ned_mps.copy(), yaw_rad, self._now_s)
+        self.offboard = OffboardSetpoint(position_ned_m.copy(), velocity_ned_mps.copy(), yaw_rad, self.now_s)
         return True, ""
 
     def set_rc_lost(self, lost: bool) -> None:
         """The simulated pilot's RC link goes away or comes back."""
         if lost and not self.rc_lost:
-            self._rc_lost_since_s = self._now_s
-            self._event("RC lost", Severity.WARNING)
+            self._rc_lost_since_s = self.now_s
+            self.event("RC lost", Severity.WARNING)
         elif not lost and self.rc_lost:
-            self._event("RC regained")
+            self.event("RC regained")
         self.rc_lost = lost
 
     # -- the periodic update ---------------------------------------------------------------------------------
     def update(self, t_s: float, state: VehicleState, collective: float) -> Setpoint | None:
         """Advance the state machine to ``t_s``; returns the setpoint to fly, or None for motors off/idle."""
-        self._now_s = t_s
+        self.now_s = t_s
         self._state = state
         self._land_detector(t_s, state, collective)
         self._failsafes(t_s)
@@ -382,7 +287,7 @@ class Commander:
             self.landed_state = LandedState.TAKEOFF
             self._armed_at_s = math.nan
             self._landed_since_s = math.nan
-            self._event("Takeoff")
+            self.event("Takeoff")
         return setpoint
 
     @staticmethod
@@ -398,7 +303,9 @@ class Commander:
         if self.landed_state in (LandedState.TAKEOFF, LandedState.IN_AIR, LandedState.LANDING):
             if self.landed_state is LandedState.TAKEOFF and alt > 0.5:
                 self.landed_state = LandedState.IN_AIR
-            landing = self.mode is FlightMode.AUTO_LAND or (self.mode is FlightMode.AUTO_MISSION and self._item_landing)
+            landing = self.mode is FlightMode.AUTO_LAND or (
+                self.mode is FlightMode.AUTO_MISSION and self.navigator.item_landing
+            )
             if self.landed_state is LandedState.IN_AIR and landing:
                 self.landed_state = LandedState.LANDING
             if self.landed_state is LandedState.LANDING and not landing:
@@ -409,9 +316,9 @@ class Commander:
                     self._landed_since_s = t_s
                 elif t_s - self._landed_since_s >= 0.5 or not self.armed:
                     self.landed_state = LandedState.ON_GROUND
-                    self._event("Landing detected")
-                    if self.mode is FlightMode.AUTO_MISSION and self._item_landing:
-                        self._item_reached()  # the land item ends the mission
+                    self.event("Landing detected")
+                    if self.mode is FlightMode.AUTO_MISSION and self.navigator.item_landing:
+                        self.navigator.item_reached()  # the land item ends the mission
             else:
                 self._landed_since_s = math.nan
         elif self.armed and not math.isnan(self._landed_since_s):
@@ -422,7 +329,7 @@ class Commander:
 
     def _outside_fence(self) -> bool:
         """Outside the uploaded fence, or beyond GF_MAX_HOR_DIST / GF_MAX_VER_DIST from home (0: no limit)."""
-        position = self._position()
+        position = self.position()
         offset = position - self.home_ned_m
         max_horizontal, max_vertical = self.params["GF_MAX_HOR_DIST"], self.params["GF_MAX_VER_DIST"]
         if max_horizontal > 0 and math.hypot(offset[0], offset[1]) > max_horizontal:
@@ -446,7 +353,7 @@ class Commander:
         if outside and not self._fence_breached:
             action = GF_ACTIONS.get(int(self.params["GF_ACTION"]))
             if action == "warn":
-                self._event("Geofence breached", Severity.CRITICAL)
+                self.event("Geofence breached", Severity.CRITICAL)
             elif action is not None:
                 self._trigger_failsafe("Geofence breached", action)
         self._fence_breached = outside
@@ -470,11 +377,11 @@ class Commander:
         if self.landed_state is LandedState.ON_GROUND and mode is not FlightMode.AUTO_LOITER:
             mode = FlightMode.AUTO_LOITER
         self.failsafe = reason
-        self.failsafe_since_s = self._now_s
-        self._event(f"Failsafe: {reason}, {name}", Severity.CRITICAL)
+        self.failsafe_since_s = self.now_s
+        self.event(f"Failsafe: {reason}, {name}", Severity.CRITICAL)
         if mode is self.mode is FlightMode.AUTO_LOITER:  # holding already, towards a go-to point: stop here
             self._capture_hold()
-            self._braking = True
+            self.braking = True
         self.set_mode(mode, ControlSource.FAILSAFE)
 
     def _mode_setpoint(self, state: VehicleState) -> Setpoint:
@@ -483,192 +390,33 @@ class Commander:
             sp = self.offboard
             return Setpoint(sp.position_ned_m.copy(), sp.velocity_ned_mps.copy(), sp.yaw_rad)
         if self.mode is FlightMode.AUTO_TAKEOFF:
-            target = self._hold_ned_m.copy()
+            target = self.hold_ned_m.copy()
             target[2] = self.home_ned_m[2] - self.takeoff_altitude_m
             if state.position_ned_m[2] - target[2] < 0.3:
                 self.set_mode(FlightMode.AUTO_LOITER, ControlSource.AUTOPILOT)
-                return Setpoint.hold(target, self._hold_yaw_rad)
+                return Setpoint.hold(target, self.hold_yaw_rad)
             climb = np.array([math.nan, math.nan, -self.params["MPC_TKO_SPEED"]])
             pos = np.array([target[0], target[1], math.nan])
-            return Setpoint(pos, climb, self._hold_yaw_rad)
+            return Setpoint(pos, climb, self.hold_yaw_rad)
         if self.mode is FlightMode.AUTO_LAND:
-            pos = np.array([self._hold_ned_m[0], self._hold_ned_m[1], math.nan])
-            return Setpoint(pos, np.array([math.nan, math.nan, self.params["MPC_LAND_SPEED"]]), self._hold_yaw_rad)
+            pos = np.array([self.hold_ned_m[0], self.hold_ned_m[1], math.nan])
+            return Setpoint(pos, np.array([math.nan, math.nan, self.params["MPC_LAND_SPEED"]]), self.hold_yaw_rad)
         if self.mode is FlightMode.AUTO_RTL:
-            return self._rtl_setpoint(state)
+            return self.navigator.rtl_setpoint(state)
         if self.mode is FlightMode.AUTO_MISSION:
-            return self._mission_setpoint(state)
-        if self.mode is FlightMode.ORBIT and self.orbit is not None:
-            return self._orbit_setpoint()
+            return self.navigator.mission_setpoint(state)
+        if self.mode is FlightMode.ORBIT and self.navigator.orbit is not None:
+            return self.navigator.orbit_setpoint()
         if self.mode is FlightMode.POSCTL and np.any(self.pilot_sticks != 0) and not self.rc_lost:
             self._capture_hold()
             vel = self.pilot_sticks * np.array(
                 [self.params["MPC_XY_VEL_MAX"], self.params["MPC_XY_VEL_MAX"], self.params["MPC_Z_VEL_MAX_DN"]]
             )
-            return Setpoint(nan3.copy(), vel, self._hold_yaw_rad)
-        if self._braking:  # as PX4: brake to a stop first, then hold where the vehicle stopped
+            return Setpoint(nan3.copy(), vel, self.hold_yaw_rad)
+        if self.braking:  # as PX4: brake to a stop first, then hold where the vehicle stopped
             if math.hypot(state.velocity_ned_mps[0], state.velocity_ned_mps[1]) > 0.3:
-                pos = np.array([math.nan, math.nan, self._hold_ned_m[2]])
-                return Setpoint(pos, np.array([0.0, 0.0, math.nan]), self._hold_yaw_rad)
-            self._braking = False
-            self._hold_ned_m[:2] = state.position_ned_m[:2]
-        return Setpoint.hold(self._hold_ned_m, self._hold_yaw_rad)
-
-    def _rtl_setpoint(self, state: VehicleState) -> Setpoint:
-        return_down = self.home_ned_m[2] - self.params["RTL_RETURN_ALT"]
-        pos = state.position_ned_m
-        if self._rtl_phase == 0:  # climb to the return altitude where we are
-            target_down = min(return_down, pos[2])
-            if abs(pos[2] - target_down) < 0.5:
-                self._rtl_phase = 1
-            return Setpoint.hold(np.array([self._hold_ned_m[0], self._hold_ned_m[1], target_down]), self._hold_yaw_rad)
-        if self._rtl_phase == 1:  # fly home at that altitude
-            target = np.array([self.home_ned_m[0], self.home_ned_m[1], min(return_down, self._hold_ned_m[2])])
-            if math.hypot(pos[0] - target[0], pos[1] - target[1]) < 1.0:
-                self._rtl_phase = 2
-            return Setpoint.hold(target, self._hold_yaw_rad)
-        land = np.array([self.home_ned_m[0], self.home_ned_m[1], math.nan])
-        return Setpoint(land, np.array([math.nan, math.nan, self.params["MPC_LAND_SPEED"]]), self._hold_yaw_rad)
-
-    # -- go-to, orbit, missions ------------------------------------------------------------------------------------
-    def reposition(self, target_ned_m: F64Array, yaw_rad: float = math.nan) -> MavResult:
-        """DO_REPOSITION: fly to ``target_ned_m`` (NaN: keep that coordinate) in HOLD and stay there."""
-        if not self.armed or self.landed_state is LandedState.ON_GROUND:
-            self._event("Reposition rejected: not flying", Severity.CRITICAL)
-            return MavResult.TEMPORARILY_REJECTED
-        result = self.set_mode(FlightMode.AUTO_LOITER)
-        if result is not MavResult.ACCEPTED:
-            return result
-        target = np.asarray(target_ned_m, dtype=np.float64)
-        here = self._position()
-        self._hold_ned_m = np.where(np.isnan(target), here, target)
-        if math.isfinite(yaw_rad):
-            self._hold_yaw_rad = yaw_rad
-        self._braking = False
-        self.changed = True
-        return MavResult.ACCEPTED
-
-    def start_orbit(self, orbit: Orbit) -> MavResult:
-        """DO_ORBIT: circle ``orbit`` (in the air only)."""
-        if not self.armed or self.landed_state is LandedState.ON_GROUND:
-            self._event("Orbit rejected: not flying", Severity.CRITICAL)
-            return MavResult.TEMPORARILY_REJECTED
-        here = self._position()
-        self.orbit = orbit
-        self._orbit_angle_rad = math.atan2(here[1] - orbit.east_m, here[0] - orbit.north_m)
-        self._orbit_last_s = math.nan
-        if self.mode is FlightMode.ORBIT:
-            return MavResult.ACCEPTED
-        return self.set_mode(FlightMode.ORBIT)
-
-    def _orbit_setpoint(self) -> Setpoint:
-        o = self.orbit
-        assert o is not None
-        if math.isfinite(self._orbit_last_s):
-            self._orbit_angle_rad += o.speed_mps / o.radius_m * (self._now_s - self._orbit_last_s)
-        self._orbit_last_s = self._now_s
-        a = self._orbit_angle_rad
-        position = np.array([o.north_m + o.radius_m * math.cos(a), o.east_m + o.radius_m * math.sin(a), o.down_m])
-        velocity = np.array([-o.speed_mps * math.sin(a), o.speed_mps * math.cos(a), 0.0])
-        return Setpoint(position, velocity, math.atan2(-math.sin(a), -math.cos(a)))
-
-    def set_mission(self, items: list[NavItem]) -> None:
-        """A new mission (an upload or a clear); flying it goes on from the same index, or holds when it is gone."""
-        self.mission = list(items)
-        self.mission_current = min(self.mission_current, max(len(items) - 1, 0)) if items else 0
-        self.mission_changed = True
-        if self.mode is FlightMode.AUTO_MISSION:
-            if not items:
-                self.set_mode(FlightMode.AUTO_LOITER, ControlSource.AUTOPILOT)
-            else:
-                self._start_item()
-
-    def set_mission_current(self, seq: int) -> MavResult:
-        """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: fly item ``seq`` next."""
-        if not 0 <= seq < len(self.mission):
-            return MavResult.DENIED
-        self.mission_current = seq
-        self.mission_changed = True
-        if self.mode is FlightMode.AUTO_MISSION:
-            self._start_item()
-        return MavResult.ACCEPTED
-
-    def start_mission(self, first: int) -> MavResult:
-        """MISSION_START: AUTO.MISSION from item ``first``."""
-        if not 0 <= first < len(self.mission):
-            self._event("Mission rejected: no such item", Severity.CRITICAL)
-            return MavResult.DENIED
-        self.mission_current = first
-        self.mission_changed = True
-        return self.set_mode(FlightMode.AUTO_MISSION)
-
-    def _start_item(self) -> None:
-        """The current item begins: resolve the coordinates it leaves to the vehicle."""
-        self._item_arrived_s = math.nan
-        self._item_landing = False
-        if self.mission_current >= len(self.mission):
-            return
-        item = self.mission[self.mission_current]
-        here = self._position()
-        down = item.down_m
-        if math.isnan(down) and not math.isnan(item.above_home_m):
-            down = float(self.home_ned_m[2]) - item.above_home_m
-        if item.command is NavCommand.LAND:
-            down = float(here[2])  # fly there at this height, then descend
-        target = np.array([item.north_m, item.east_m, down])
-        self._item_target_ned = np.where(np.isnan(target), here, target)
-        if math.isfinite(item.yaw_rad):
-            self._hold_yaw_rad = item.yaw_rad
-
-    def _item_reached(self) -> None:
-        self.mission_reached.append(self.mission_current)
-        self.mission_current += 1
-        self.mission_changed = True
-        if self.mission_current >= len(self.mission):
-            self.mission_current = len(self.mission)
-            if self.armed and self.landed_state is not LandedState.ON_GROUND:
-                self._event("Mission finished, loitering")
-                self.set_mode(FlightMode.AUTO_LOITER, ControlSource.AUTOPILOT)
-            else:
-                self._event("Mission finished")  # landed: it starts over from the first item once disarmed
-            return
-        self._start_item()
-
-    def _mission_setpoint(self, state: VehicleState) -> Setpoint:
-        if self.mission_current >= len(self.mission):  # finished: stay where it is, on the ground or in the air
-            if self.landed_state is LandedState.ON_GROUND:
-                return Setpoint.hold(self._position(), self._hold_yaw_rad)
-            return Setpoint.hold(self._hold_ned_m, self._hold_yaw_rad)
-        item = self.mission[self.mission_current]
-        target = self._item_target_ned
-        pos = state.position_ned_m
-        if item.command is NavCommand.RETURN_TO_LAUNCH:
-            self._item_reached()
-            self.set_mode(FlightMode.AUTO_RTL, ControlSource.AUTOPILOT)
-            return self._rtl_setpoint(state)
-        radius = item.radius_m if math.isfinite(item.radius_m) and item.radius_m > 0 else self.params["NAV_ACC_RAD"]
-        horizontal = math.hypot(pos[0] - target[0], pos[1] - target[1])
-        if item.command is NavCommand.LAND:
-            if self._item_landing or horizontal < radius:
-                self._item_landing = True
-                descend = np.array([math.nan, math.nan, self.params["MPC_LAND_SPEED"]])
-                return Setpoint(np.array([target[0], target[1], math.nan]), descend, self._hold_yaw_rad)
-            return Setpoint.hold(target, self._hold_yaw_rad)
-        if item.command is NavCommand.TAKEOFF and pos[2] - target[2] > 0.3:
-            climb = np.array([math.nan, math.nan, -self.params["MPC_TKO_SPEED"]])
-            setpoint = Setpoint(np.array([target[0], target[1], math.nan]), climb, self._hold_yaw_rad)
-        else:
-            setpoint = Setpoint.hold(target, self._hold_yaw_rad)
-        vertical_ok = abs(pos[2] - target[2]) < self.params["NAV_MC_ALT_RAD"]
-        arrived = vertical_ok and (item.command is NavCommand.TAKEOFF or horizontal < radius)
-        if arrived and math.isnan(self._item_arrived_s):
-            self._item_arrived_s = self._now_s
-        if item.command is NavCommand.LOITER_UNLIM or math.isnan(self._item_arrived_s):
-            return setpoint
-        if self._now_s - self._item_arrived_s >= item.hold_s:
-            self._hold_ned_m = target.copy()
-            self._item_reached()
-            if self.mode is FlightMode.AUTO_MISSION and self.mission_current < len(self.mission):
-                return self._mission_setpoint(state)
-            return Setpoint.hold(self._hold_ned_m, self._hold_yaw_rad)
-        return setpoint
+                pos = np.array([math.nan, math.nan, self.hold_ned_m[2]])
+                return Setpoint(pos, np.array([0.0, 0.0, math.nan]), self.hold_yaw_rad)
+            self.braking = False
+            self.hold_ned_m[:2] = state.position_ned_m[:2]
+        return Setpoint.hold(self.hold_ned_m, self.hold_yaw_rad)

@@ -3,7 +3,8 @@ offboard setpoints, parameters, SET_MODE, TIMESYNC), and the counters a test or 
 
 Every field that came over the wire is checked before use: a command parameter that must be a whole number and is
 NaN, infinite or fractional is DENIED (:func:`whole`), a setpoint field the type mask uses must be finite and in
-range. The vehicle (:class:`sitl.vehicle.SitlVehicle`) owns the state; this server acts on it.
+range. The vehicle owns the state and this server acts on it, seeing the vehicle through :class:`AutopilotHost` alone
+(:class:`sitl.vehicle.SitlVehicle` is one), so it never imports the process that runs it.
 """
 
 from __future__ import annotations
@@ -13,23 +14,28 @@ import math
 import struct
 import time
 from collections import deque
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.autopilot.commander import FORCE_MAGIC, LandedState, MavResult, Orbit, Severity
+from sitl.autopilot.commander import FORCE_MAGIC, Commander
+from sitl.autopilot.controller import CascadedController, ControllerLimits
 from sitl.autopilot.ftp_server import FtpServer
 from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
 from sitl.autopilot.mission_server import MAX_DISTANCE_M, MissionServer
 from sitl.autopilot.modes import FlightMode, MainMode
-from sitl.autopilot.params import ParamError, decode_value, encode_value
-from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT
-from sitl.control_requests import count_capped
+from sitl.autopilot.navigator import Orbit
+from sitl.autopilot.params import ParamError, ParameterStore, decode_value, encode_value
+from sitl.autopilot.status import LandedState, MavResult, Severity
+from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT, Battery, StreamSchedule, TelemetryBuilder
+from sitl.clock import SimClock
+from sitl.config import SitlConfig
+from sitl.dynamics.base import Dynamics
 from sitl.geodesy import geodetic_to_ned
-
-if TYPE_CHECKING:
-    from sitl.vehicle import SitlVehicle
+from sitl.lockstep_gate import LockstepGate
 
 logger = logging.getLogger(__name__)
 
@@ -44,6 +50,14 @@ REPOSITION_CHANGE_MODE = 1  # DO_REPOSITION param2 bit: switch to the go-to mode
 STICK_FULL = 1000.0  # MANUAL_CONTROL's full deflection
 PARAM_RATE_HZ = 500.0  # a parameter list goes out paced (PX4 spreads it over the link's bandwidth): a ground
 PARAM_BURST = 25  # station reading at its own pace must not lose half of it in a full receive buffer
+MAX_SENDERS_REPORTED = 32  # per counter in the control channel's `state` reply, which must fit one datagram
+
+
+def count_capped(counts: dict[str, int], key: str) -> None:
+    """Count one for ``key``; past MAX_SENDERS_REPORTED keys, new ones share the key ``"other"``."""
+    if key not in counts and len(counts) >= MAX_SENDERS_REPORTED:
+        key = "other"
+    counts[key] = counts.get(key, 0) + 1
 
 
 def whole(value: float, low: int, high: int, nan_is: int | None = None) -> int | None:
@@ -59,10 +73,60 @@ def whole(value: float, low: int, high: int, nan_is: int | None = None) -> int |
     return int(value)
 
 
+@dataclass
+class CommandRequest:
+    """One COMMAND_LONG or COMMAND_INT as its handler sees it: the link it came on, the message, its first four
+    parameters and the seventh (COMMAND_INT's ``z``), and the message the handler wants sent after the ACK."""
+
+    link: MavlinkLink
+    msg: Any
+    is_int: bool
+    follow_up: str | None = None
+
+    @property
+    def p(self) -> list[float]:
+        return [self.msg.param1, self.msg.param2, self.msg.param3, self.msg.param4]
+
+    @property
+    def p7(self) -> float:
+        return float(self.msg.z) if self.is_int else float(self.msg.param7)
+
+
+class AutopilotHost(Protocol):
+    """What the MAVLink server reads and acts on: the vehicle's parts, its clock and links, and three services."""
+
+    config: SitlConfig
+    clock: SimClock
+    params: ParameterStore
+    dynamics: Dynamics
+    commander: Commander
+    controller: CascadedController
+    telemetry: TelemetryBuilder
+    battery: Battery
+    links: list[MavlinkLink]
+    schedules: dict[int, StreamSchedule]
+    """Each link's telemetry schedule, by the link's ``id()``."""
+    lockstep: LockstepGate
+    speed_mps: float | None
+    """DO_CHANGE_SPEED's horizontal speed while it holds (None: the parameter's)."""
+
+    def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
+        """A STATUSTEXT on every link."""
+        ...
+
+    def heartbeat_now(self) -> None:
+        """A heartbeat on every link at once."""
+        ...
+
+    def limits(self) -> ControllerLimits:
+        """The controller's limits from the live parameters and ``speed_mps``."""
+        ...
+
+
 class MavlinkServer:
     """The MAVLink requests of ``vehicle`` (see the module docstring)."""
 
-    def __init__(self, vehicle: SitlVehicle) -> None:
+    def __init__(self, vehicle: AutopilotHost) -> None:
         self.v = vehicle
         self.setpoints_rejected = 0
         self.commands_by_sender: dict[str, int] = {}
@@ -70,8 +134,15 @@ class MavlinkServer:
         self.last_setpoint_ned: tuple[float, float, float, float] | None = None  # any sender: n, e, d, yaw (rad)
         self.commands_seen: dict[int, int] = {}  # command id -> how many received
         self._last_reject_text_s = -math.inf
-        self.missions = MissionServer(vehicle)
+        self.missions = MissionServer(
+            vehicle.commander.navigator,
+            vehicle.commander.set_fence,
+            vehicle.config.system_id,
+            vehicle.telemetry.origin,
+            vehicle.statustext,
+        )
         self.ftp = FtpServer()
+        self._commands = self._command_table()
         self.forwarded = 0  # messages passed between the links (PX4's MAV_x_FORWARD)
         self._param_lists: dict[int, tuple[MavlinkLink, deque[str]]] = {}  # per link: the list still to send
         self._param_tokens = float(PARAM_BURST)
@@ -184,119 +255,145 @@ class MavlinkServer:
         )
 
     def _handle_command(self, link: MavlinkLink, msg: Any, is_int: bool) -> None:
+        """A COMMAND_LONG or COMMAND_INT: its handler from the command table (UNSUPPORTED without one), the ACK, the
+        message it asked for, and a heartbeat at once when the mode or arming changed."""
         cmd = self.v.commander
-        c = int(msg.command)
-        p = [msg.param1, msg.param2, msg.param3, msg.param4]
-        p7 = float(msg.z) if is_int else float(msg.param7)
-        result = MavResult.UNSUPPORTED
-        follow_up: str | None = None
-        if c == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = whole(p[1], 0, 65535) == FORCE_MAGIC
-            arm = whole(p[0], 0, 1)  # neither 0 (disarm) nor 1 (arm): malformed, do neither
-            result = MavResult.DENIED if arm is None else cmd.arm(force) if arm == 1 else cmd.disarm(force)
-        elif c == mavlink.MAV_CMD_NAV_TAKEOFF:
-            above_home = math.nan
-            if math.isfinite(p7):
-                above_home = p7 - (self.v.config.origin_alt_m - float(cmd.home_ned_m[2]))  # param7 is AMSL
-            result = cmd.takeoff(above_home)
-        elif c == mavlink.MAV_CMD_NAV_LAND:
-            result = cmd.land()
-        elif c == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            result = cmd.return_to_launch()
-        elif c == mavlink.MAV_CMD_DO_SET_MODE:
-            result = self._set_mode(whole(p[0], 0, 255), whole(p[1], 0, 255), whole(p[2], 0, 255, nan_is=0))
-        elif c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            msg_id = whole(p[0], 0, 0xFFFFFF)
-            name = NAMES_BY_ID.get(msg_id) if msg_id is not None else None
-            if msg_id is None or not math.isfinite(p[1]):
-                result = MavResult.DENIED
-            elif name is None or name in ONE_SHOT:
-                result = MavResult.UNSUPPORTED if msg_id != mavlink.MAVLINK_MSG_ID_HEARTBEAT else MavResult.ACCEPTED
-            else:
-                self.v.schedules[id(link)].set_interval(name, float(p[1]))
-                result = MavResult.ACCEPTED
-        elif c == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
-            msg_id = whole(p[0], 0, 0xFFFFFF)
-            if msg_id is None:
-                result = MavResult.DENIED
-            else:
-                name = NAMES_BY_ID.get(msg_id)
-                interval_us = 0  # not available
-                if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
-                    interval_us = 1_000_000
-                elif name is not None and name not in ONE_SHOT:
-                    interval_s = self.v.schedules[id(link)].intervals_s.get(name, math.inf)
-                    interval_us = round(interval_s * 1e6) if math.isfinite(interval_s) else -1
-                result = MavResult.ACCEPTED
-                link.send(link.mav.message_interval_encode(msg_id, interval_us))
-        elif c in (
-            mavlink.MAV_CMD_REQUEST_MESSAGE,
-            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
-            mavlink.MAV_CMD_GET_HOME_POSITION,
-            MAV_CMD_REQUEST_PROTOCOL_VERSION,
-        ):
-            wanted = {
-                mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: MESSAGE_IDS["AUTOPILOT_VERSION"],
-                mavlink.MAV_CMD_GET_HOME_POSITION: MESSAGE_IDS["HOME_POSITION"],
-                MAV_CMD_REQUEST_PROTOCOL_VERSION: MESSAGE_IDS["PROTOCOL_VERSION"],
-            }.get(c, whole(p[0], 0, 0xFFFFFF))
-            name = NAMES_BY_ID.get(wanted) if wanted is not None else None
-            if wanted is None:
-                result = MavResult.DENIED
-            elif name is not None and self.v.telemetry.can_build(name):
-                result, follow_up = MavResult.ACCEPTED, name
-        elif c == mavlink.MAV_CMD_DO_SET_HOME:
-            if not math.isfinite(p[0]):
-                result = MavResult.DENIED
-            elif cmd.landed_state is LandedState.ON_GROUND and p[0] > 0.5:
-                home = self.v.dynamics.state().position_ned_m.copy()
-                home[2] = cmd.home_ned_m[2]
-                cmd.home_ned_m = home
-                result = MavResult.ACCEPTED
-            else:
-                result = MavResult.TEMPORARILY_REJECTED if p[0] > 0.5 else MavResult.DENIED
-        elif c == mavlink.MAV_CMD_DO_REPOSITION:
-            result = self._reposition(msg, is_int)
-        elif c == mavlink.MAV_CMD_DO_ORBIT:
-            result = self._orbit(msg, is_int)
-        elif c == mavlink.MAV_CMD_MISSION_START:
-            first = whole(p[0], 0, 65535, nan_is=0)
-            result = MavResult.DENIED if first is None else cmd.start_mission(first)
-        elif c == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
-            seq = whole(p[0], -1, 65535)
-            if seq is None:
-                result = MavResult.DENIED
-            else:
-                result = cmd.set_mission_current(seq if seq >= 0 else cmd.mission_current)
-        elif c == mavlink.MAV_CMD_DO_PAUSE_CONTINUE:
-            pause = whole(p[0], 0, 1)
-            if pause is None:
-                result = MavResult.DENIED
-            elif pause == 0:
-                result = cmd.set_mode(FlightMode.AUTO_LOITER) if cmd.armed else MavResult.TEMPORARILY_REJECTED
-            else:
-                result = cmd.set_mode(FlightMode.AUTO_MISSION)
-        elif c == mavlink.MAV_CMD_DO_CHANGE_SPEED:
-            # As PX4: the speed flown from now on, within MPC_XY_VEL_MAX; no parameter changes (-1: back to it).
-            spec = self.v.params.spec("MPC_XY_VEL_MAX")
-            if p[1] == -1:
-                self.v.speed_mps = None
-                result = MavResult.ACCEPTED
-            elif math.isfinite(p[1]) and spec.minimum <= p[1] <= spec.maximum:
-                self.v.speed_mps = float(p[1])
-                result = MavResult.ACCEPTED
-            else:
-                result = MavResult.DENIED
-            self.v.controller.limits = self.v.limits()
+        request = CommandRequest(link, msg, is_int)
+        handler = self._commands.get(int(msg.command))
+        result = MavResult.UNSUPPORTED if handler is None else handler(request)
         self._send_ack(link, msg, result)
-        if follow_up is not None:
+        if request.follow_up is not None:
             link.send(
                 self.v.telemetry.build(
-                    follow_up, link.mav, self.v.clock.now_s, self.v.dynamics.state(), cmd, self.v.battery
+                    request.follow_up, link.mav, self.v.clock.now_s, self.v.dynamics.state(), cmd, self.v.battery
                 )
             )
         if cmd.changed:
             self.v.heartbeat_now()  # let the client see the new mode/arming at once
+
+    def _command_table(self) -> dict[int, Callable[[CommandRequest], MavResult]]:
+        """The commands this autopilot acts on, by MAV_CMD id."""
+        request_message = self._request_message
+        return {
+            mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._arm_disarm,
+            mavlink.MAV_CMD_NAV_TAKEOFF: self._takeoff,
+            mavlink.MAV_CMD_NAV_LAND: lambda r: self.v.commander.land(),
+            mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: lambda r: self.v.commander.return_to_launch(),
+            mavlink.MAV_CMD_DO_SET_MODE: lambda r: self._set_mode(
+                whole(r.p[0], 0, 255), whole(r.p[1], 0, 255), whole(r.p[2], 0, 255, nan_is=0)
+            ),
+            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._set_message_interval,
+            mavlink.MAV_CMD_GET_MESSAGE_INTERVAL: self._get_message_interval,
+            mavlink.MAV_CMD_REQUEST_MESSAGE: request_message,
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: request_message,
+            mavlink.MAV_CMD_GET_HOME_POSITION: request_message,
+            MAV_CMD_REQUEST_PROTOCOL_VERSION: request_message,
+            mavlink.MAV_CMD_DO_SET_HOME: self._set_home,
+            mavlink.MAV_CMD_DO_REPOSITION: lambda r: self._reposition(r.msg, r.is_int),
+            mavlink.MAV_CMD_DO_ORBIT: lambda r: self._orbit(r.msg, r.is_int),
+            mavlink.MAV_CMD_MISSION_START: self._mission_start,
+            mavlink.MAV_CMD_DO_SET_MISSION_CURRENT: self._set_mission_current,
+            mavlink.MAV_CMD_DO_PAUSE_CONTINUE: self._pause_continue,
+            mavlink.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
+        }
+
+    # -- the commands ------------------------------------------------------------------------------------------------
+    def _arm_disarm(self, r: CommandRequest) -> MavResult:
+        cmd = self.v.commander
+        force = whole(r.p[1], 0, 65535) == FORCE_MAGIC
+        arm = whole(r.p[0], 0, 1)  # neither 0 (disarm) nor 1 (arm): malformed, do neither
+        return MavResult.DENIED if arm is None else cmd.arm(force) if arm == 1 else cmd.disarm(force)
+
+    def _takeoff(self, r: CommandRequest) -> MavResult:
+        cmd = self.v.commander
+        above_home = math.nan
+        if math.isfinite(r.p7):
+            above_home = r.p7 - (self.v.config.origin_alt_m - float(cmd.home_ned_m[2]))  # param7 is AMSL
+        return cmd.takeoff(above_home)
+
+    def _set_message_interval(self, r: CommandRequest) -> MavResult:
+        msg_id = whole(r.p[0], 0, 0xFFFFFF)
+        name = NAMES_BY_ID.get(msg_id) if msg_id is not None else None
+        if msg_id is None or not math.isfinite(r.p[1]):
+            return MavResult.DENIED
+        if name is None or name in ONE_SHOT:
+            return MavResult.UNSUPPORTED if msg_id != mavlink.MAVLINK_MSG_ID_HEARTBEAT else MavResult.ACCEPTED
+        self.v.schedules[id(r.link)].set_interval(name, float(r.p[1]))
+        return MavResult.ACCEPTED
+
+    def _get_message_interval(self, r: CommandRequest) -> MavResult:
+        msg_id = whole(r.p[0], 0, 0xFFFFFF)
+        if msg_id is None:
+            return MavResult.DENIED
+        name = NAMES_BY_ID.get(msg_id)
+        interval_us = 0  # not available
+        if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            interval_us = 1_000_000
+        elif name is not None and name not in ONE_SHOT:
+            interval_s = self.v.schedules[id(r.link)].intervals_s.get(name, math.inf)
+            interval_us = round(interval_s * 1e6) if math.isfinite(interval_s) else -1
+        r.link.send(r.link.mav.message_interval_encode(msg_id, interval_us))
+        return MavResult.ACCEPTED
+
+    def _request_message(self, r: CommandRequest) -> MavResult:
+        """REQUEST_MESSAGE and the older requests of one message each: the message follows the ACK."""
+        wanted = {
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: MESSAGE_IDS["AUTOPILOT_VERSION"],
+            mavlink.MAV_CMD_GET_HOME_POSITION: MESSAGE_IDS["HOME_POSITION"],
+            MAV_CMD_REQUEST_PROTOCOL_VERSION: MESSAGE_IDS["PROTOCOL_VERSION"],
+        }.get(int(r.msg.command), whole(r.p[0], 0, 0xFFFFFF))
+        name = NAMES_BY_ID.get(wanted) if wanted is not None else None
+        if wanted is None:
+            return MavResult.DENIED
+        if name is not None and self.v.telemetry.can_build(name):
+            r.follow_up = name
+            return MavResult.ACCEPTED
+        return MavResult.UNSUPPORTED
+
+    def _set_home(self, r: CommandRequest) -> MavResult:
+        cmd = self.v.commander
+        if not math.isfinite(r.p[0]):
+            return MavResult.DENIED
+        if cmd.landed_state is LandedState.ON_GROUND and r.p[0] > 0.5:
+            home = self.v.dynamics.state().position_ned_m.copy()
+            home[2] = cmd.home_ned_m[2]
+            cmd.home_ned_m = home
+            return MavResult.ACCEPTED
+        return MavResult.TEMPORARILY_REJECTED if r.p[0] > 0.5 else MavResult.DENIED
+
+    def _mission_start(self, r: CommandRequest) -> MavResult:
+        first = whole(r.p[0], 0, 65535, nan_is=0)
+        return MavResult.DENIED if first is None else self.v.commander.navigator.start_mission(first)
+
+    def _set_mission_current(self, r: CommandRequest) -> MavResult:
+        navigator = self.v.commander.navigator
+        seq = whole(r.p[0], -1, 65535)
+        if seq is None:
+            return MavResult.DENIED
+        return navigator.set_mission_current(seq if seq >= 0 else navigator.mission_current)
+
+    def _pause_continue(self, r: CommandRequest) -> MavResult:
+        cmd = self.v.commander
+        pause = whole(r.p[0], 0, 1)
+        if pause is None:
+            return MavResult.DENIED
+        if pause == 0:
+            return cmd.set_mode(FlightMode.AUTO_LOITER) if cmd.armed else MavResult.TEMPORARILY_REJECTED
+        return cmd.set_mode(FlightMode.AUTO_MISSION)
+
+    def _change_speed(self, r: CommandRequest) -> MavResult:
+        """As PX4: the speed flown from now on, within MPC_XY_VEL_MAX; no parameter changes (-1: back to it)."""
+        spec = self.v.params.spec("MPC_XY_VEL_MAX")
+        if r.p[1] == -1:
+            self.v.speed_mps = None
+            result = MavResult.ACCEPTED
+        elif math.isfinite(r.p[1]) and spec.minimum <= r.p[1] <= spec.maximum:
+            self.v.speed_mps = float(r.p[1])
+            result = MavResult.ACCEPTED
+        else:
+            result = MavResult.DENIED
+        self.v.controller.limits = self.v.limits()
+        return result
 
     def _global_target(self, msg: Any, is_int: bool) -> tuple[float, float, float] | None:
         """The NED point of a command's x/y/z (latitude, longitude, altitude): NaN where the command leaves the
@@ -339,7 +436,7 @@ class MavlinkServer:
         if not change_mode & REPOSITION_CHANGE_MODE and self.v.commander.mode is not FlightMode.AUTO_LOITER:
             return MavResult.TEMPORARILY_REJECTED
         yaw = math.radians(float(msg.param4)) if math.isfinite(msg.param4) else math.nan
-        return self.v.commander.reposition(np.array(target), yaw)
+        return self.v.commander.navigator.reposition(np.array(target), yaw)
 
     def _orbit(self, msg: Any, is_int: bool) -> MavResult:
         """DO_ORBIT: radius (param1; negative: counter-clockwise), speed (param2), centre and altitude (here when
@@ -356,7 +453,7 @@ class MavlinkServer:
             radius, speed = -radius, -abs(speed)
         here = self.v.dynamics.state().position_ned_m
         north, east, down = (here[i] if math.isnan(v) else v for i, v in enumerate(target))
-        return self.v.commander.start_orbit(Orbit(float(north), float(east), float(down), radius, speed))
+        return self.v.commander.navigator.start_orbit(Orbit(float(north), float(east), float(down), radius, speed))
 
     def _handle_setpoint(self, msg: Any) -> None:
         mask = int(msg.type_mask)

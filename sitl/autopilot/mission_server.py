@@ -20,18 +20,19 @@ import enum
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.autopilot.commander import Fence, MavResult, NavCommand, NavItem, Severity
+from sitl.autopilot.commander import Fence
 from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
+from sitl.autopilot.navigator import NavCommand, Navigator, NavItem
+from sitl.autopilot.status import MavResult, Severity
+from sitl.autopilot.telemetry import Origin
 from sitl.geodesy import geodetic_to_ned
-
-if TYPE_CHECKING:
-    from sitl.vehicle import SitlVehicle
 
 logger = logging.getLogger(__name__)
 
@@ -121,10 +122,35 @@ class ItemRefusedError(Exception):
 
 
 class MissionServer:
-    """The mission, fence and rally lists of ``vehicle`` and the protocol that reads and writes them."""
+    """The mission, fence and rally lists of a vehicle and the protocol that reads and writes them.
 
-    def __init__(self, vehicle: SitlVehicle) -> None:
-        self.v = vehicle
+    Parameters
+    ----------
+    navigator : Navigator
+        Flies the mission (the list is handed to it once an upload completes).
+    set_fence : callable
+        ``set_fence(fence)`` hands the commander a completed fence upload.
+    system_id : int
+        This autopilot's MAVLink system id (messages for another system are not ours).
+    origin : Origin
+        The geodetic position of the local NED origin (items in latitude and longitude become north and east).
+    statustext : callable
+        ``statustext(text, severity)`` tells the ground stations why an upload or a request was refused.
+    """
+
+    def __init__(
+        self,
+        navigator: Navigator,
+        set_fence: Callable[[Fence], None],
+        system_id: int,
+        origin: Origin,
+        statustext: Callable[[str, Severity], None],
+    ) -> None:
+        self.navigator = navigator
+        self.set_fence = set_fence
+        self.system_id = system_id
+        self.origin = origin
+        self.statustext = statustext
         self.lists: dict[MissionType, list[StoredItem]] = {t: [] for t in MissionType if t is not MissionType.ALL}
         self.upload: Upload | None = None
         self.uploads_accepted = 0
@@ -136,7 +162,7 @@ class MissionServer:
         kind = msg.get_type()
         if not kind.startswith("MISSION_") or kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
             return False
-        if not for_autopilot(msg, self.v.config.system_id):
+        if not for_autopilot(msg, self.system_id):
             return True
         peer = (msg.get_srcSystem(), msg.get_srcComponent())
         try:
@@ -154,8 +180,8 @@ class MissionServer:
             self._receive_item(link, peer, msg, as_int=kind == "MISSION_ITEM_INT")
         elif kind == "MISSION_CLEAR_ALL":
             self._clear(link, peer, mission_type)
-        elif kind == "MISSION_SET_CURRENT" and self.v.commander.set_mission_current(int(msg.seq)) != MavResult.ACCEPTED:
-            self.v.statustext(f"Mission: no item {int(msg.seq)}", Severity.CRITICAL)
+        elif kind == "MISSION_SET_CURRENT" and self.navigator.set_mission_current(int(msg.seq)) != MavResult.ACCEPTED:
+            self.statustext(f"Mission: no item {int(msg.seq)}", Severity.CRITICAL)
         return True  # MISSION_ACK from a ground station after a download: nothing to do
 
     def _ack(self, link: MavlinkLink, peer: tuple[int, int], mission_type: int, result: MissionResult) -> None:
@@ -176,7 +202,7 @@ class MissionServer:
             self._ack(link, peer, int(mission_type), MissionResult.INVALID_SEQUENCE)
             return
         item = items[seq]
-        current = int(mission_type is MissionType.MISSION and seq == self.v.commander.mission_current)
+        current = int(mission_type is MissionType.MISSION and seq == self.navigator.mission_current)
         common = (peer[0], peer[1], seq)
         if as_int:
             frame = {
@@ -203,14 +229,14 @@ class MissionServer:
         busy = self.upload
         if busy is not None and (busy.peer != peer or busy.link is not link):
             self._ack(link, peer, int(mission_type), MissionResult.DENIED)
-            self.v.statustext("Mission upload refused: another upload in progress", Severity.CRITICAL)
+            self.statustext("Mission upload refused: another upload in progress", Severity.CRITICAL)
             return
         if mission_type is MissionType.ALL:
             self._ack(link, peer, int(mission_type), MissionResult.UNSUPPORTED)
             return
         if count > MAX_ITEMS[int(mission_type)]:
             self._ack(link, peer, int(mission_type), MissionResult.NO_SPACE)
-            self.v.statustext(
+            self.statustext(
                 f"{mission_type.name.lower()} upload refused: {count} items, at most {MAX_ITEMS[int(mission_type)]}",
                 Severity.CRITICAL,
             )
@@ -248,7 +274,7 @@ class MissionServer:
             self.upload = None
             self.uploads_refused += 1
             self._ack(link, peer, mission_type, exc.result)
-            self.v.statustext(f"{up.mission_type.name.lower()} item {seq} refused: {exc}", Severity.CRITICAL)
+            self.statustext(f"{up.mission_type.name.lower()} item {seq} refused: {exc}", Severity.CRITICAL)
             return
         up.items.append(item)
         if len(up.items) < up.count:
@@ -260,7 +286,7 @@ class MissionServer:
         except ItemRefusedError as exc:
             self.uploads_refused += 1
             self._ack(link, peer, mission_type, exc.result)
-            self.v.statustext(f"{up.mission_type.name.lower()} refused: {exc}", Severity.CRITICAL)
+            self.statustext(f"{up.mission_type.name.lower()} refused: {exc}", Severity.CRITICAL)
             return
         self.uploads_accepted += 1
         self._ack(link, peer, mission_type, MissionResult.ACCEPTED)
@@ -274,7 +300,7 @@ class MissionServer:
         if up.retries >= MAX_RETRIES:
             self.upload = None
             self._ack(up.link, up.peer, int(up.mission_type), MissionResult.OPERATION_CANCELLED)
-            self.v.statustext(f"{up.mission_type.name.lower()} upload timed out", Severity.CRITICAL)
+            self.statustext(f"{up.mission_type.name.lower()} upload timed out", Severity.CRITICAL)
             return
         up.retries += 1
         up.last_activity_wall_s = time.monotonic()
@@ -289,9 +315,9 @@ class MissionServer:
     def _replace(self, mission_type: MissionType, items: list[StoredItem]) -> None:
         """A whole list replaces the old one: missions are handed to the commander as flown items."""
         if mission_type is MissionType.FENCE:
-            self.v.commander.set_fence(self._fence(items))
+            self.set_fence(self._fence(items))
         if mission_type is MissionType.MISSION:
-            self.v.commander.set_mission([self._nav_item(seq, item) for seq, item in enumerate(items)])
+            self.navigator.set_mission([self._nav_item(seq, item) for seq, item in enumerate(items)])
         self.lists[mission_type] = list(items)
 
     # -- checks and conversions --------------------------------------------------------------------------------
@@ -333,8 +359,8 @@ class MissionServer:
         return StoredItem(frame, command, int(msg.autocontinue), params, lat_e7, lon_e7, alt)
 
     def _ned(self, lat_e7: int, lon_e7: int) -> tuple[float, float]:
-        c = self.v.config
-        north, east, _ = geodetic_to_ned(lat_e7 / 1e7, lon_e7 / 1e7, 0.0, c.origin_lat_deg, c.origin_lon_deg, 0.0)
+        o = self.origin
+        north, east, _ = geodetic_to_ned(lat_e7 / 1e7, lon_e7 / 1e7, 0.0, o.lat_deg, o.lon_deg, 0.0)
         return north, east
 
     def _nav_item(self, seq: int, item: StoredItem) -> NavItem:
@@ -348,7 +374,7 @@ class MissionServer:
             if item.frame in RELATIVE_FRAMES:
                 above_home = item.alt_m
             else:
-                down = self.v.config.origin_alt_m - item.alt_m
+                down = self.origin.alt_m - item.alt_m
         p1, p2, _p3, p4 = item.params
         hold_s = p1 if command in (NavCommand.WAYPOINT, NavCommand.LOITER_TIME) and math.isfinite(p1) else 0.0
         radius = p2 if command is NavCommand.WAYPOINT and math.isfinite(p2) and p2 > 0 else math.nan

@@ -17,9 +17,10 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.vehicle.statustext import statustext_chunks
-from sitl.autopilot.commander import Commander, LandedState
+from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import Setpoint
 from sitl.autopilot.modes import FlightMode
+from sitl.autopilot.status import LandedState
 from sitl.dynamics.base import VehicleState
 from sitl.dynamics.rigid_body import quaternion_to_matrix
 from sitl.geodesy import ned_to_geodetic
@@ -504,14 +505,15 @@ class TelemetryBuilder:
         )
 
     def _mission_current(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        total = len(cmd.mission)
+        nav = cmd.navigator
+        total = len(nav.mission)
         if total == 0:
             state = mavlink.MISSION_STATE_NO_MISSION
-        elif cmd.mission_current >= total:
+        elif nav.mission_current >= total:
             state = mavlink.MISSION_STATE_COMPLETE
         elif cmd.mode is FlightMode.AUTO_MISSION:
             state = mavlink.MISSION_STATE_ACTIVE
         else:
-            state = mavlink.MISSION_STATE_NOT_STARTED if cmd.mission_current == 0 else mavlink.MISSION_STATE_PAUSED
+            state = mavlink.MISSION_STATE_NOT_STARTED if nav.mission_current == 0 else mavlink.MISSION_STATE_PAUSED
         in_mission = 1 if cmd.mode is FlightMode.AUTO_MISSION else 2
-        return mav.mission_current_encode(min(cmd.mission_current, 65535), total, state, in_mission)
+        return mav.mission_current_encode(min(nav.mission_current, 65535), total, state, in_mission)

@@ -3,7 +3,7 @@
 Each mission is one Ray task (``num_cpus=1``, so Ray runs one per CPU it is given) in a Ray worker process, which Ray
 keeps between tasks. At its first mission a worker leases a free SITL instance on its node (:mod:`sitl.instances`) and
 starts its warm SITL and companion processes (:mod:`sitl.warm`), kept for its later missions; each task flies its
-mission exactly as the local backend does (:func:`sitl.campaign.runner.fly_one`) and returns the result's JSON. The
+mission exactly as the local backend does (:func:`sitl.campaign.worker.fly_one`) and returns the result's JSON. The
 driver streams the results into the same resumable campaign folder as they finish. When a node dies, Ray flies its
 missions in flight again on another node (``max_retries``): the mission's SITL and companion die with their worker
 (``sitl.process.die_with_parent``), and a mission is in lockstep, so where and how often it was started does not change
@@ -45,7 +45,7 @@ def fly_on_node(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: 
     """In a Ray worker: fly the mission on this worker's warm processes (leasing a SITL instance for the worker's
     lifetime at its first mission), or, not ``warm``, lease an instance for this mission alone."""
     global _warm, _warm_lease
-    from sitl.campaign.runner import fly_one, warm_worker
+    from sitl.campaign.worker import fly_one, warm_worker
     from sitl.instances import lease_instance, leased_instance
 
     folder = Path(out_dir)

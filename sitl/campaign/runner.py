@@ -11,7 +11,6 @@ and config only, not on the number of workers or the machine's speed.
 
 from __future__ import annotations
 
-import atexit
 import collections
 import concurrent.futures
 import contextlib
@@ -20,11 +19,8 @@ import json
 import logging
 import multiprocessing
 import os
-import shutil
 import signal
-import socket
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures.process import BrokenProcessPool
@@ -35,14 +31,13 @@ import yaml
 
 from companion.app.recorder import open_append, read_log
 from companion.config import ConfigError, read_yaml_file, validate_config
-from sitl.campaign.metrics import mission_metrics, stale
+from sitl.campaign.metrics import stale
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
+from sitl.campaign.worker import error_result, fly_one, warm_worker
 from sitl.config import MAX_INSTANCE, SitlConfig
 from sitl.instances import InstanceLease, lease_instance
-from sitl.mission import MissionError, MissionProcesses, MissionSpec, fly
-from sitl.process import SitlProcessError
-from sitl.warm import ServeProcessError, WarmWorker
+from sitl.warm import WarmWorker
 
 logger = logging.getLogger(__name__)
 
@@ -74,21 +69,6 @@ def worker_instances(instance_base: int, workers: int) -> list[int]:
     return instances
 
 
-def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance: int, **extra: Any) -> MissionSpec:
-    """The :class:`MissionSpec` of one planned mission."""
-    sitl, mission = plan.overrides(spec)
-    return MissionSpec(
-        seed=plan.seed,
-        run_dir=run_dir,
-        instance=instance,
-        mission_config=spec.mission_config,
-        sitl_overrides=sitl,
-        mission_overrides=mission,
-        timeout_s=spec.timeout_s,
-        **extra,
-    )
-
-
 _worker_instance = INSTANCE_BASE
 _worker_lease: InstanceLease | None = None
 _worker_warm: WarmWorker | None = None
@@ -109,67 +89,9 @@ def _init_worker(instances: Any, warm: bool) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def error_result(plan: MissionPlan, error: str) -> dict[str, Any]:
-    """The result line of a mission that could not be flown."""
-    return {
-        "mission_id": plan.mission_id,
-        "condition": plan.condition.name,
-        "strategy": plan.strategy.name,
-        "run": plan.run,
-        "seed": plan.seed,
-        "error": error[-2000:],
-    }
-
-
-def node_name() -> str:
-    """This node's name in the results: its host name and, in a Ray worker, its Ray node id's first 8 characters.
-    Only a Ray worker has Ray imported: a local worker never imports it."""
-    host = socket.gethostname()
-    ray = sys.modules.get("ray")
-    if ray is not None and ray.is_initialized():
-        return f"{host}/{ray.get_runtime_context().get_node_id()[:8]}"
-    return host
-
-
-def warm_worker(instance: int) -> WarmWorker:
-    """This process's warm worker on ``instance`` (its processes stopped when this process exits)."""
-    worker = WarmWorker(instance, Path(tempfile.gettempdir()) / "slz-warm")
-    atexit.register(worker.close)
-    return worker
-
-
 def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
     """In a local worker process: :func:`fly_one` on the worker's SITL instance (and its warm processes)."""
     return fly_one(spec_json, mission_id, out_dir, keep, _worker_instance, _worker_warm)
-
-
-def fly_one(
-    spec_json: dict[str, Any],
-    mission_id: str,
-    out_dir: str,
-    keep: bool,
-    instance: int,
-    processes: MissionProcesses | None = None,
-) -> dict[str, Any]:
-    """Fly one mission on SITL ``instance`` and return its metrics (or its error) as JSON, with the wall time it took
-    and the node that flew it (every backend flies a mission through here). ``processes``: a warm worker's, or
-    None for new processes."""
-    spec = CampaignSpec.model_validate(spec_json)
-    plan = next(p for p in spec.missions() if p.mission_id == mission_id)
-    run_dir = Path(out_dir) / "missions" / mission_id
-    shutil.rmtree(run_dir, ignore_errors=True)  # a mission cut off by a kill starts again from nothing
-    started = time.monotonic()
-    try:
-        fly(mission_spec(spec, plan, run_dir, instance), processes)
-        metrics = mission_metrics(run_dir, mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
-        result: dict[str, Any] = metrics.to_json()
-    except (MissionError, SitlProcessError, ServeProcessError, OSError, ValueError, KeyError) as exc:
-        result = error_result(plan, str(exc))
-    result["wall_s"] = round(time.monotonic() - started, 3)
-    result["node"] = node_name()
-    if not keep:
-        shutil.rmtree(run_dir, ignore_errors=True)
-    return result
 
 
 def _stop_workers(pool: concurrent.futures.ProcessPoolExecutor) -> None:

@@ -120,16 +120,3 @@ class Dynamics(Protocol):
     def step(self, dt_s: float) -> None:
         """Advance the model by ``dt_s`` seconds."""
         ...
-
-
-def make_dynamics(
-    backend: DynamicsBackend, rate_hz: float = 400.0, home_position_ned_m: F64Array | None = None
-) -> Dynamics:
-    """The named backend stepping at ``rate_hz``, resting on the ground at ``home_position_ned_m`` (the origin)."""
-    if backend is DynamicsBackend.RIGID_BODY:
-        from sitl.dynamics.rigid_body import RigidBodyQuadrotor
-
-        return RigidBodyQuadrotor(home_position_ned_m=home_position_ned_m)
-    from sitl.dynamics.jsbsim_f450 import JsbsimF450
-
-    return JsbsimF450(home_position_ned_m=home_position_ned_m, rate_hz=rate_hz)

@@ -1,0 +1,188 @@
+"""The house's floors as a test: every import between the modules of ``companion`` and ``sitl`` (at the top, under
+``TYPE_CHECKING`` or inside a function) goes down or sideways, never up, and no modules import each other in a
+circle. A split that needs a back-reference passes an interface in its constructor instead (``FlightLoop``,
+``AutopilotHost``, ``ControlledVehicle``, ``MissionServer``'s parts).
+
+Floors, from the bottom: the drone's shared values and geometry; its camera, vehicle link and perception; guidance;
+the flight app; its command line. Then the lab, which may use any of the drone's floors: the simulated world's and
+vehicle's parts; the autopilot, the SITL's config and the renderer; the SITL vehicle process; the harness that starts
+and drives SITL processes; campaigns; the test kit; the lab's command line.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("companion", "sitl")
+
+# Longest matching prefix wins. A module may import modules on its own floor or below.
+FLOORS: dict[str, int] = {
+    "companion.config": 0,
+    "companion.geometry": 0,
+    "companion.camera": 1,
+    "companion.vehicle": 1,
+    "companion.perception": 1,
+    "companion.guidance": 2,
+    "companion.app": 3,
+    "companion.cli": 4,
+    "companion": 4,
+    # the simulated world's and vehicle's parts (no I/O of a process)
+    "sitl.geodesy": 10,
+    "sitl.clock": 10,
+    "sitl.lockstep_gate": 10,
+    "sitl.frame_server": 10,
+    "sitl.control_channel": 10,
+    "sitl.world": 10,
+    "sitl.dynamics": 10,
+    # the autopilot, the SITL's config (which names the autopilot's parameters) and the renderer
+    "sitl.autopilot": 11,
+    "sitl.config": 11,
+    "sitl.render": 11,
+    # the SITL vehicle process
+    "sitl.vehicle": 12,
+    "sitl.control_requests": 12,
+    "sitl.sim_camera": 12,
+    "sitl.snapshot": 12,
+    "sitl.flat_scene": 12,
+    # the harness: SITL and companion processes started, leased, stepped, fuzzed, flown as missions
+    "sitl.process": 13,
+    "sitl.instances": 13,
+    "sitl.lockstep": 13,
+    "sitl.mission": 13,
+    "sitl.warm": 13,
+    "sitl.fuzz": 13,
+    "sitl.demo": 13,
+    "sitl.campaign": 14,
+    "sitl.testing": 15,
+    "sitl.cli": 16,
+    "sitl.__main__": 16,
+    "sitl": 16,
+}
+
+
+def module_files() -> dict[str, Path]:
+    """Every module of the two packages by its dotted name (a package by its ``__init__``)."""
+    modules = {}
+    for package in PACKAGES:
+        for path in (REPO_ROOT / package).rglob("*.py"):
+            name = ".".join(path.relative_to(REPO_ROOT).with_suffix("").parts).removesuffix(".__init__")
+            modules[name] = path
+    return modules
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the modules of the two packages it imports (anywhere in its source; a name imported from a package
+    counts as its submodule when it is one). A package's own submodules and its parents are left out: importing a
+    submodule runs its parents' ``__init__``, which is not an arrow of the design."""
+    modules = module_files()
+
+    def resolve(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, set[str]] = {name: set() for name in modules}
+    for name, path in modules.items():
+        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    base = ".".join(package[: len(package) - node.level + 1] + ([node.module] if node.module else []))
+                targets = [base, *(f"{base}.{alias.name}" for alias in node.names)]
+            else:
+                continue
+            for target in targets:
+                found = resolve(target)
+                if found is not None and found != name and not name.startswith(found + "."):
+                    graph[name].add(found)
+    return graph
+
+
+def floor_of(module: str) -> int:
+    parts = module.split(".")
+    for end in range(len(parts), 0, -1):
+        prefix = ".".join(parts[:end])
+        if prefix in FLOORS:
+            return FLOORS[prefix]
+    raise AssertionError(f"{module} has no floor: add it to FLOORS")
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    found: list[list[str]] = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+@pytest.mark.unit
+def test_no_modules_import_each_other_in_a_circle() -> None:
+    assert circles(import_graph()) == []
+
+
+@pytest.mark.unit
+def test_the_circle_finder_finds_a_circle_and_nothing_else() -> None:
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": set()}
+    assert circles(graph) == [["a", "b", "c"]]
+    assert circles({"a": {"b"}, "b": set()}) == []
+
+
+@pytest.mark.unit
+def test_every_import_goes_down_or_sideways() -> None:
+    upward = [
+        f"{module} (floor {floor_of(module)}) -> {target} (floor {floor_of(target)})"
+        for module, targets in sorted(import_graph().items())
+        for target in sorted(targets)
+        if floor_of(target) > floor_of(module)
+    ]
+    assert upward == []
+
+
+@pytest.mark.unit
+def test_the_graph_sees_lazy_and_type_checking_imports() -> None:
+    """The two kinds of import that the interpreter does not run at import time still count as arrows."""
+    graph = import_graph()
+    assert "sitl.dynamics.rigid_body" in graph["sitl.dynamics.factory"]  # inside make_dynamics
+    assert "companion.camera.opencv_source" in graph["companion.camera.sources"]  # inside open_frame_source
+    assert "sitl.campaign.ray_backend" in graph["sitl.campaign.runner"]  # only with --backend ray
