@@ -24,8 +24,8 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
 from companion.app.flight_log import FlightLog, RecordKind  # noqa: E402
-from sitl.instances import lease_instance  # noqa: E402
-from sitl.mission import MissionSpec, fly  # noqa: E402
+from sitl.harness.instances import lease_instance  # noqa: E402
+from sitl.harness.mission import MissionSpec, fly  # noqa: E402
 
 
 def main() -> int:

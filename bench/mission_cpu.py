@@ -27,8 +27,8 @@ from bench.campaign_sample import NOT_METRICS, SPEC, differences  # noqa: E402
 from bench.machine import machine_context, save_report  # noqa: E402
 from sitl.campaign.spec import load_campaign_spec  # noqa: E402
 from sitl.campaign.worker import fly_one  # noqa: E402
-from sitl.instances import leased_instance  # noqa: E402
-from sitl.warm import WarmWorker  # noqa: E402
+from sitl.harness.instances import leased_instance  # noqa: E402
+from sitl.harness.warm import WarmWorker  # noqa: E402
 
 MISSIONS = ("static/oldest/0001", "moving_10/biggest/0001", "moving_20/oldest/0001", "weather/biggest/0001")
 WARM_UP = "static/random/0000"

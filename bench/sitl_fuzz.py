@@ -2,11 +2,10 @@
 
 Run: ``.venv/bin/python bench/sitl_fuzz.py [--datagrams 100000] [--requests 10000] [--seed 23]``.
 
-A ground-station peer and an API peer hold the two MAVLink links (each is its link's partner and heartbeats at 1 Hz,
-as MAVSDK and QGroundControl do) and record every heartbeat's wall time. A stray sender then sends the seeded
-datagrams of ``sitl.fuzz`` to both links, paced (every datagram reaches the SITL's parser), then an unthrottled 5 s
-flood, then the control requests. Asserted, and printed with the machine's context into
-``bench/results/sitl_fuzz.json``:
+A ground-station peer and an API peer hold the two MAVLink links (each is its link's partner and heartbeats at 1 Hz, as
+MAVSDK and QGroundControl do) and record every heartbeat's wall time. A stray sender then sends the seeded datagrams of
+``sitl.harness.fuzz`` to both links, paced (every datagram reaches the SITL's parser), then an unthrottled 5 s flood,
+then the control requests. Asserted, and printed with the machine's context into ``bench/results/sitl_fuzz.json``:
 
 - the SITL process is alive, answers ``state``, and never failed to handle a message (``handler_errors`` 0);
 - the heartbeat gap on both links stayed under 1.5 s throughout;
@@ -32,9 +31,9 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
 from sitl.config import SitlConfig  # noqa: E402
-from sitl.fuzz import ControlFuzzer, MavlinkFuzzer  # noqa: E402
-from sitl.instances import lease_instance  # noqa: E402
-from sitl.process import SitlProcess  # noqa: E402
+from sitl.harness.fuzz import ControlFuzzer, MavlinkFuzzer  # noqa: E402
+from sitl.harness.instances import lease_instance  # noqa: E402
+from sitl.harness.process import SitlProcess  # noqa: E402
 from sitl.testing.helpers import MavlinkPeer, wait_until  # noqa: E402
 from sitl.testing.mavsdk_client import Client  # noqa: E402
 

@@ -29,9 +29,9 @@ from companion.camera.frames import SitlFrameSource  # noqa: E402
 from sitl.autopilot.modes import FlightMode  # noqa: E402
 from sitl.config import SitlConfig  # noqa: E402
 from sitl.dynamics.base import DynamicsBackend  # noqa: E402
-from sitl.instances import leased_instance  # noqa: E402
-from sitl.lockstep import LockstepControl  # noqa: E402
-from sitl.process import SitlProcess  # noqa: E402
+from sitl.harness.instances import leased_instance  # noqa: E402
+from sitl.harness.lockstep import LockstepControl  # noqa: E402
+from sitl.harness.process import SitlProcess  # noqa: E402
 from sitl.vehicle import SitlVehicle  # noqa: E402
 
 

@@ -23,11 +23,11 @@ from companion.config import read_yaml_file
 
 @contextlib.contextmanager
 def _instance(requested: int | None) -> Iterator[int]:
-    """The SITL instance to fly: the one asked for, or a free one leased from :mod:`sitl.instances`."""
+    """The SITL instance to fly: the one asked for, or a free one leased from :mod:`sitl.harness.instances`."""
     if requested is not None:
         yield requested
         return
-    from sitl.instances import leased_instance
+    from sitl.harness.instances import leased_instance
 
     with leased_instance() as lease:
         yield lease.instance
@@ -36,9 +36,9 @@ def _instance(requested: int | None) -> Iterator[int]:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from companion.app.mission import load_mission_config
     from companion.perception.pipeline import SlzPipeline
-    from sitl import demo
-    from sitl.instances import InstanceError
-    from sitl.mission import MissionError
+    from sitl.harness import demo
+    from sitl.harness.instances import InstanceError
+    from sitl.harness.mission import MissionError
 
     config = load_mission_config(args.config)  # a bad config or a model that does not load fails before any process
     SlzPipeline.from_config(config.perception)
@@ -137,8 +137,8 @@ def _campaign_replay(args: argparse.Namespace) -> int:
     from sitl.campaign.runner import read_results
     from sitl.campaign.spec import CampaignSpec
     from sitl.campaign.worker import mission_spec
-    from sitl.instances import InstanceError
-    from sitl.mission import fly
+    from sitl.harness.instances import InstanceError
+    from sitl.harness.mission import fly
 
     folder = Path(args.spec_or_folder or "")
     spec_path = folder / "spec.yaml"

@@ -24,7 +24,7 @@ class LockstepGate:
     Parameters
     ----------
     enabled : bool
-        The SITL runs in lockstep (``sitl.lockstep``).
+        The SITL runs in lockstep (``sitl.harness.lockstep``).
     period_s : float
         Simulated seconds between ticks.
     timeout_s : float

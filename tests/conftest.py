@@ -10,7 +10,7 @@ import pytest
 from companion.perception.blob_model import build_blob_density_model, save_model
 from companion.perception.config import PerceptionConfig
 from companion.perception.density import OnnxDensityModel
-from sitl.instances import InstanceLease, lease_instance, leased_instance
+from sitl.harness.instances import InstanceLease, lease_instance, leased_instance
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -35,8 +35,8 @@ def config(blob_model_path: Path) -> PerceptionConfig:
 
 @pytest.fixture
 def instances() -> Iterator[Callable[[], int]]:
-    """Lease free SITL instances (``sitl.instances``) for this test: call it once per SITL; all are given back after
-    the test. Tests never pick instance numbers, so they pass beside another test run, a campaign or a demo."""
+    """Lease free SITL instances (``sitl.harness.instances``) for this test: call it once per SITL; all are given back
+    after the test. Tests never pick instance numbers, so they pass beside another test run, a campaign or a demo."""
     leases: list[InstanceLease] = []
 
     def take() -> int:

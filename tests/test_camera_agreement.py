@@ -10,7 +10,7 @@ import pytest
 from companion.app.mission import camera_mismatches
 from companion.perception.config import PerceptionConfig
 from sitl.config import SitlCameraConfig
-from sitl.mission import MissionError, MissionSpec, write_configs
+from sitl.harness.mission import MissionError, MissionSpec, write_configs
 
 pytestmark = pytest.mark.unit
 

@@ -18,8 +18,8 @@ from companion.guidance.commitment import CommitmentConfig
 from sitl.campaign.metrics import mission_metrics
 from sitl.campaign.spec import load_campaign_spec
 from sitl.campaign.worker import mission_spec
-from sitl.instances import leased_instance
-from sitl.mission import fly
+from sitl.harness.instances import leased_instance
+from sitl.harness.mission import fly
 
 pytestmark = pytest.mark.sitl
 

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.app.replay import replay
 from sitl.config import SitlConfig
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import GroundStation, free_udp_port, sitl_mission_yaml, state_when, wait_until
 
 pytestmark = pytest.mark.sitl

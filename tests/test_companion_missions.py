@@ -21,8 +21,8 @@ import pytest
 
 from companion.app.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
-from sitl.instances import leased_instance
-from sitl.mission import MissionResult, MissionSpec, fly, read_truth, touchdown
+from sitl.harness.instances import leased_instance
+from sitl.harness.mission import MissionResult, MissionSpec, fly, read_truth, touchdown
 from sitl.testing.helpers import ListeningGroundStation, free_udp_port
 
 pytestmark = pytest.mark.sitl

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import sitl_mission_yaml
 
 pytestmark = pytest.mark.sitl

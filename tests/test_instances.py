@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from sitl.config import SitlConfig
-from sitl.instances import InstanceError, lease_instance, usable_instances
+from sitl.harness.instances import InstanceError, lease_instance, usable_instances
 
 pytestmark = pytest.mark.unit
 
@@ -46,7 +46,7 @@ def test_a_lease_held_by_another_process_is_respected_until_that_process_dies(tm
         [
             sys.executable,
             "-c",
-            "import sys, time; from pathlib import Path; from sitl.instances import lease_instance\n"
+            "import sys, time; from pathlib import Path; from sitl.harness.instances import lease_instance\n"
             f"lease = lease_instance([{instance}], lock_dir=Path({str(tmp_path)!r}))\n"
             "print('leased', flush=True)\n"
             "sys.stdin.read()\n",  # holds the lease until it is killed (or its stdin closes)

@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.camera.frames import CameraError, SitlFrameSource
 from companion.camera.sources import open_frame_source
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import LockstepClient, state_when
 
 pytestmark = pytest.mark.sitl

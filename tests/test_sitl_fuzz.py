@@ -1,8 +1,8 @@
 """Hostile input against a running SITL: it stays up, keeps heartbeating, is not taken over, and still flies.
 
 A ground station holds the GCS link; a stray sender floods both MAVLink links with seeded malformed datagrams
-(``sitl.fuzz``) and the control channel with hostile requests; then a clean MAVSDK client arms, takes off and enters
-OFFBOARD. The 100,000-datagram version is ``bench/sitl_fuzz.py``.
+(``sitl.harness.fuzz``) and the control channel with hostile requests; then a clean MAVSDK client arms, takes off and
+enters OFFBOARD. The 100,000-datagram version is ``bench/sitl_fuzz.py``.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from sitl.config import SitlConfig
-from sitl.fuzz import ControlFuzzer, MavlinkFuzzer
-from sitl.process import SitlProcess
+from sitl.harness.fuzz import ControlFuzzer, MavlinkFuzzer
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import MavlinkPeer, free_udp_port, wait_until
 from sitl.testing.mavsdk_client import Client
 

@@ -20,7 +20,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot.modes import FlightMode
 from sitl.geodesy import ned_to_geodetic
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import GroundStation, free_udp_port, state_when, wait_until
 
 pytestmark = pytest.mark.sitl

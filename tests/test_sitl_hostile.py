@@ -19,7 +19,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot.mavlink_link import SIGNING_EPOCH_UNIX_S
 from sitl.config import SitlConfig
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import MavlinkPeer, api_port, wait_until
 
 pytestmark = pytest.mark.sitl

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import LockstepClient, position_setpoint, wait_until
 
 pytestmark = pytest.mark.sitl

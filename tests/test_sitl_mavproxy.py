@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from sitl.geodesy import ned_to_geodetic
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import free_udp_port, wait_until
 from tests.mavproxy_client import MavProxy
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from sitl.autopilot.modes import FlightMode
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import GroundStation, free_udp_port, state_when, wait_until
 from sitl.testing.mavsdk_client import Client
 

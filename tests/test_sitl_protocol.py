@@ -15,7 +15,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.params import ParamType
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import MavlinkPeer, api_port, position_setpoint, state_when, wait_until
 
 pytestmark = pytest.mark.sitl

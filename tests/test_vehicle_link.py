@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from sitl.process import SitlProcess
+from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import api_port
 
 pytestmark = pytest.mark.sitl

@@ -19,9 +19,9 @@ import pytest
 
 from sitl.campaign.spec import load_campaign_spec
 from sitl.campaign.worker import fly_one
-from sitl.instances import leased_instance
+from sitl.harness.instances import leased_instance
+from sitl.harness.warm import ServeProcess, ServeProcessError, WarmWorker
 from sitl.testing.helpers import wait_until
-from sitl.warm import ServeProcess, ServeProcessError, WarmWorker
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SMOKE = REPO_ROOT / "mission_configs" / "campaigns" / "smoke.yaml"

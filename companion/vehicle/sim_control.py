@@ -4,7 +4,7 @@ The control channel is JSON over UDP beside MAVLink, for what MAVLink does not c
 acknowledgements, a simulated pilot (mode switch, sticks, RC loss), injected faults, wind, ground truth and shutdown.
 A request is ``{"cmd": <Command>, ...fields}`` (with an optional ``"id"`` the reply echoes); a reply or an
 unsolicited event is ``{"event": <Event>, ...}``. The SITL (``sitl.control_channel``, ``sitl.vehicle``), its process
-wrapper and lockstep client (``sitl.process``, ``sitl.lockstep``) and the companion's lockstep client
+wrapper and lockstep client (``sitl.harness.process``, ``sitl.harness.lockstep``) and the companion's lockstep client
 (``companion.vehicle.lockstep``) all speak it through this module, which lives in ``companion`` because the companion
 is one of its clients and must not import the lab.
 

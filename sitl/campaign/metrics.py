@@ -25,7 +25,7 @@ import numpy as np
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.config import load_yaml_config
 from sitl.config import SitlConfig
-from sitl.mission import body_edges_m, people_at, read_truth, touchdown
+from sitl.harness.mission import body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
 METRICS_VERSION = 5

@@ -1,13 +1,13 @@
 """Ray as the campaign's distributed backend: the same missions as Ray tasks, on every node of a cluster.
 
 Each mission is one Ray task (``num_cpus=1``, so Ray runs one per CPU it is given) in a Ray worker process, which Ray
-keeps between tasks. At its first mission a worker leases a free SITL instance on its node (:mod:`sitl.instances`) and
-starts its warm SITL and companion processes (:mod:`sitl.warm`), kept for its later missions; each task flies its
-mission exactly as the local backend does (:func:`sitl.campaign.worker.fly_one`) and returns the result's JSON. The
-driver streams the results into the same resumable campaign folder as they finish. When a node dies, Ray flies its
-missions in flight again on another node (``max_retries``): the mission's SITL and companion die with their worker
-(``sitl.process.die_with_parent``), and a mission is in lockstep, so where and how often it was started does not change
-its result.
+keeps between tasks. At its first mission a worker leases a free SITL instance on its node
+(:mod:`sitl.harness.instances`) and starts its warm SITL and companion processes (:mod:`sitl.harness.warm`), kept for
+its later missions; each task flies its mission exactly as the local backend does (:func:`sitl.campaign.worker.fly_one`)
+and returns the result's JSON. The driver streams the results into the same resumable campaign folder as they finish.
+When a node dies, Ray flies its missions in flight again on another node (``max_retries``): the mission's SITL and
+companion die with their worker (``sitl.harness.process.die_with_parent``), and a mission is in lockstep, so where and
+how often it was started does not change its result.
 
 A mission's folder (``missions/<id>``) is made under the campaign folder when the node sees that folder (the driver's
 machine, or a shared file system), else under the node's temporary directory; ``--keep-runs`` keeps it there.
@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from sitl.instances import InstanceLease
-    from sitl.warm import WarmWorker
+    from sitl.harness.instances import InstanceLease
+    from sitl.harness.warm import WarmWorker
 
 logger = logging.getLogger(__name__)
 
@@ -46,7 +46,7 @@ def fly_on_node(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: 
     lifetime at its first mission), or, not ``warm``, lease an instance for this mission alone."""
     global _warm, _warm_lease
     from sitl.campaign.worker import fly_one, warm_worker
-    from sitl.instances import lease_instance, leased_instance
+    from sitl.harness.instances import lease_instance, leased_instance
 
     folder = Path(out_dir)
     if not folder.is_dir():  # another machine than the driver's, without a shared file system

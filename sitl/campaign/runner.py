@@ -36,13 +36,13 @@ from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.campaign.worker import error_result, fly_one, warm_worker
 from sitl.config import MAX_INSTANCE, SitlConfig
-from sitl.instances import InstanceLease, lease_instance
-from sitl.warm import WarmWorker
+from sitl.harness.instances import InstanceLease, lease_instance
+from sitl.harness.warm import WarmWorker
 
 logger = logging.getLogger(__name__)
 
-# By default each worker leases a free SITL instance for its lifetime (sitl.instances), so campaigns, tests and demos
-# share a machine. With an explicit instance base, worker k flies instance BASE + k.
+# By default each worker leases a free SITL instance for its lifetime (sitl.harness.instances), so campaigns, tests
+# and demos share a machine. With an explicit instance base, worker k flies instance BASE + k.
 INSTANCE_BASE = 30
 
 
@@ -85,7 +85,7 @@ def _init_worker(instances: Any, warm: bool) -> None:
         _worker_warm = warm_worker(_worker_instance)
     logging.basicConfig(level=logging.WARNING)
     # SIGTERM ends a worker at once (the default action: the pool would catch an exception and fly the next
-    # mission); its SITL and companion get SIGTERM from the kernel as it dies (sitl.process.die_with_parent).
+    # mission); its SITL and companion get SIGTERM from the kernel as it dies (sitl.harness.process.die_with_parent).
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
@@ -226,7 +226,7 @@ def run_campaign(
 
     ``backend`` says where: local worker processes (``workers`` of them, on ``instance_base`` + k or leased
     instances), or Ray tasks on the cluster at ``address`` (None: a Ray instance on this machine with ``workers``
-    CPUs). ``warm``: each worker keeps a SITL and a companion process across its missions (:mod:`sitl.warm`);
+    CPUs). ``warm``: each worker keeps a SITL and a companion process across its missions (:mod:`sitl.harness.warm`);
     False starts both anew for every mission. Every backend writes the same results, warm or not: a mission's
     depends on its seed and config alone.
     """

@@ -16,7 +16,7 @@ from pydantic import Field, model_validator
 from companion.app.mission import MissionConfig
 from companion.config import StrictModel, load_yaml_config, read_yaml_file, validate_config
 from companion.perception.config import SelectionPolicyName
-from sitl.mission import DEFAULT_MISSION_CONFIG, deep_merge
+from sitl.harness.mission import DEFAULT_MISSION_CONFIG, deep_merge
 from sitl.world.scenario import ScenarioConfig
 
 

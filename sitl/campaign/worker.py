@@ -1,5 +1,5 @@
-"""What a campaign worker does with one mission, on every backend: its :class:`~sitl.mission.MissionSpec` from the
-campaign's plan, the flight on the worker's SITL instance (new processes, or a warm worker's), and the result line
+"""What a campaign worker does with one mission, on every backend: its :class:`~sitl.harness.mission.MissionSpec` from
+the campaign's plan, the flight on the worker's SITL instance (new processes, or a warm worker's), and the result line
 (its metrics, or the error that kept it from flying, with the wall time and the node that flew it).
 
 The local backend (:mod:`sitl.campaign.runner`) and the Ray backend (:mod:`sitl.campaign.ray_backend`) both call
@@ -19,9 +19,9 @@ from typing import Any
 
 from sitl.campaign.metrics import mission_metrics
 from sitl.campaign.spec import CampaignSpec, MissionPlan
-from sitl.mission import MissionError, MissionProcesses, MissionSpec, fly
-from sitl.process import SitlProcessError
-from sitl.warm import ServeProcessError, WarmWorker
+from sitl.harness.mission import MissionError, MissionProcesses, MissionSpec, fly
+from sitl.harness.process import SitlProcessError
+from sitl.harness.warm import ServeProcessError, WarmWorker
 
 
 def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance: int, **extra: Any) -> MissionSpec:

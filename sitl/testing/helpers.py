@@ -13,8 +13,8 @@ from typing import Any, TypeVar
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.config import API_PORT_REMOTE, GCS_PORT_REMOTE, SitlConfig
-from sitl.lockstep import LockstepControl
-from sitl.process import SitlProcess
+from sitl.harness.lockstep import LockstepControl
+from sitl.harness.process import SitlProcess
 
 T = TypeVar("T")
 
@@ -207,8 +207,8 @@ def position_setpoint(
 
 
 class ListeningGroundStation:
-    """A ground station that only listens, on its own thread, for the length of a ``with`` block (a mission flown
-    by :func:`sitl.mission.fly` blocks the test's thread). Keeps every message from any system: the vehicle and the
+    """A ground station that only listens, on its own thread, for the length of a ``with`` block (a mission flown by
+    :func:`sitl.harness.mission.fly` blocks the test's thread). Keeps every message from any system: the vehicle and the
     companion behind it."""
 
     def __init__(self, port: int) -> None:

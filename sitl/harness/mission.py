@@ -28,7 +28,7 @@ from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig, camera_mismatches
 from companion.config import read_yaml_file, validate_config
 from sitl.config import SitlConfig
-from sitl.process import SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
+from sitl.harness.process import SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
 
 logger = logging.getLogger(__name__)
 
@@ -294,7 +294,8 @@ def _autopilot_lands(spec: MissionSpec) -> bool:
 
 
 class SitlHandle(Protocol):
-    """What :func:`fly` needs of a mission's SITL (:class:`~sitl.process.SitlProcess`, :class:`~sitl.warm.WarmSitl`)."""
+    """What :func:`fly` needs of a mission's SITL (:class:`~sitl.harness.process.SitlProcess`,
+    :class:`~sitl.harness.warm.WarmSitl`)."""
 
     def start(self, ready_timeout_s: float) -> Any:
         """Start it and wait until it answers on its control channel."""
@@ -318,7 +319,7 @@ class SitlHandle(Protocol):
 
 class CompanionHandle(Protocol):
     """What :func:`fly` needs of a mission's companion (:class:`CompanionProcess`,
-    :class:`~sitl.warm.WarmCompanion`)."""
+    :class:`~sitl.harness.warm.WarmCompanion`)."""
 
     def start(self) -> Any:
         """Start it."""
@@ -335,7 +336,7 @@ class CompanionHandle(Protocol):
 
 class MissionProcesses(Protocol):
     """Where a mission's SITL and companion run: fresh processes (:class:`ColdProcesses`) or a campaign worker's
-    warm ones (:class:`~sitl.warm.WarmWorker`). Either way the same command lines, so the same result."""
+    warm ones (:class:`~sitl.harness.warm.WarmWorker`). Either way the same command lines, so the same result."""
 
     def sitl(self, instance: int, config_path: Path, log_path: Path) -> SitlHandle:
         """The SITL of one mission (``slz sitl --instance INSTANCE --config CONFIG_PATH``)."""

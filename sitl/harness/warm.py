@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.vehicle.sim_control import Command
-from sitl.process import ControlClient, ControlledSitl, SitlProcessError, child_env, die_with_parent, log_tail
+from sitl.harness.process import ControlClient, ControlledSitl, SitlProcessError, child_env, die_with_parent, log_tail
 
 logger = logging.getLogger(__name__)
 
@@ -188,8 +188,8 @@ class ServeProcess:
 
 
 class WarmSitl(ControlledSitl):
-    """One mission's SITL on a warm process: what :func:`sitl.mission.fly` needs of a SITL (as
-    :class:`~sitl.process.SitlProcess`)."""
+    """One mission's SITL on a warm process: what :func:`sitl.harness.mission.fly` needs of a SITL (as
+    :class:`~sitl.harness.process.SitlProcess`)."""
 
     def __init__(self, process: ServeProcess, instance: int, config_path: Path, log_path: Path) -> None:
         self.process, self.instance = process, instance
@@ -265,8 +265,8 @@ class WarmSitl(ControlledSitl):
 
 
 class WarmCompanion:
-    """One mission's companion (``slz fly``) on a warm process: what :func:`sitl.mission.fly` needs of it (as
-    :class:`~sitl.mission.CompanionProcess`)."""
+    """One mission's companion (``slz fly``) on a warm process: what :func:`sitl.harness.mission.fly` needs of it (as
+    :class:`~sitl.harness.mission.CompanionProcess`)."""
 
     def __init__(self, process: ServeProcess, config_path: Path, out_dir: Path, timeout_s: float, log_path: Path):
         self.process = process
@@ -301,7 +301,7 @@ class WarmCompanion:
 
 class WarmWorker:
     """A warm SITL process and a warm companion process for one SITL instance, started when first needed and
-    started again after a mission that failed either (:class:`sitl.mission.MissionProcesses`)."""
+    started again after a mission that failed either (:class:`sitl.harness.mission.MissionProcesses`)."""
 
     def __init__(self, instance: int, log_dir: Path) -> None:
         self.instance = instance

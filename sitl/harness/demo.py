@@ -1,12 +1,11 @@
 """The main job: one seeded landing mission in the SITL, flown by the companion in lockstep, and what to look at.
 
-``slz demo`` starts the SITL with a seeded random scene (a park with 80-120 people in the 30 m region of interest)
-and the companion with ``mission_configs/sitl.yaml``, flies one mission in lockstep (:mod:`sitl.mission`), and writes
-``runs/<id>/``: the flight log (``flight/flight.jsonl``, with every frame saved losslessly, so ``slz replay`` re-runs
-it), the SITL's ground truth, ``top_view.png`` (people, the zones tracked when the landing was decided, the path,
-the touchdown), ``camera.mp4`` (the camera view with occupancy, zones and target, from a replay of the log) and
-``summary.json``.
-"""
+``slz demo`` starts the SITL with a seeded random scene (a park with 80-120 people in the 30 m region of interest) and
+the companion with ``mission_configs/sitl.yaml``, flies one mission in lockstep (:mod:`sitl.harness.mission`), and
+writes ``runs/<id>/``: the flight log (``flight/flight.jsonl``, with every frame saved losslessly, so ``slz replay``
+re-runs it), the SITL's ground truth, ``top_view.png`` (people, the zones tracked when the landing was decided, the
+path, the touchdown), ``camera.mp4`` (the camera view with occupancy, zones and target, from a replay of the log) and
+``summary.json``."""
 
 from __future__ import annotations
 
@@ -23,7 +22,15 @@ import numpy as np
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.app.replay import replay
 from companion.app.report import tracks_at_landing
-from sitl.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly, people_at, read_truth, touchdown
+from sitl.harness.mission import (
+    DEFAULT_MISSION_CONFIG,
+    MissionResult,
+    MissionSpec,
+    fly,
+    people_at,
+    read_truth,
+    touchdown,
+)
 
 logger = logging.getLogger(__name__)
 
