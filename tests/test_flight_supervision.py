@@ -106,9 +106,8 @@ class NoFrames:
         yield  # type: ignore[misc]  # never reached: an async generator that waits for ever
 
 
-@pytest.fixture
-def app_and_link(tmp_path: Path, config: PerceptionConfig) -> tuple[FlightApp, FakeLink]:
-    """A field flight (the pilot hands over in HOLD at 20 m) with the blob model."""
+def field_flight(tmp_path: Path, config: PerceptionConfig, link: FakeLink) -> FlightApp:
+    """A field flight (the pilot hands over in HOLD at 20 m) with the blob model, over ``link``."""
     mission = MissionConfig.model_validate(
         {
             "start": {"arm_and_takeoff": False},
@@ -116,9 +115,13 @@ def app_and_link(tmp_path: Path, config: PerceptionConfig) -> tuple[FlightApp, F
             "recorder": {"directory": str(tmp_path), "frame_every": 0},
         }
     )
+    return FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
+
+
+@pytest.fixture
+def app_and_link(tmp_path: Path, config: PerceptionConfig) -> tuple[FlightApp, FakeLink]:
     link = FakeLink()
-    app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
-    return app, link
+    return field_flight(tmp_path, config, link), link
 
 
 async def hand_over(app: FlightApp, link: FakeLink, t_s: float = 1.0) -> None:
@@ -178,15 +181,8 @@ class PilotRightAfterOffboardLink(FakeLink):
 def test_a_pilot_who_takes_over_while_offboard_starts_gets_the_vehicle_and_keeps_it(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
-    mission = MissionConfig.model_validate(
-        {
-            "start": {"arm_and_takeoff": False},
-            "perception": config.model_dump(mode="json"),
-            "recorder": {"directory": str(tmp_path), "frame_every": 0},
-        }
-    )
     link = PilotRightAfterOffboardLink()
-    app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
+    app = field_flight(tmp_path, config, link)
     silence_s = app.config.guidance.hold_after_silence_s
 
     async def flight() -> None:
