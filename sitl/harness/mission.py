@@ -32,7 +32,7 @@ from sitl.harness.process import SitlProcess, child_env, die_with_parent, log_ta
 
 logger = logging.getLogger(__name__)
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_MISSION_CONFIG = REPO_ROOT / "mission_configs" / "sitl.yaml"
 SITL_READY_WALL_S = 60.0  # a SITL starts in about 5 s; a machine busy with parallel missions may take several times it
 SETTLE_WALL_S = 60.0  # after the companion ends: how long the SITL may run to finish an autopilot landing

@@ -91,7 +91,7 @@ class ServeProcess:
                 stdout=subprocess.PIPE,
                 stderr=log,
                 env=env,
-                cwd=Path(__file__).resolve().parent.parent,
+                cwd=Path(__file__).resolve().parents[2],
                 preexec_fn=die_with_parent,
             )
         self._buffer, self._outstanding, self.commands = b"", False, 0
