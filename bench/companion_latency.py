@@ -52,9 +52,9 @@ def main() -> int:
             finally:
                 if lease is not None:
                     lease.release()
-            records = FlightLog.read(spec.run_dir / "flight").records
-            mission_ms = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == RecordKind.LATENCY]
-            outcome = next(r for r in records if r["kind"] == RecordKind.END)["outcome"]
+            flight = FlightLog.read(spec.run_dir / "flight")
+            mission_ms = [float(r["frame_to_command_ms"]) for r in flight.of(RecordKind.LATENCY)]
+            outcome = flight.outcome
             share = outcome["cpu_s"] / outcome["wall_s"] if outcome["wall_s"] > 0 else float("nan")
             latencies += mission_ms
             missions.append(

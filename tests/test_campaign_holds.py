@@ -7,6 +7,7 @@ from typing import Any
 
 import pytest
 
+from companion.app.flight_log import DecisionRecord
 from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, hold_cause, zones_chosen
 from sitl.campaign.report import against_previous, build_report, hold_kind
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
@@ -17,13 +18,8 @@ USED_UP = "person seen inside the footprint; 6 re-selections used up: hold"
 TIME_LIMIT = "no landing within 300 s of the start: hold"
 
 
-def _decision(t_s: float, phase: str, reason: str, target: bool) -> dict[str, Any]:
-    return {
-        "kind": "decision",
-        "t_s": t_s,
-        "source": "frame",
-        "decision": {"phase": phase, "reason": reason, "target": {"track_id": 1} if target else None},
-    }
+def _decision(t_s: float, phase: str, reason: str, target: bool) -> DecisionRecord:
+    return DecisionRecord(t_s, "setpoint", phase, {"track_id": 1} if target else None, None, reason, "frame", None)
 
 
 def test_each_hold_is_explained_by_kind_from_the_flight_log() -> None:

@@ -58,3 +58,34 @@ def test_every_kind_the_recorder_writes_itself_is_in_the_schema() -> None:
     # FlightRecorder.frame() writes "frame" records on its own (the recorder knows no schema).
     assert RecordKind("frame") is RecordKind.FRAME
     assert set(REQUIRED_FIELDS) <= set(RecordKind)
+
+
+def test_decisions_read_typed_and_kinds_in_log_order_from_the_recorders_own_records(tmp_path: Path) -> None:
+    from companion.guidance.landing import CommandKind, Decision, LandingPhase, VehicleState
+    from companion.perception.selection import Target
+    from companion.vehicle.link import Setpoint
+
+    recorder = FlightRecorder(tmp_path)
+    recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, schema_version=SCHEMA_VERSION)
+    state = VehicleState(3.0, 1.0, 2.0, -20.0, 90.0)
+    target = Target(4.0, 5.0, 2.5, 7)
+    setpoint = Setpoint(4.0, 5.0, -20.0, 90.0)
+    decision = Decision(3.0, LandingPhase.APPROACH, CommandKind.SETPOINT, setpoint, target, "approach target 7")
+    recorder.write(RecordKind.DECISION, 3.0, decision=decision, source="frame", state=state, inputs={"seq": 30})
+    recorder.write(RecordKind.COMMAND, 3.0, command=CommandKind.SETPOINT, setpoint=setpoint)
+    recorder.write("a_newer_kind", 3.5, value=1)  # a newer writer's record
+    recorder.write(RecordKind.DECISION, 4.0, decision=Decision(4.0, LandingPhase.LAND, CommandKind.LAND, None, target,
+                   "land on zone 7"), source="frame", state=state, inputs={"seq": 40})  # fmt: skip
+    recorder.close()
+    log = FlightLog.read(tmp_path)
+    first, landing = log.decisions()
+    assert (first.t_s, first.kind, first.phase, first.source) == (3.0, "setpoint", "approach", "frame")
+    assert first.target == {"north_m": 4.0, "east_m": 5.0, "radius_m": 2.5, "track_id": 7}
+    assert first.setpoint == {"north_m": 4.0, "east_m": 5.0, "down_m": -20.0, "yaw_deg": 90.0}
+    assert first.state is not None
+    assert first.state["north_m"] == 1.0
+    assert (landing.kind, landing.setpoint, landing.reason) == ("land", None, "land on zone 7")
+    kinds = [kind for kind, _ in log.tagged()]
+    assert kinds == [RecordKind.HEADER, RecordKind.DECISION, RecordKind.COMMAND, RecordKind.DECISION]  # not the new one
+    assert [kind for kind, _ in log.tagged(RecordKind.COMMAND, RecordKind.DECISION)] == kinds[1:]
+    assert len(log.records) == 5

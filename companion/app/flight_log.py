@@ -11,6 +11,7 @@ against :data:`REQUIRED_FIELDS` and names the line and the field that is missing
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,6 +69,48 @@ REQUIRED_FIELDS: dict[RecordKind, tuple[str, ...]] = {
 }
 
 
+_KINDS = {k.value: k for k in RecordKind}
+
+
+def kind_of(record: dict[str, Any]) -> RecordKind | None:
+    """A record's kind; None for a kind this reader does not know (a newer writer's). The one place a record's kind
+    is read from its JSON."""
+    return _KINDS.get(str(record.get("kind")))
+
+
+@dataclass(frozen=True)
+class DecisionRecord:
+    """A ``decision`` record, typed: the command decided (``kind``: none, setpoint, land, hold, return) at vehicle
+    time ``t_s`` in ``phase``, toward ``target`` (a zone: ``north_m``, ``east_m``, ``radius_m``, ``track_id``) with
+    ``setpoint`` (local NED, m; yaw, deg), why, what produced it (``source``: start, frame, silence, time, landed,
+    takeover) and the vehicle ``state`` it was taken in (``north_m``, ``east_m``, ``down_m``, ``yaw_deg``)."""
+
+    t_s: float
+    kind: str
+    phase: str
+    target: dict[str, Any] | None
+    setpoint: dict[str, Any] | None
+    reason: str
+    source: str
+    state: dict[str, Any] | None
+
+    @classmethod
+    def from_record(cls, record: dict[str, Any]) -> DecisionRecord:
+        """From a checked ``decision`` record (see :data:`REQUIRED_FIELDS`); a decision without a target, setpoint
+        or reason has none."""
+        decision = record["decision"]
+        return cls(
+            float(record["t_s"]),
+            str(decision["kind"]),
+            str(decision["phase"]),
+            decision.get("target"),
+            decision.get("setpoint"),
+            str(decision.get("reason", "")),
+            str(record["source"]),
+            record["state"],
+        )
+
+
 class FlightLogError(Exception):
     """A flight log does not follow its schema (which file, which line, which field)."""
 
@@ -107,9 +150,8 @@ class FlightLog:
         except (OSError, RecorderError) as exc:
             raise FlightLogError(f"{path}: {exc}") from None
         version = 1
-        known = {k.value: k for k in RecordKind}
         for number, record in enumerate(records, start=1):
-            kind = known.get(str(record.get("kind")))
+            kind = kind_of(record)
             if kind is None:
                 continue
             missing = [f for f in REQUIRED_FIELDS.get(kind, ()) if f not in record]
@@ -123,19 +165,32 @@ class FlightLog:
 
     def of(self, kind: RecordKind) -> list[dict[str, Any]]:
         """Every record of ``kind``, in order."""
-        return [r for r in self.records if r.get("kind") == kind.value]
+        return [r for r in self.records if kind_of(r) is kind]
 
     def first(self, kind: RecordKind) -> dict[str, Any] | None:
         """The first record of ``kind``, or None."""
-        return next((r for r in self.records if r.get("kind") == kind.value), None)
+        return next((r for r in self.records if kind_of(r) is kind), None)
 
     def last(self, kind: RecordKind) -> dict[str, Any] | None:
         """The last record of ``kind``, or None."""
-        return next((r for r in reversed(self.records) if r.get("kind") == kind.value), None)
+        return next((r for r in reversed(self.records) if kind_of(r) is kind), None)
 
     def count(self, kind: RecordKind) -> int:
         """How many records of ``kind``."""
-        return sum(1 for r in self.records if r.get("kind") == kind.value)
+        return sum(1 for r in self.records if kind_of(r) is kind)
+
+    def tagged(self, *kinds: RecordKind) -> Iterator[tuple[RecordKind, dict[str, Any]]]:
+        """The records of ``kinds`` (every known kind when none is named) with their kind, in log order: for readers
+        that follow several kinds through the flight."""
+        wanted = set(kinds) if kinds else set(RecordKind)
+        for record in self.records:
+            kind = kind_of(record)
+            if kind is not None and kind in wanted:
+                yield kind, record
+
+    def decisions(self) -> list[DecisionRecord]:
+        """Every decision, typed, in order."""
+        return [DecisionRecord.from_record(r) for r in self.of(RecordKind.DECISION)]
 
     @property
     def config(self) -> dict[str, Any]:

@@ -118,14 +118,14 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
         No header, or a processed frame that was not saved losslessly.
     """
     try:
-        records = FlightLog.read(log_dir).records
+        flight = FlightLog.read(log_dir)
     except FlightLogError as exc:
         raise ReplayError(str(exc)) from None
-    header = next((r for r in records if r["kind"] == RecordKind.HEADER), None)
+    header = flight.first(RecordKind.HEADER)
     if header is None:
         raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
     config = config_from_header(header["config"])
-    frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in records if r["kind"] == RecordKind.FRAME}
+    frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in flight.of(RecordKind.FRAME)}
     pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
     zones = config.perception.zones
     guidance = LandingGuidance(
@@ -136,9 +136,8 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     video = VideoWriter(video_path, video_rate_hz) if video_path is not None else None
     phase = "idle"
     try:
-        for record in records:
-            kind = record["kind"]
-            if kind == RecordKind.FRAME_RESULT:
+        for kind, record in flight.tagged(RecordKind.FRAME_RESULT, RecordKind.DECISION):
+            if kind is RecordKind.FRAME_RESULT:
                 seq = int(record["seq"])
                 path = frame_paths.get(seq)
                 if path is None or path.suffix != ".png":
@@ -168,7 +167,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
                     altitude = -float(pose.position_ned_m[2])
                     caption = f"t {record['t_s']:6.1f} s  alt {altitude:5.1f} m  {phase}"
                     video.add(draw_camera_overlay(image, result, pipeline.projector), caption)
-            elif kind == RecordKind.DECISION:
+            else:
                 decision = _decide(guidance, record, results)
                 report.decisions += 1
                 phase = f"{record['decision']['phase']}: {record['decision']['reason']}"[:70]

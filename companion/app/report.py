@@ -28,7 +28,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
+from companion.app.flight_log import DecisionRecord, FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig
 from companion.app.replay import VideoWriter
 from companion.geometry import Pose
@@ -65,10 +65,10 @@ class FlightReport:
     summary: dict[str, Any] = field(default_factory=dict)
 
 
-def _phase_spans(records: list[dict[str, Any]], end_s: float) -> list[tuple[float, float, str]]:
+def _phase_spans(log: FlightLog, end_s: float) -> list[tuple[float, float, str]]:
     spans: list[tuple[float, float, str]] = []
-    for r in records:
-        if r["kind"] == RecordKind.PHASE and r["t_s"] is not None:
+    for r in log.of(RecordKind.PHASE):
+        if r["t_s"] is not None:
             if spans:
                 spans[-1] = (spans[-1][0], r["t_s"], spans[-1][2])
             spans.append((r["t_s"], end_s, r["phase"]))
@@ -79,24 +79,25 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
 
 
-def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
+def summarize(log: FlightLog) -> dict[str, Any]:
     """The outcome, counters, latency and the decision timeline (phase changes, failsafes, commands) of a log."""
-    header = next((r for r in records if r["kind"] == RecordKind.HEADER), None)
-    start = next((r for r in records if r["kind"] == RecordKind.START), {})
-    end = next((r for r in records if r["kind"] == RecordKind.END), None)
-    decisions = [r for r in records if r["kind"] == RecordKind.DECISION]
-    latencies = [float(r["frame_to_command_ms"]) for r in records if r["kind"] == RecordKind.LATENCY]
-    land = next((r for r in decisions if r["decision"]["kind"] == "land" and r["state"]), None)
+    header = log.first(RecordKind.HEADER)
+    start = log.first(RecordKind.START) or {}
+    end = log.first(RecordKind.END)
+    decisions = log.decisions()
+    latencies = [float(r["frame_to_command_ms"]) for r in log.of(RecordKind.LATENCY)]
+    land = next((d for d in decisions if d.kind == "land" and d.state), None)
     events = []
-    for r in records:
-        if r["kind"] == RecordKind.PHASE:
+    starting = (RecordKind.HANDOVER, RecordKind.TAKEOFF, RecordKind.WAITING_FOR_HANDOVER)
+    for kind, r in log.tagged(RecordKind.PHASE, RecordKind.FAILSAFE, RecordKind.ERROR, *starting):
+        if kind is RecordKind.PHASE:
             events.append({"t_s": r["t_s"], "event": f"phase {r['previous']} -> {r['phase']}", "reason": r["reason"]})
-        elif r["kind"] == RecordKind.FAILSAFE:
+        elif kind is RecordKind.FAILSAFE:
             events.append({"t_s": r["t_s"], "event": f"failsafe ({r['action']})", "reason": r["reason"]})
-        elif r["kind"] == RecordKind.ERROR:
+        elif kind is RecordKind.ERROR:
             events.append({"t_s": r["t_s"], "event": f"error in {r['where']}", "reason": r["error"]})
-        elif r["kind"] in (RecordKind.HANDOVER, RecordKind.TAKEOFF, RecordKind.WAITING_FOR_HANDOVER):
-            events.append({"t_s": r["t_s"], "event": r["kind"].replace("_", " "), "reason": ""})
+        else:
+            events.append({"t_s": r["t_s"], "event": kind.value.replace("_", " "), "reason": ""})
     outcome = end["outcome"] if end else None
     return {
         "version": header.get("version") if header else None,
@@ -107,13 +108,13 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
         "camera": start.get("camera"),
         "complete": end is not None,
         "outcome": outcome,
-        "frames_processed": sum(1 for r in records if r["kind"] == RecordKind.FRAME_RESULT),
-        "frame_errors": sum(1 for r in records if r["kind"] == RecordKind.FRAME_ERROR),
+        "frames_processed": log.count(RecordKind.FRAME_RESULT),
+        "frame_errors": log.count(RecordKind.FRAME_ERROR),
         "decisions": len(decisions),
-        "commands_sent": sum(1 for r in records if r["kind"] == RecordKind.COMMAND),
+        "commands_sent": log.count(RecordKind.COMMAND),
         "land_command": None
-        if land is None
-        else {"t_s": land["t_s"], "north_m": land["state"]["north_m"], "east_m": land["state"]["east_m"]},
+        if land is None or land.state is None
+        else {"t_s": land.t_s, "north_m": land.state["north_m"], "east_m": land.state["east_m"]},
         "latency_ms": {
             "count": len(latencies),
             "median": _percentile(latencies, 50),
@@ -124,36 +125,36 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def tracks_at_landing(records: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+def tracks_at_landing(log: FlightLog) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
     """The tracked zones when the final descent began (the last entry into descent before the land command, else
     the tracks at the land command or the last frame) and the target landed on (or the last one)."""
     tracks: list[dict[str, Any]] = []
     at_descent: list[dict[str, Any]] | None = None
     target = None
     previous_phase = ""
-    for record in records:
-        if record["kind"] == RecordKind.FRAME_RESULT:
+    for kind, record in log.tagged(RecordKind.FRAME_RESULT, RecordKind.DECISION):
+        if kind is RecordKind.FRAME_RESULT:
             tracks = record["tracks"] or []
-        elif record["kind"] == RecordKind.DECISION:
-            decision = record["decision"]
-            if decision["target"] is not None:
-                target = decision["target"]
-            if decision["phase"] == "descent" and previous_phase != "descent":
+        else:
+            decision = DecisionRecord.from_record(record)
+            if decision.target is not None:
+                target = decision.target
+            if decision.phase == "descent" and previous_phase != "descent":
                 at_descent = tracks
-            previous_phase = decision["phase"]
-            if decision["kind"] == "land":
+            previous_phase = decision.phase
+            if decision.kind == "land":
                 break
     return (at_descent if at_descent is not None else tracks), target
 
 
-def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: Path) -> None:
+def _plot_top_view(log: FlightLog, config: MissionConfig, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Polygon
 
-    decisions = [r for r in records if r["kind"] == RecordKind.DECISION]
+    decisions = log.decisions()
     fig, ax = plt.subplots(figsize=(9.5, 7.0), dpi=100)
     fence = np.asarray(config.geofence.polygon_ne_m, dtype=float)
     ax.add_patch(Polygon(fence[:, ::-1], closed=True, fill=False, edgecolor="red", lw=1.2, label="geofence"))
@@ -163,23 +164,15 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
             Polygon(area[:, ::-1], closed=True, fill=False, edgecolor="green", lw=1.2, ls="--", label="landing area")
         )
     if decisions:
-        ne = np.array([[r["state"]["north_m"], r["state"]["east_m"]] for r in decisions if r["state"]])
+        ne = np.array([[d.state["north_m"], d.state["east_m"]] for d in decisions if d.state])
         if len(ne):
             ax.plot(ne[:, 1], ne[:, 0], color="0.45", lw=1.5, label="path (vehicle states)")
             ax.plot(ne[0, 1], ne[0, 0], "o", color="0.2", label="start")
-    setpoints = np.array(
-        [
-            [r["decision"]["setpoint"]["north_m"], r["decision"]["setpoint"]["east_m"]]
-            for r in decisions
-            if r["decision"]["setpoint"] is not None
-        ]
-    )
+    setpoints = np.array([[d.setpoint["north_m"], d.setpoint["east_m"]] for d in decisions if d.setpoint is not None])
     if len(setpoints):
-        label = "setpoints " + (
-            "sent" if any(r["kind"] == RecordKind.COMMAND for r in records) else "decided (not sent)"
-        )
+        label = "setpoints " + ("sent" if log.count(RecordKind.COMMAND) else "decided (not sent)")
         ax.plot(setpoints[:, 1], setpoints[:, 0], ".", color="tab:blue", ms=3, alpha=0.5, label=label)
-    for i, track in enumerate(tracks_at_landing(records)[0]):
+    for i, track in enumerate(tracks_at_landing(log)[0]):
         ax.add_patch(
             Circle(
                 (track["east_m"], track["north_m"]),
@@ -191,17 +184,17 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
             )
         )
     targets: dict[Any, dict[str, Any]] = {}  # each target zone where it was last chosen
-    for r in decisions:  # the targets acted on: approached, descended over or landed on
-        if (t := r["decision"]["target"]) is not None and r["decision"]["phase"] in ("approach", "descent", "land"):
+    for d in decisions:  # the targets acted on: approached, descended over or landed on
+        if (t := d.target) is not None and d.phase in ("approach", "descent", "land"):
             targets[t["track_id"] if t["track_id"] is not None else (t["north_m"], t["east_m"])] = t
     for i, t in enumerate(targets.values()):
         ax.add_patch(
             Circle((t["east_m"], t["north_m"]), max(t["radius_m"], 0.3), fill=False, edgecolor="gold", lw=1.5,
                    label="targets acted on (last estimate)" if i == 0 else None)
         )  # fmt: skip
-    land = next((r for r in decisions if r["decision"]["kind"] == "land" and r["state"]), None)
+    land = next((d.state for d in decisions if d.kind == "land" and d.state), None)
     if land is not None:
-        ax.plot(land["state"]["east_m"], land["state"]["north_m"], "x", color="green", ms=14, mew=3, label="land")
+        ax.plot(land["east_m"], land["north_m"], "x", color="green", ms=14, mew=3, label="land")
     extent = float(np.abs(fence).max()) + 3.0
     ax.set_xlim(-extent, extent)
     ax.set_ylim(-extent, extent)
@@ -216,25 +209,25 @@ def _plot_top_view(records: list[dict[str, Any]], config: MissionConfig, path: P
     plt.close(fig)
 
 
-def _plot_timeline(records: list[dict[str, Any]], path: Path) -> None:
+def _plot_timeline(log: FlightLog, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    decisions = [r for r in records if r["kind"] == RecordKind.DECISION and r["state"]]
-    frames = [r for r in records if r["kind"] == RecordKind.FRAME_RESULT]
-    times = [r["t_s"] for r in decisions] + [r["t_s"] for r in frames]
+    decisions = [d for d in log.decisions() if d.state]
+    frames = log.of(RecordKind.FRAME_RESULT)
+    times = [d.t_s for d in decisions] + [r["t_s"] for r in frames]
     if not times:
         raise ReportError("the log holds no decision and no processed frame: nothing to plot")
     t0, t1 = min(times), max(times)
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9.0, 5.5), dpi=110, sharex=True, height_ratios=[2, 1])
-    for a, b, phase in _phase_spans(records, t1):
+    for a, b, phase in _phase_spans(log, t1):
         top.axvspan(a, b, color=PHASE_COLOURS.get(phase, "#eeeeee"), alpha=0.6, lw=0)
         top.text((a + b) / 2, 0.98, phase, transform=top.get_xaxis_transform(), ha="center", va="top", fontsize=8)
-    top.plot([r["t_s"] for r in decisions], [-r["state"]["down_m"] for r in decisions], color="k", lw=1.2)
-    for r in records:
-        if r["kind"] == RecordKind.FAILSAFE and r["t_s"] is not None:
+    top.plot([d.t_s for d in decisions], [-d.state["down_m"] for d in decisions if d.state], color="k", lw=1.2)
+    for r in log.of(RecordKind.FAILSAFE):
+        if r["t_s"] is not None:
             top.axvline(r["t_s"], color="red", ls="--", lw=1)
     top.set_ylabel("altitude (m)")
     top.set_title("Altitude and phases (failsafes dashed red)")
@@ -251,19 +244,18 @@ def _plot_timeline(records: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def _camera_views(
-    flight_dir: Path, records: list[dict[str, Any]], config: MissionConfig
-) -> list[tuple[float, np.ndarray, str]]:
+def _camera_views(flight_dir: Path, log: FlightLog, config: MissionConfig) -> list[tuple[float, np.ndarray, str]]:
     """Every saved frame with the logged zones and target drawn on it, and its caption."""
     camera, T_body_camera = camera_from_config(config.perception.camera)
     projector = HeadPlaneProjector(camera, T_body_camera, config.perception.projection)
-    paths = {int(r["seq"]): flight_dir / str(r["path"]) for r in records if r["kind"] == RecordKind.FRAME}
+    paths = {int(r["seq"]): flight_dir / str(r["path"]) for r in log.of(RecordKind.FRAME)}
     views = []
     decision = "idle"
-    for r in records:
-        if r["kind"] == RecordKind.DECISION:
+    for kind, r in log.tagged(RecordKind.DECISION, RecordKind.FRAME_RESULT):
+        if kind is RecordKind.DECISION:
             decision = f"{r['decision']['phase']}: {r['decision']['reason']}"[:60]
-        if r["kind"] != RecordKind.FRAME_RESULT or int(r["seq"]) not in paths:
+            continue
+        if int(r["seq"]) not in paths:
             continue
         raw = cv2.imread(str(paths[int(r["seq"])]), cv2.IMREAD_COLOR)
         if raw is None:
@@ -358,21 +350,21 @@ def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bo
     if not log.is_file():
         raise ReportError(f"no flight log at {log}")
     try:
-        records = FlightLog.read(log).records
+        flight = FlightLog.read(log)
     except FlightLogError as exc:
         raise ReportError(str(exc)) from None
-    header = next((r for r in records if r["kind"] == RecordKind.HEADER), None)
+    header = flight.first(RecordKind.HEADER)
     if header is None:
         raise ReportError(f"{log}: no header record (the config the flight ran with)")
     config = MissionConfig.model_validate(header["config"])
     out = out_dir or flight_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
     report = FlightReport(out)
-    report.summary = summarize(records)
-    _plot_top_view(records, config, out / "top_view.png")
-    _plot_timeline(records, out / "timeline.png")
+    report.summary = summarize(flight)
+    _plot_top_view(flight, config, out / "top_view.png")
+    _plot_timeline(flight, out / "timeline.png")
     report.files += [out / "top_view.png", out / "timeline.png"]
-    views = _camera_views(flight_dir, records, config)
+    views = _camera_views(flight_dir, flight, config)
     if views:
         _contact_sheet(views, out / "camera_sheet.jpg")
         report.files.append(out / "camera_sheet.jpg")

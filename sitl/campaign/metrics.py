@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.app.flight_log import FlightLog, RecordKind
+from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
 from sitl.config import SitlConfig
 from sitl.harness.mission import body_edges_m, people_at, read_truth, touchdown
@@ -120,22 +120,21 @@ class MissionMetrics:
         return out
 
 
-def _final_descent(flight: list[dict[str, Any]]) -> tuple[float | None, dict[str, Any] | None]:
+def _final_descent(flight: FlightLog) -> tuple[float | None, dict[str, Any] | None]:
     """Start time of the final descent and the target at that moment."""
     start: float | None = None
     target: dict[str, Any] | None = None
     previous = ""
     last_command_t: float | None = None
-    for record in flight:
-        if record["kind"] == RecordKind.COMMAND:
+    for kind, record in flight.tagged(RecordKind.COMMAND, RecordKind.DECISION):
+        if kind is RecordKind.COMMAND:
             last_command_t = float(record["t_s"])
-        if record["kind"] != RecordKind.DECISION:
             continue
-        decision = record["decision"]
-        if decision["phase"] == "descent" and previous != "descent":
-            start, target = float(record["t_s"]), decision["target"]
-        previous = decision["phase"]
-        if decision["kind"] == "land":
+        decision = DecisionRecord.from_record(record)
+        if decision.phase == "descent" and previous != "descent":
+            start, target = decision.t_s, decision.target
+        previous = decision.phase
+        if decision.kind == "land":
             return start, target
     return last_command_t, None
 
@@ -157,7 +156,7 @@ HOLD_CAUSES = {
 NOTHING_FREE_WINDOW_S = 30.0
 
 
-def hold_cause(decisions: list[dict[str, Any]], reason: str) -> str:
+def hold_cause(decisions: list[DecisionRecord], reason: str) -> str:
     """Why a mission without a touchdown ended, from its decisions (flight-log records) and its final reason.
 
     A hold is a decision the log explains: the descents allowed (``guidance.max_reselections``) were all aborted, and
@@ -178,25 +177,22 @@ def hold_cause(decisions: list[dict[str, Any]], reason: str) -> str:
         return "pilot took over"
     if "no landing within" not in reason:
         return "other"
-    flying = [d for d in decisions if d.get("source") == "frame"]
+    flying = [d for d in decisions if d.source == "frame"]
     if not flying:
         return "nothing free"
-    end_s = float(flying[-1]["t_s"])
-    recent = [d for d in flying if float(d["t_s"]) >= end_s - NOTHING_FREE_WINDOW_S]
-    if not any(d["decision"]["target"] is not None for d in recent):
+    end_s = flying[-1].t_s
+    recent = [d for d in flying if d.t_s >= end_s - NOTHING_FREE_WINDOW_S]
+    if not any(d.target is not None for d in recent):
         return "nothing free"
-    phase = flying[-1]["decision"]["phase"]
+    phase = flying[-1].phase
     return {"approach": "time limit while approaching", "descent": "time limit while descending"}.get(
         phase, "time limit while searching"
     )
 
 
-def zones_chosen(decisions: list[dict[str, Any]]) -> int:
+def zones_chosen(decisions: list[DecisionRecord]) -> int:
     """Commitments and switches in the decisions' reasons (:mod:`companion.guidance.commitment`)."""
-    return sum(
-        d["decision"]["reason"].count("committed to zone") + d["decision"]["reason"].count("switched from zone")
-        for d in decisions
-    )
+    return sum(d.reason.count("committed to zone") + d.reason.count("switched from zone") for d in decisions)
 
 
 def mission_metrics(
@@ -204,17 +200,17 @@ def mission_metrics(
 ) -> MissionMetrics:
     """The metrics of the mission flown in ``run_dir`` (``truth.jsonl`` and ``flight/flight.jsonl``)."""
     header, truth = read_truth(run_dir / "truth.jsonl")
-    flight = FlightLog.read(run_dir / "flight").records
-    config = next(r for r in flight if r["kind"] == RecordKind.HEADER)["config"]
+    flight = FlightLog.read(run_dir / "flight")
+    config = flight.config
     vehicle_radius_m = float(config["perception"]["zones"]["vehicle_radius_m"])
     sitl = load_yaml_config(SitlConfig, run_dir / "sitl.yaml", section="sitl")
-    end: dict[str, Any] = next((r["outcome"] for r in reversed(flight) if r["kind"] == RecordKind.END), {})
-    decisions = [r for r in flight if r["kind"] == RecordKind.DECISION]
-    started = next((float(r["t_s"]) for r in decisions if r.get("source") == "start"), math.nan)
+    end = flight.outcome
+    decisions = flight.decisions()
+    started = next((d.t_s for d in decisions if d.source == "start"), math.nan)
     down = touchdown(truth)
     # Without a touchdown the mission ends where the companion's log does (a hold, a yield, its time limit): an instant
     # of the lockstep, unlike the end of the ground truth, which depends on how soon the SITL was stopped.
-    stamped = [float(r["t_s"]) for r in flight if r.get("t_s") is not None]
+    stamped = [float(r["t_s"]) for r in flight.records if r.get("t_s") is not None]
     t_end = float(down["t_s"]) if down is not None else (max(stamped) if stamped else math.nan)
     truth = [r for r in truth if r["t_s"] <= t_end + 1e-9] if down is None else truth
 
@@ -251,9 +247,9 @@ def mission_metrics(
         [r["position_ned_m"] for r in truth if math.isfinite(started) and started <= r["t_s"] <= t_end + 1e-9]
     )
     path_length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
-    targets = [d["decision"]["target"]["track_id"] for d in decisions if d["decision"]["target"] is not None]
+    targets = [d.target["track_id"] for d in decisions if d.target is not None]
     reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)
-    aborts = sum(1 for d in decisions if "climb back" in d["decision"]["reason"])
+    aborts = sum(1 for d in decisions if "climb back" in d.reason)
     obstacle_m, obstacle_kind = (
         nearest_obstacle(park_layout(sitl.seed, sitl.scenario.roi_side_m), *down["position_ned_m"][:2])
         if down is not None

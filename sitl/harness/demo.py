@@ -19,7 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.app.flight_log import FlightLog, RecordKind
+from companion.app.flight_log import FlightLog
 from companion.app.replay import replay
 from companion.app.report import tracks_at_landing
 from sitl.harness.mission import (
@@ -85,8 +85,8 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
     tracked when the final descent began (cyan), the target (yellow), the true path (grey), the touchdown (green cross)
     and the geofence (red)."""
     header, records = read_truth(run_dir / "truth.jsonl")
-    flight = FlightLog.read(run_dir / "flight").records
-    config = next(r for r in flight if r["kind"] == RecordKind.HEADER)["config"]
+    flight = FlightLog.read(run_dir / "flight")
+    config = flight.config
     down = touchdown(records)
     at = down if down is not None else (records[-1] if records else {"t_s": 0.0})
     positions, radii = people_at(header, at)

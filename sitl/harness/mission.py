@@ -236,14 +236,10 @@ def touchdown(records: list[dict[str, Any]]) -> dict[str, Any] | None:
 def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
     """The mission's result from its flight log and ground truth."""
     header, records = read_truth(spec.run_dir / "truth.jsonl")
-    flight = _flight_records(spec.run_dir / "flight")
-    end = next((r for r in reversed(flight) if r["kind"] == RecordKind.END), None)
-    outcome = end["outcome"] if end else {}
-    land = next(
-        (r for r in reversed(flight) if r["kind"] == RecordKind.DECISION and r["decision"]["kind"] == "land"),
-        None,
-    )
-    target = land["decision"]["target"] if land else None
+    flight = _flight_log(spec.run_dir / "flight")
+    outcome = flight.outcome
+    land = next((d for d in reversed(flight.decisions()) if d.kind == "land"), None)
+    target = land.target if land else None
     down = touchdown(records)
     nearest, within_1, within_15 = math.nan, 0, 0
     touchdown_ne = None
@@ -272,10 +268,10 @@ def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
     )
 
 
-def _flight_records(path: Path) -> list[dict[str, Any]]:
+def _flight_log(path: Path) -> FlightLog:
     """The companion's flight log, checked against its schema (a broken one is the mission's error)."""
     try:
-        return FlightLog.read(path).records
+        return FlightLog.read(path)
     except FlightLogError as exc:
         raise MissionError(str(exc)) from None
 
@@ -286,9 +282,9 @@ def _autopilot_lands(spec: MissionSpec) -> bool:
     path = spec.run_dir / "flight" / "flight.jsonl"
     if not path.is_file():
         return True
-    records = _flight_records(path)
-    commands = [r for r in records if r["kind"] == RecordKind.COMMAND]
-    if any(r["kind"] == RecordKind.PHASE and r["phase"] == "yielded" for r in records):
+    flight = _flight_log(path)
+    commands = flight.of(RecordKind.COMMAND)
+    if any(r["phase"] == "yielded" for r in flight.of(RecordKind.PHASE)):
         return False
     return not commands or commands[-1]["command"] != "hold"
 
