@@ -43,6 +43,7 @@ from sitl.control_requests import ControlRequests
 from sitl.dynamics.base import DynamicsError
 from sitl.dynamics.factory import make_dynamics
 from sitl.lockstep_gate import LockstepGate
+from sitl.truth import TruthHeader, TruthRecord
 
 logger = logging.getLogger(__name__)
 
@@ -284,24 +285,26 @@ class SitlVehicle:
             return
         t_s = self.clock.now_s
         people = self.camera.people_at(t_s)
+        positions = np.asarray(people["positions_ne_m"], dtype=np.float64).reshape(-1, 2)
         if not self._truth_header_written:
             self._truth_header_written = True
-            header = {"kind": "header", "seed": self.config.seed, **people}
-            self._truth_file.write(json.dumps(header) + "\n")
+            moving = tuple(bool(m) for m in people["moving"])
+            radii = np.asarray(people["radii_m"], dtype=np.float64)
+            header = TruthHeader(self.config.seed, float(people["t_s"]), positions, radii, moving)
+            self._truth_file.write(json.dumps(header.to_json()) + "\n")
         s = self.dynamics.state()
         cmd = self.commander
-        record: dict[str, Any] = {
-            "kind": "truth",
-            "t_s": t_s,
-            "position_ned_m": [round(float(v), 4) for v in s.position_ned_m],
-            "armed": cmd.armed,
-            "mode": cmd.mode.px4_name,
-            "landed_state": cmd.landed_state.name,
-            "on_ground": bool(s.on_ground),
-        }
-        if any(people["moving"]):
-            record["positions_ne_m"] = [[round(n, 4), round(e, 4)] for n, e in people["positions_ne_m"]]
-        self._truth_file.write(json.dumps(record) + "\n")
+        n, e, d = (float(v) for v in s.position_ned_m)
+        record = TruthRecord(
+            t_s,
+            (n, e, d),
+            cmd.armed,
+            cmd.mode.px4_name,
+            cmd.landed_state.name,
+            bool(s.on_ground),
+            positions if any(people["moving"]) else None,
+        )
+        self._truth_file.write(json.dumps(record.to_json()) + "\n")
         self._truth_file.flush()
 
     def _send_tick_pose(self) -> None:

@@ -38,6 +38,7 @@ FLOORS: dict[str, int] = {
     "sitl.control_channel": 10,
     "sitl.world": 10,
     "sitl.dynamics": 10,
+    "sitl.truth": 10,
     # the autopilot, the SITL's config (which names the autopilot's parameters) and the renderer
     "sitl.autopilot": 11,
     "sitl.config": 11,

@@ -22,8 +22,9 @@ import pytest
 from companion.app.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from sitl.harness.instances import leased_instance
-from sitl.harness.mission import MissionResult, MissionSpec, fly, read_truth, touchdown
+from sitl.harness.mission import MissionResult, MissionSpec, fly
 from sitl.testing.helpers import ListeningGroundStation, free_udp_port
+from sitl.truth import read_truth, touchdown
 
 pytestmark = pytest.mark.sitl
 
@@ -107,7 +108,7 @@ def test_every_setpoint_stays_in_the_geofence_and_within_the_descent_rate(demo: 
     # At the SITL's side: while the companion commanded (OFFBOARD), the true descent never exceeded the limit
     # (10 % for the position controller's overshoot, over 0.5 s windows).
     _, truth = read_truth(demo.run_dir / "truth.jsonl")
-    offboard = [(t["t_s"], t["position_ned_m"][2]) for t in truth if t["mode"] == "OFFBOARD"]
+    offboard = [(t.t_s, t.position_ned_m[2]) for t in truth if t.mode == "OFFBOARD"]
     t_s, down_m = np.array(offboard).T
     window = 5  # frames of 0.1 s
     rates = (down_m[window:] - down_m[:-window]) / (t_s[window:] - t_s[:-window])
@@ -150,7 +151,7 @@ def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_
     assert r.landed
     assert r.nearest_person_m >= CLEARANCE_M
     header, truth = read_truth(Path(r.run_dir) / "truth.jsonl")
-    assert sum(header["moving"]) >= 10  # the walkers were there
+    assert sum(header.moving) >= 10  # the walkers were there
     # Every zone the companion acted on lay wholly inside the area (to half a 0.1 m cell), and so did the touchdown
     # (0.5 m for the position controller).
     targets = [
@@ -163,7 +164,7 @@ def test_a_mission_with_walking_people_lands_safely_inside_its_landing_area(tmp_
         assert max(abs(t["north_m"]), abs(t["east_m"])) + t["radius_m"] <= roi_half_m + 0.05, t
     down = touchdown(truth)
     assert down is not None
-    assert max(abs(v) for v in down["position_ned_m"][:2]) <= roi_half_m + 0.5
+    assert max(abs(v) for v in down.position_ned_m[:2]) <= roi_half_m + 0.5
     # `slz report` draws the area on the top view.
     reported = subprocess.run(
         [sys.executable, "-m", "companion.cli", "report", str(Path(r.run_dir) / "flight")],
@@ -243,7 +244,7 @@ def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path:
     assert end["outcome"]["link_lost"]
     # At the SITL's side: its own offboard-loss failsafe took over and landed the vehicle.
     _, truth = read_truth(Path(r.run_dir) / "truth.jsonl")
-    modes_after = {t["mode"] for t in truth if t["t_s"] > FAULT_AT_S}
+    modes_after = {t.mode for t in truth if t.t_s > FAULT_AT_S}
     assert "AUTO.LAND" in modes_after
     assert r.landed
     assert math.isfinite(r.touchdown_t_s or math.nan)

@@ -25,7 +25,7 @@ import numpy as np
 from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
 from sitl.config import SitlConfig
-from sitl.harness.mission import body_edges_m, people_at, read_truth, touchdown
+from sitl.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
 METRICS_VERSION = 5
@@ -211,19 +211,17 @@ def mission_metrics(
     # Without a touchdown the mission ends where the companion's log does (a hold, a yield, its time limit): an instant
     # of the lockstep, unlike the end of the ground truth, which depends on how soon the SITL was stopped.
     stamped = [float(r["t_s"]) for r in flight.records if r.get("t_s") is not None]
-    t_end = float(down["t_s"]) if down is not None else (max(stamped) if stamped else math.nan)
-    truth = [r for r in truth if r["t_s"] <= t_end + 1e-9] if down is None else truth
+    t_end = down.t_s if down is not None else (max(stamped) if stamped else math.nan)
+    truth = [r for r in truth if r.t_s <= t_end + 1e-9] if down is None else truth
 
     descent_t, target = _final_descent(flight)
-    window = [r for r in truth if descent_t is not None and descent_t - 1e-9 <= r["t_s"] <= t_end + 1e-9]
-    nearest = np.array(
-        [float(body_edges_m(header, r, r["position_ned_m"][0], r["position_ned_m"][1]).min()) for r in window]
-    )
+    window = [r for r in truth if descent_t is not None and descent_t - 1e-9 <= r.t_s <= t_end + 1e-9]
+    nearest = np.array([float(body_edges_m(header, r, r.position_ned_m[0], r.position_ned_m[1]).min()) for r in window])
     nan = math.nan
     within_1 = within_15 = 0
     touchdown_nearest = nan
     if down is not None:
-        edges = body_edges_m(header, down, down["position_ned_m"][0], down["position_ned_m"][1])
+        edges = body_edges_m(header, down, down.position_ned_m[0], down.position_ned_m[1])
         touchdown_nearest = float(edges.min())
         within_1, within_15 = int((edges < 1.0).sum()), int((edges < 1.5).sum())
     intrusion = bool(len(nearest)) and float(nearest.min()) < vehicle_radius_m
@@ -237,21 +235,19 @@ def mission_metrics(
     if target is not None and descent_t is not None:
         r_zone = float(target["radius_m"])
         area = math.pi * r_zone**2
-        at = min(truth, key=lambda r: abs(r["t_s"] - descent_t)) if truth else None
+        at = min(truth, key=lambda r: abs(r.t_s - descent_t)) if truth else None
         if at is not None:
             free = max(0.0, float(body_edges_m(header, at, target["north_m"], target["east_m"]).min()))
             big, small = max(r_zone, free), min(r_zone, free)
             iou = (small / big) ** 2 if big > 0 else nan
 
-    path = np.array(
-        [r["position_ned_m"] for r in truth if math.isfinite(started) and started <= r["t_s"] <= t_end + 1e-9]
-    )
+    path = np.array([r.position_ned_m for r in truth if math.isfinite(started) and started <= r.t_s <= t_end + 1e-9])
     path_length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
     targets = [d.target["track_id"] for d in decisions if d.target is not None]
     reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)
     aborts = sum(1 for d in decisions if "climb back" in d.reason)
     obstacle_m, obstacle_kind = (
-        nearest_obstacle(park_layout(sitl.seed, sitl.scenario.roi_side_m), *down["position_ned_m"][:2])
+        nearest_obstacle(park_layout(sitl.seed, sitl.scenario.roi_side_m), *down.position_ned_m[:2])
         if down is not None
         else (nan, None)
     )
@@ -279,12 +275,12 @@ def mission_metrics(
         reselections=reselections,
         aborts=aborts,
         failsafes=len(end.get("failsafes", [])),
-        touchdown_north_m=float(down["position_ned_m"][0]) if down is not None else nan,
-        touchdown_east_m=float(down["position_ned_m"][1]) if down is not None else nan,
+        touchdown_north_m=down.position_ned_m[0] if down is not None else nan,
+        touchdown_east_m=down.position_ned_m[1] if down is not None else nan,
         obstacle_distance_m=obstacle_m,
         obstacle_kind=obstacle_kind,
         touched_obstacle=obstacle_m < vehicle_radius_m,
-        people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else {})),
+        people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else None)),
         hold_cause=None if down is not None else hold_cause(decisions, str(end.get("reason", ""))),
         zones_chosen=zones_chosen(decisions),
     )
@@ -293,7 +289,7 @@ def mission_metrics(
 GRID_HALF_M = 20.0
 
 
-def _people_cells(header: dict[str, Any], record: dict[str, Any]) -> list[list[int]]:
+def _people_cells(header: TruthHeader, record: TruthRecord | None) -> list[list[int]]:
     positions, _ = people_at(header, record)
     cells: dict[tuple[int, int], int] = {}
     for north, east in positions:

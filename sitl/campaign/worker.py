@@ -22,6 +22,7 @@ from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.harness.mission import MissionError, MissionProcesses, MissionSpec, fly
 from sitl.harness.process import SitlProcessError
 from sitl.harness.warm import ServeProcessError, WarmWorker
+from sitl.truth import TruthError
 
 
 def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance: int, **extra: Any) -> MissionSpec:
@@ -88,7 +89,7 @@ def fly_one(
         fly(mission_spec(spec, plan, run_dir, instance), processes)
         metrics = mission_metrics(run_dir, mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
         result: dict[str, Any] = metrics.to_json()
-    except (MissionError, SitlProcessError, ServeProcessError, OSError, ValueError, KeyError) as exc:
+    except (MissionError, TruthError, SitlProcessError, ServeProcessError, OSError, ValueError, KeyError) as exc:
         result = error_result(plan, str(exc))
     result["wall_s"] = round(time.monotonic() - started, 3)
     result["node"] = node_name()

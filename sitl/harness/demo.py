@@ -22,15 +22,8 @@ import numpy as np
 from companion.app.flight_log import FlightLog
 from companion.app.replay import replay
 from companion.app.report import tracks_at_landing
-from sitl.harness.mission import (
-    DEFAULT_MISSION_CONFIG,
-    MissionResult,
-    MissionSpec,
-    fly,
-    people_at,
-    read_truth,
-    touchdown,
-)
+from sitl.harness.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly
+from sitl.truth import people_at, read_truth, touchdown
 
 logger = logging.getLogger(__name__)
 
@@ -88,7 +81,7 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
     flight = FlightLog.read(run_dir / "flight")
     config = flight.config
     down = touchdown(records)
-    at = down if down is not None else (records[-1] if records else {"t_s": 0.0})
+    at = down if down is not None else (records[-1] if records else None)
     positions, radii = people_at(header, at)
     px_per_m = size_px / (2.0 * half_extent_m)
     view = np.full((size_px, size_px, 3), 245, np.uint8)
@@ -105,7 +98,7 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
     cv2.polylines(view, [np.array(fence, np.int32)], True, FENCE_BGR, 1, cv2.LINE_AA)
     for (n, e), r in zip(positions, radii, strict=True):
         cv2.circle(view, to_px(n, e), max(2, round(r * px_per_m)), PERSON_BGR, -1, cv2.LINE_AA)
-    path = [to_px(r["position_ned_m"][0], r["position_ned_m"][1]) for r in records]
+    path = [to_px(r.position_ned_m[0], r.position_ned_m[1]) for r in records]
     if len(path) > 1:
         cv2.polylines(view, [np.array(path, np.int32)], False, PATH_BGR, 2, cv2.LINE_AA)
     tracks, target = tracks_at_landing(flight)
@@ -116,9 +109,9 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
         centre = to_px(target["north_m"], target["east_m"])
         cv2.circle(view, centre, round(target["radius_m"] * px_per_m), TARGET_BGR, 2, cv2.LINE_AA)
     if down is not None:
-        n, e = down["position_ned_m"][:2]
+        n, e, _ = down.position_ned_m
         cv2.drawMarker(view, to_px(n, e), TOUCHDOWN_BGR, cv2.MARKER_CROSS, 22, 3)
-    caption = f"seed {header['seed']}  t {at['t_s']:.1f} s  " + (
+    caption = f"seed {header.seed}  t {0.0 if at is None else at.t_s:.1f} s  " + (
         "touchdown (green)" if down is not None else "no touchdown"
     )
     cv2.putText(view, caption, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1, cv2.LINE_AA)

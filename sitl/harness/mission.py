@@ -21,7 +21,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-import numpy as np
 import yaml
 
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
@@ -29,6 +28,7 @@ from companion.app.mission import MissionConfig, camera_mismatches
 from companion.config import read_yaml_file, validate_config
 from sitl.config import SitlConfig
 from sitl.harness.process import SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
+from sitl.truth import TruthError, body_edges_m, read_truth, touchdown
 
 logger = logging.getLogger(__name__)
 
@@ -199,43 +199,12 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
     return sitl_path, mission_path
 
 
-def read_truth(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """The ground-truth log: its header (``radii_m``, ``positions_ne_m`` at the start, ``moving``) and records."""
-    lines = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    if not lines or lines[0].get("kind") != "header":
-        raise MissionError(f"{path}: no ground-truth header")
-    return lines[0], lines[1:]
-
-
-def people_at(header: dict[str, Any], record: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    """Positions (N, 2) north/east m and body radii (N,) m at a ground-truth record."""
-    positions = record.get("positions_ne_m", header["positions_ne_m"])
-    return np.asarray(positions, dtype=np.float64).reshape(-1, 2), np.asarray(header["radii_m"], dtype=np.float64)
-
-
-def body_edges_m(header: dict[str, Any], record: dict[str, Any], north_m: float, east_m: float) -> np.ndarray:
-    """Horizontal distance (m) from a point to every person's body edge at a ground-truth record; ``[inf]`` when
-    nobody is there."""
-    positions, radii = people_at(header, record)
-    if not len(radii):
-        return np.array([math.inf])
-    return np.asarray(np.hypot(positions[:, 0] - north_m, positions[:, 1] - east_m) - radii)
-
-
-def touchdown(records: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """The first ground-truth record on the ground after having flown, or None."""
-    flown = False
-    for record in records:
-        if not record["on_ground"]:
-            flown = True
-        elif flown:
-            return record
-    return None
-
-
 def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
     """The mission's result from its flight log and ground truth."""
-    header, records = read_truth(spec.run_dir / "truth.jsonl")
+    try:
+        header, records = read_truth(spec.run_dir / "truth.jsonl")
+    except TruthError as exc:
+        raise MissionError(str(exc)) from None
     flight = _flight_log(spec.run_dir / "flight")
     outcome = flight.outcome
     land = next((d for d in reversed(flight.decisions()) if d.kind == "land"), None)
@@ -244,8 +213,8 @@ def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
     nearest, within_1, within_15 = math.nan, 0, 0
     touchdown_ne = None
     if down is not None:
-        n, e = down["position_ned_m"][0], down["position_ned_m"][1]
-        touchdown_ne = (float(n), float(e))
+        n, e, _ = down.position_ned_m
+        touchdown_ne = (n, e)
         edges = body_edges_m(header, down, n, e)
         nearest = float(edges.min()) if math.isfinite(edges.min()) else math.nan  # NaN: nobody in the scene
         within_1, within_15 = int((edges < 1.0).sum()), int((edges < 1.5).sum())
@@ -256,13 +225,13 @@ def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
         companion_exit_code=exit_code,
         landed=down is not None,
         touchdown_ne_m=touchdown_ne,
-        touchdown_t_s=None if down is None else float(down["t_s"]),
+        touchdown_t_s=None if down is None else down.t_s,
         nearest_person_m=nearest,
         people_within_1m=within_1,
         people_within_1_5m=within_15,
         target_radius_m=None if target is None else float(target["radius_m"]),
         failsafes=list(outcome.get("failsafes", [])),
-        sim_time_s=float(records[-1]["t_s"]) if records else 0.0,
+        sim_time_s=records[-1].t_s if records else 0.0,
         wall_s=wall_s,
         run_dir=str(spec.run_dir),
     )

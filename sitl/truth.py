@@ -1,0 +1,156 @@
+"""The SITL's ground-truth log, ``truth.jsonl``: its schema, written by the vehicle process (:mod:`sitl.vehicle`) and
+read, typed, by whoever scores a mission (:mod:`sitl.harness.mission`, :mod:`sitl.campaign.metrics`, the demo).
+
+One JSON object per line: first the header (``kind: header``: the scene's seed, every person's head-plane position
+at the start, body radius and whether they walk, and the schema version), then one record per camera frame or
+lockstep tick (``kind: truth``: the vehicle's true position, arming, mode, landed state and ground contact, and the
+people's positions when some walk). Positions are local NED (north, east, down), m. A header without
+``schema_version`` is version 1 (the same fields).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+TRUTH_SCHEMA_VERSION = 2
+"""1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version."""
+
+F64Array = npt.NDArray[np.float64]
+
+
+class TruthError(Exception):
+    """A ground-truth log cannot be read (which file, what is wrong)."""
+
+
+@dataclass(frozen=True, eq=False)  # numpy fields: compare by their to_json()
+class TruthHeader:
+    """The scene at the start: people's head-plane positions (N, 2) north/east m, body radii (N,) m, who walks."""
+
+    seed: int | None
+    t_s: float
+    positions_ne_m: F64Array
+    radii_m: F64Array
+    moving: tuple[bool, ...]
+    version: int = TRUTH_SCHEMA_VERSION
+
+    def to_json(self) -> dict[str, Any]:
+        """The header line as written."""
+        return {
+            "kind": "header",
+            "schema_version": self.version,
+            "seed": self.seed,
+            "t_s": self.t_s,
+            "positions_ne_m": self.positions_ne_m.tolist(),
+            "radii_m": self.radii_m.tolist(),
+            "moving": list(self.moving),
+        }
+
+    @classmethod
+    def from_json(cls, line: dict[str, Any]) -> TruthHeader:
+        return cls(
+            None if line.get("seed") is None else int(line["seed"]),
+            float(line.get("t_s", 0.0)),
+            np.asarray(line["positions_ne_m"], dtype=np.float64).reshape(-1, 2),
+            np.asarray(line["radii_m"], dtype=np.float64),
+            tuple(bool(m) for m in line["moving"]),
+            int(line.get("schema_version", 1)),
+        )
+
+
+@dataclass(frozen=True, eq=False)  # numpy fields: compare by their to_json()
+class TruthRecord:
+    """The truth at simulated time ``t_s`` (s): the vehicle's position (NED, m) and state; the people's positions
+    (N, 2) when some walk (None: where the header has them)."""
+
+    t_s: float
+    position_ned_m: tuple[float, float, float]
+    armed: bool
+    mode: str
+    landed_state: str
+    on_ground: bool
+    people_ne_m: F64Array | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The record line as written (positions rounded to 0.1 mm)."""
+        record: dict[str, Any] = {
+            "kind": "truth",
+            "t_s": self.t_s,
+            "position_ned_m": [round(float(v), 4) for v in self.position_ned_m],
+            "armed": self.armed,
+            "mode": self.mode,
+            "landed_state": self.landed_state,
+            "on_ground": self.on_ground,
+        }
+        if self.people_ne_m is not None:
+            record["positions_ne_m"] = [[round(float(n), 4), round(float(e), 4)] for n, e in self.people_ne_m]
+        return record
+
+    @classmethod
+    def from_json(cls, line: dict[str, Any]) -> TruthRecord:
+        n, e, d = (float(v) for v in line["position_ned_m"])
+        people = line.get("positions_ne_m")
+        return cls(
+            float(line["t_s"]),
+            (n, e, d),
+            bool(line["armed"]),
+            str(line["mode"]),
+            str(line["landed_state"]),
+            bool(line["on_ground"]),
+            None if people is None else np.asarray(people, dtype=np.float64).reshape(-1, 2),
+        )
+
+
+def read_truth(path: Path) -> tuple[TruthHeader, list[TruthRecord]]:
+    """The ground-truth log at ``path``: its header and records (:class:`TruthError` naming the file and line when it
+    has no header or a record lacks a field)."""
+    try:
+        lines = [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
+    except (OSError, ValueError) as exc:
+        raise TruthError(f"{path}: {exc}") from None
+    if not lines or lines[0].get("kind") != "header":
+        raise TruthError(f"{path}: no ground-truth header")
+    number = 1
+    try:
+        header = TruthHeader.from_json(lines[0])
+        records = []
+        for number, line in enumerate(lines[1:], start=2):  # noqa: B007 - named in the error below
+            if line.get("kind", "truth") == "truth":
+                records.append(TruthRecord.from_json(line))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise TruthError(f"{path}: line {number}: missing or bad field {exc}") from None
+    if header.version > TRUTH_SCHEMA_VERSION:
+        raise TruthError(f"{path}: schema version {header.version}; this reader knows up to {TRUTH_SCHEMA_VERSION}")
+    return header, records
+
+
+def people_at(header: TruthHeader, record: TruthRecord | None) -> tuple[F64Array, F64Array]:
+    """Positions (N, 2) north/east m and body radii (N,) m at ``record`` (the header's without one)."""
+    positions = header.positions_ne_m if record is None or record.people_ne_m is None else record.people_ne_m
+    return positions, header.radii_m
+
+
+def body_edges_m(header: TruthHeader, record: TruthRecord | None, north_m: float, east_m: float) -> F64Array:
+    """Horizontal distance (m) from a point to every person's body edge at a ground-truth record; ``[inf]`` when
+    nobody is there."""
+    positions, radii = people_at(header, record)
+    if not len(radii):
+        return np.array([math.inf])
+    return np.asarray(np.hypot(positions[:, 0] - north_m, positions[:, 1] - east_m) - radii)
+
+
+def touchdown(records: list[TruthRecord]) -> TruthRecord | None:
+    """The first ground-truth record on the ground after having flown, or None."""
+    flown = False
+    for record in records:
+        if not record.on_ground:
+            flown = True
+        elif flown:
+            return record
+    return None
