@@ -15,9 +15,10 @@ MAVLink datagrams (:class:`MavlinkFuzzer`), in kinds chosen at random:
 - ``noise``: random bytes, sometimes behind a MAVLink start marker;
 - ``mavlink1``: a structured message packed as MAVLink 1.
 
-Input that is well formed *and* meaningful (a valid mode change, an in-range parameter) is not fuzz but a command,
-so the structured kind never builds one: a float field always holds a value the SITL must refuse, and a mode field
-a mode that does not exist. Messages of integers only (MANUAL_CONTROL, MISSION_COUNT, MISSION_CLEAR_ALL, FTP
+Input that is well formed *and* meaningful (a valid mode change, any finite value of a real parameter: the SITL
+stores it as PX4 does and flies with it clamped) is not fuzz but a command, so the structured kind never builds one:
+a float field always holds a value the SITL must refuse (a real parameter gets NaN or infinity), and a mode field a
+mode that does not exist. Messages of integers only (MANUAL_CONTROL, MISSION_COUNT, MISSION_CLEAR_ALL, FTP
 headers) are random and so sometimes meaningful: they act only where the state allows (sticks in POSCTL, an upload
 the fuzzer's own items must complete, which random items do not). Control requests (:class:`ControlFuzzer`)
 likewise: broken JSON, NaN and infinity, numbers that overflow, deep nesting, wrong types (``"lost": "false"``),
@@ -34,6 +35,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 FLOAT_SPECIALS = (float("nan"), float("inf"), float("-inf"), 3.4e38, -3.4e38, 1e30, -1e30)
+NON_FINITE = FLOAT_SPECIALS[:3]
 HANDLED = (
     "COMMAND_LONG",
     "COMMAND_INT",
@@ -159,6 +161,12 @@ class MavlinkFuzzer:
             fields["custom_mode"] = (fields["custom_mode"] & 0xFF00FFFF) | (main << 16)
         if name in ("PARAM_SET", "PARAM_REQUEST_READ") and self.rng.random() < 0.5:
             fields["param_id"] = bytes(self.rng.choice(PARAM_NAMES))
+            if name == "PARAM_SET":
+                # As PX4, the SITL stores any finite value of a parameter's type, even out of range, and flies with it
+                # clamped (COM_OF_LOSS_T -1e30 flies as 0 s: offboard is lost at once). That is a command, not fuzz:
+                # a real parameter only ever gets a value it must refuse, not a number at all.
+                fields["param_value"] = float(self.rng.choice(NON_FINITE))
+                fields["param_type"] = mavlink.MAV_PARAM_TYPE_REAL32
         if name == "COMMAND_INT":  # x, y are int32 (lat/lon); z is the float
             fields["z"] = float(self.rng.choice(FLOAT_SPECIALS))
         return cls, fields
