@@ -12,8 +12,9 @@ import math
 import time
 from typing import Any
 
+from companion.vehicle.sim_control import SetpointNedYaw
+
 Address = tuple[str, int]
-SetpointNedYaw = tuple[float, float, float, float]  # north, east, down (m), yaw (rad)
 
 LIVE_CLIENT_S = 2.0  # a client that acknowledged a tick this recently keeps the lockstep against a new subscriber
 

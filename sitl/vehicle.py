@@ -20,7 +20,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from companion.config import quote
-from companion.vehicle.sim_control import Event, Tick
+from companion.vehicle.sim_control import Event, Tick, same_setpoint
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
@@ -328,14 +328,7 @@ class SitlVehicle:
             setpoint = expect.get("setpoint")
             if setpoint is not None:
                 last = self.mavlink.last_setpoint_ned
-                if last is None:
-                    return False
-                # Positions exactly as float32 (how they travel), so a late re-send of the previous setpoint, a
-                # millimetre away, is never taken for this one; the yaw within 1e-4 rad (the sender converts it
-                # from degrees in its own precision).
-                wanted = np.asarray(setpoint[:3], dtype=np.float64).astype(np.float32)
-                arrived = np.asarray(last[:3], dtype=np.float64).astype(np.float32)
-                if not np.array_equal(arrived, wanted) or abs(last[3] - float(setpoint[3])) > 1e-4:
+                if last is None or not same_setpoint(last, setpoint):
                     return False
             for command, count in (expect.get("commands") or {}).items():
                 if self.mavlink.commands_seen.get(command, 0) < count:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from companion.vehicle.sim_control import SetpointNedYaw
 from sitl.lockstep_gate import LockstepGate
 
 pytestmark = pytest.mark.unit
@@ -22,7 +23,7 @@ def test_ticks_pass_only_with_the_acknowledgement_of_the_tick_out() -> None:
     assert gate.pending_ack() is None
     gate.acknowledge(CLIENT, {"seq": 0})
     assert gate.pending_ack() == {"seq": 0}
-    gate.passed((1.0, 2.0, -3.0, 0.0))
+    gate.passed(SetpointNedYaw(1.0, 2.0, -3.0, 0.0))
     assert gate.seq == 1
     assert gate.next_tick_s == pytest.approx(0.1)
     assert not gate.tick_out

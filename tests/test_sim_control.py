@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+import math
 
+import numpy as np
 import pytest
 
 from companion.vehicle.sim_control import (
     Command,
     Event,
     RequestError,
+    SetpointNedYaw,
     Tick,
     ack_counting,
     ack_expecting,
@@ -17,6 +20,7 @@ from companion.vehicle.sim_control import (
     encode,
     lockstep_ack,
     parse_request,
+    same_setpoint,
 )
 
 pytestmark = pytest.mark.unit
@@ -41,7 +45,7 @@ def test_a_malformed_tick_names_its_field(field: str, value: object, named: str)
 
 
 def test_both_kinds_of_acknowledgement_pass_the_sitl_s_checks() -> None:
-    expecting = parse_request(ack_expecting(Tick(3, 0.3, 2), (1.0, 2.0, -20.0, 0.5)))
+    expecting = parse_request(ack_expecting(Tick(3, 0.3, 2), SetpointNedYaw(1.0, 2.0, -20.0, 0.5)))
     assert expecting["cmd"] == Command.LOCKSTEP_ACK
     assert lockstep_ack(expecting) == {"seq": 3, "expect": {"setpoint": [1.0, 2.0, -20.0, 0.5]}}
     counting = parse_request(ack_counting(4, 120, 245, 190))
@@ -56,3 +60,11 @@ def test_every_command_encodes_as_a_request_the_sitl_parses() -> None:
 @pytest.mark.parametrize("data", [b"", b"\xff", b"[1]", b'{"no": "event"}', b'{"event": 5}', b"[" * 5000])
 def test_anything_but_an_event_is_refused_for_counting(data: bytes) -> None:
     assert decode_event(data) is None
+
+
+def test_a_setpoint_is_the_same_as_float32_travels_it_and_its_yaw_within_1e_4_rad() -> None:
+    sent = SetpointNedYaw(1.0000000001, -2.5, -20.0, math.radians(90.0))
+    arrived = tuple(float(np.float32(v)) for v in sent)  # as SET_POSITION_TARGET_LOCAL_NED carries it
+    assert same_setpoint(arrived, list(sent))
+    assert not same_setpoint(arrived, [1.001, -2.5, -20.0, sent.yaw_rad])  # a millimetre: the previous setpoint
+    assert not same_setpoint(arrived, [*sent[:3], sent.yaw_rad + 2e-4])

@@ -17,7 +17,7 @@ from companion.camera.frames import CameraError, Frame
 from companion.guidance.landing import VehicleState
 from companion.vehicle.link import VehicleError
 from companion.vehicle.lockstep import LockstepClient
-from companion.vehicle.sim_control import Tick
+from companion.vehicle.sim_control import SetpointNedYaw, Tick
 
 TICK_PERIOD_S = 0.1  # free running: how often the supervision looks at the vehicle (wall time)
 
@@ -75,9 +75,8 @@ class FlightLoop(Protocol):
         """Supervise at one vehicle state (start sequence, takeover, touchdown, silence)."""
         ...
 
-    def take_tick_setpoint(self) -> tuple[float, float, float, float] | None:
-        """The position setpoint sent since the last call (north, east, down m NED; yaw rad), to acknowledge a lockstep
-        tick with; cleared by the call."""
+    def take_tick_setpoint(self) -> SetpointNedYaw | None:
+        """The position setpoint sent since the last call, to acknowledge a lockstep tick with; cleared by the call."""
         ...
 
 

@@ -51,6 +51,7 @@ from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.vehicle.link import FlightMode, VehicleError, VehicleLink
 from companion.vehicle.lockstep import LockstepClient
+from companion.vehicle.sim_control import SetpointNedYaw
 
 logger = logging.getLogger(__name__)
 
@@ -170,7 +171,7 @@ class FlightApp:
         self._first_tick_t_s: float | None = None
         self._last_takeoff_try_t_s = -math.inf
         self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
-        self.tick_setpoint: tuple[float, float, float, float] | None = None  # sent during this lockstep tick
+        self.tick_setpoint: SetpointNedYaw | None = None  # sent during this lockstep tick
         self._transit_yaw_deg: float | None = None
         self._waiting_logged = False
 
@@ -236,7 +237,7 @@ class FlightApp:
                     self._offboard = True
                 else:
                     await self.link.set_setpoint(sp)
-                self.tick_setpoint = (sp.north_m, sp.east_m, sp.down_m, math.radians(sp.yaw_deg))
+                self.tick_setpoint = SetpointNedYaw(sp.north_m, sp.east_m, sp.down_m, math.radians(sp.yaw_deg))
             elif decision.kind is CommandKind.LAND:
                 await self.link.land()
             elif decision.kind is CommandKind.HOLD:
@@ -442,7 +443,7 @@ class FlightApp:
         last_telemetry = self.link.status.last_telemetry_wall_s
         return None if last_telemetry is None else time.monotonic() - last_telemetry
 
-    def take_tick_setpoint(self) -> tuple[float, float, float, float] | None:
+    def take_tick_setpoint(self) -> SetpointNedYaw | None:
         setpoint, self.tick_setpoint = self.tick_setpoint, None
         return setpoint
 

@@ -24,6 +24,7 @@ from companion.vehicle.sim_control import (
     Command,
     Event,
     RequestError,
+    SetpointNedYaw,
     Tick,
     ack_expecting,
     decode_event,
@@ -124,10 +125,10 @@ class LockstepClient:
         except RequestError as exc:
             raise LockstepError(self.url, f"malformed tick: {exc}") from None
 
-    def ack(self, tick: Tick, setpoint_ned_yaw_rad: tuple[float, float, float, float] | None = None) -> None:
-        """Let the simulator pass ``tick`` once it has received ``setpoint_ned_yaw_rad`` (north, east, down m; yaw rad),
-        the position setpoint sent while handling the tick (None: nothing to wait for)."""
-        self._send(ack_expecting(tick, setpoint_ned_yaw_rad))
+    def ack(self, tick: Tick, setpoint: SetpointNedYaw | None = None) -> None:
+        """Let the simulator pass ``tick`` once it has received ``setpoint``, the position setpoint sent while handling
+        the tick (None: nothing to wait for)."""
+        self._send(ack_expecting(tick, setpoint))
 
     def release(self) -> None:
         """Leave the lockstep: the simulator runs free from here (its own failsafes act without us)."""

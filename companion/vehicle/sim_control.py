@@ -20,7 +20,9 @@ import enum
 import json
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
+
+import numpy as np
 
 
 class Command(str, enum.Enum):
@@ -89,12 +91,32 @@ class Tick:
         return {"event": Event.TICK.value, "seq": self.seq, "t_s": self.t_s, "frame_seq": self.frame_seq}
 
 
-def ack_expecting(tick: Tick, setpoint_ned_yaw_rad: tuple[float, float, float, float] | None) -> bytes:
+class SetpointNedYaw(NamedTuple):
+    """A position setpoint in the one form both sides of the lockstep use: local NED north, east, down (m) and yaw
+    (rad), as SET_POSITION_TARGET_LOCAL_NED carries it. The companion acknowledges a tick with the one it sent; the
+    SITL latches the one that arrived and compares the two with :func:`same_setpoint`."""
+
+    north_m: float
+    east_m: float
+    down_m: float
+    yaw_rad: float
+
+
+def same_setpoint(arrived: SetpointNedYaw | tuple[float, ...], wanted: SetpointNedYaw | list[float]) -> bool:
+    """The setpoint that arrived is the one wanted: positions exactly as float32 (how they travel, so a late re-send
+    of the previous setpoint, a millimetre away, is never taken for this one), the yaw within 1e-4 rad (the sender
+    converts it from degrees in its own precision)."""
+    wanted_ned = np.asarray(wanted[:3], dtype=np.float64).astype(np.float32)
+    arrived_ned = np.asarray(arrived[:3], dtype=np.float64).astype(np.float32)
+    return bool(np.array_equal(arrived_ned, wanted_ned)) and not abs(arrived[3] - float(wanted[3])) > 1e-4
+
+
+def ack_expecting(tick: Tick, setpoint: SetpointNedYaw | None) -> bytes:
     """``lockstep_ack`` of a client that cannot count its MAVLink messages (MAVSDK re-sends on its own thread): the
     SITL moves on once the position setpoint it names has arrived (or at once, with None)."""
     expect: dict[str, Any] = {}
-    if setpoint_ned_yaw_rad is not None:
-        expect["setpoint"] = [float(v) for v in setpoint_ned_yaw_rad]
+    if setpoint is not None:
+        expect["setpoint"] = [float(v) for v in setpoint]
     return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect)
 
 

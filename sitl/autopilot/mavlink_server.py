@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.vehicle.sim_control import SetpointNedYaw
 from sitl.autopilot.commands import AutopilotHost, CommandHandlers, CommandRequest
 from sitl.autopilot.ftp_server import FtpServer
 from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
@@ -56,7 +57,7 @@ class MavlinkServer:
         self.setpoints_rejected = 0
         self.commands_by_sender: dict[str, int] = {}
         self.setpoints_by_sender: dict[str, int] = {}
-        self.last_setpoint_ned: tuple[float, float, float, float] | None = None  # any sender: n, e, d, yaw (rad)
+        self.last_setpoint_ned: SetpointNedYaw | None = None  # the latest position setpoint, any sender
         self.commands_seen: dict[int, int] = {}  # command id -> how many received
         self._last_reject_text_s = -math.inf
         self.missions = MissionServer(
@@ -95,7 +96,7 @@ class MavlinkServer:
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             if self._targets_us(msg):
                 count_capped(self.setpoints_by_sender, sender)
-                values = (float(msg.x), float(msg.y), float(msg.z), float(msg.yaw))
+                values = SetpointNedYaw(float(msg.x), float(msg.y), float(msg.z), float(msg.yaw))
                 gate = self.v.lockstep
                 latched = gate.latched_setpoint
                 if gate.between_ticks(self.v.clock.now_s) and latched is not None and values != latched:
