@@ -10,7 +10,8 @@ from companion.app.mission import load_mission_config
 from companion.config import ConfigError
 from companion.perception.config import load_perception_config
 from sitl.campaign.spec import load_campaign_spec
-from sitl.testing.hostile_configs import REPO_ROOT, HostileConfig, fly_dry_run, hostile_configs
+from sitl.harness.process import REPO_ROOT
+from sitl.testing.hostile_configs import HostileConfig, fly_dry_run, hostile_configs
 
 pytestmark = pytest.mark.unit
 

@@ -22,8 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.app.recorder import open_append, read_log
-
-REPO_ROOT = Path(__file__).resolve().parent.parent.parent
+from sitl.harness.process import REPO_ROOT
 
 
 def utc_now() -> str:

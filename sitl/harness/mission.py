@@ -27,12 +27,11 @@ from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig, camera_mismatches
 from companion.config import read_yaml_file, validate_config
 from sitl.config import SitlConfig
-from sitl.harness.process import SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
+from sitl.harness.process import REPO_ROOT, SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
 from sitl.truth import TruthError, body_edges_m, read_truth, touchdown
 
 logger = logging.getLogger(__name__)
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_MISSION_CONFIG = REPO_ROOT / "mission_configs" / "sitl.yaml"
 SITL_READY_WALL_S = 60.0  # a SITL starts in about 5 s; a machine busy with parallel missions may take several times it
 SETTLE_WALL_S = 60.0  # after the companion ends: how long the SITL may run to finish an autopilot landing

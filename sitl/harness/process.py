@@ -26,6 +26,8 @@ from sitl.config import CONTROL_PORT
 
 logger = logging.getLogger(__name__)
 
+REPO_ROOT = Path(__file__).resolve().parents[2]
+"""The repository's root, where the harness's child processes run (their configs' relative paths start there)."""
 
 # A mission's processes compute on one thread each: a campaign flies one mission per CPU, and the libraries' idle
 # worker threads spin-wait for the next call (OpenCV's parallel_for pool called sched_yield about 30,000 times a second

@@ -24,7 +24,15 @@ from pathlib import Path
 from typing import Any
 
 from companion.vehicle.sim_control import Command
-from sitl.harness.process import ControlClient, ControlledSitl, SitlProcessError, child_env, die_with_parent, log_tail
+from sitl.harness.process import (
+    REPO_ROOT,
+    ControlClient,
+    ControlledSitl,
+    SitlProcessError,
+    child_env,
+    die_with_parent,
+    log_tail,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -91,7 +99,7 @@ class ServeProcess:
                 stdout=subprocess.PIPE,
                 stderr=log,
                 env=env,
-                cwd=Path(__file__).resolve().parents[2],
+                cwd=REPO_ROOT,
                 preexec_fn=die_with_parent,
             )
         self._buffer, self._outstanding, self.commands = b"", False, 0

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+from sitl.harness.process import REPO_ROOT
+
 SHIPPED = REPO_ROOT / "mission_configs" / "sitl.yaml"
 FENCE_LINE = "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]"
 

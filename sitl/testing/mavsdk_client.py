@@ -10,12 +10,10 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
+from sitl.harness.process import REPO_ROOT
 from sitl.testing.helpers import api_port
-
-REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 class Client:
