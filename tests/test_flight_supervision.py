@@ -191,7 +191,11 @@ def test_a_pilot_who_takes_over_while_offboard_starts_gets_the_vehicle_and_keeps
         # Meanwhile the other loop decides too (the camera is silent: hold on the spot, a setpoint). It must not ask
         # for OFFBOARD a second time while the first request is still out.
         second = asyncio.create_task(tick(app, link, 1.0 + silence_s + 0.2))
-        await asyncio.sleep(0)
+        for _ in range(100):  # until it has decided to hold and waits for the first command to go out
+            if app.outcome.phase == LandingPhase.HOLD.value:
+                break
+            await asyncio.sleep(0)  # one turn of the event loop
+        assert app.outcome.phase == LandingPhase.HOLD.value
         link.ack.set()
         await asyncio.wait_for(asyncio.gather(handover, second), 5.0)
         for k in range(10):  # the ticks that follow see the pilot's mode
