@@ -257,13 +257,12 @@ def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and
     app, link = app_and_link
     asyncio.run(hand_over(app, link))
     assert app._offboard
-    app._beat_wall = time.monotonic() - 10.0  # the event loop has not beaten for 10 s
-    watchdog = threading.Thread(target=app._stall_watchdog, daemon=True)
-    watchdog.start()
+    app.watchdog.clock = lambda: time.monotonic() + 10.0  # the event loop has not beaten for 10 s
+    app.watchdog.start()
     try:
         assert link.stopped_from_thread.wait(timeout=5.0)  # within a quarter of the limit, on a free machine
     finally:
-        app._stop.set()
-        watchdog.join(timeout=5.0)
+        app.watchdog.stop()
     assert not app._offboard
     assert not app._commanding
+    assert not app.watchdog.check()  # disengaged: once is enough

@@ -13,10 +13,12 @@ vehicle's clock throughout.
   the setpoint the simulator must have received first. The same seed gives the same flight at any speed.
 
 Tasks are created together, kept, and cancelled together when one ends or fails (structured concurrency that also
-runs on Python 3.10). A **stall watchdog** thread stops offboard from outside the event loop when the loop stops
-beating for ``decision_watchdog_s``, since MAVSDK keeps re-sending the last setpoint on its own thread. In lockstep it
-is off: simulated time waits for the loop, so a stall cannot move the vehicle, and a wall-clock watchdog would make
-the flight depend on the machine's load.
+runs on Python 3.10). The start (takeoff or the pilot's handover, climb, transit) is decided by
+:class:`~companion.app.start_sequence.StartSequence`, which does no I/O; this module sends what it asks for. A
+**stall watchdog** (:class:`~companion.app.stall_watchdog.StallWatchdog`) stops offboard from outside the event loop
+when the loop stops beating for ``decision_watchdog_s``, since MAVSDK keeps re-sending the last setpoint on its own
+thread. In lockstep it is off: simulated time waits for the loop, so a stall cannot move the vehicle, and a wall-clock
+watchdog would make the flight depend on the machine's load.
 
 In a dry run the same perception and decisions run and are recorded, but nothing is sent: no arming, no mode
 change, no setpoint. Every decision is recorded with what produced it (``source``) and its inputs, so ``slz replay``
@@ -27,12 +29,9 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import contextlib
-import enum
 import functools
 import logging
 import math
-import threading
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -43,6 +42,8 @@ from companion.app.flight_log import RecordKind
 from companion.app.ground_report import GroundReport
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.recorder import FlightRecorder
+from companion.app.stall_watchdog import StallWatchdog
+from companion.app.start_sequence import StartAction, StartSequence, StartStep
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import GeometryError, Pose, polygon_centroid_ne_m
 from companion.guidance.geofence import Geofence
@@ -57,24 +58,8 @@ logger = logging.getLogger(__name__)
 
 TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAILSAFE})
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
-TAKEOFF_RETRY_S = 1.0  # vehicle time between arming attempts while the autopilot refuses
-START_TIMEOUT_S = 120.0  # vehicle time from the first tick to the start of the search
-START_TOLERANCE_M = 1.0  # horizontal distance to the start pose at which the search begins
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
 _OURS = (FlightMode.OFFBOARD, FlightMode.UNKNOWN)  # modes in which offboard setpoints are still the companion's
-
-
-class StartStage(str, enum.Enum):
-    """Before the landing logic starts."""
-
-    WAITING = "waiting"
-    """For the autopilot to accept arming and takeoff (SITL), or for the pilot's handover (the field)."""
-    CLIMBING = "climbing"
-    """Taking off to the start altitude."""
-    TRANSIT = "transit"
-    """Flying to the start pose (``start.start_north_m``, ``start_east_m``)."""
-    STARTED = "started"
-    """The landing logic runs."""
 
 
 @dataclass
@@ -161,19 +146,16 @@ class FlightApp:
         self._area_centre_ne_m = polygon_centroid_ne_m(config.geofence.polygon_ne_m)
         self.outcome = FlightOutcome()
         self._executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="perception")
-        self._beat_wall = time.monotonic()
         self._offboard = False
         self._commanding = not self.dry_run
-        self._stop = threading.Event()
+        self.watchdog = StallWatchdog(
+            config.vehicle.decision_watchdog_s, lambda: self._offboard and self._commanding, self._stalled
+        )
         self._send_lock = asyncio.Lock()  # one command at a time (see _send)
         self.done = asyncio.Event()
-        self._start_stage = StartStage.WAITING
-        self._first_tick_t_s: float | None = None
-        self._last_takeoff_try_t_s = -math.inf
+        self.start_sequence = StartSequence(config.start, self.dry_run)
         self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
         self.tick_setpoint: SetpointNedYaw | None = None  # sent during this lockstep tick
-        self._transit_yaw_deg: float | None = None
-        self._waiting_logged = False
 
     # -- vehicle state ------------------------------------------------------------------------------------------
     def vehicle_state(self) -> VehicleState | None:
@@ -255,7 +237,7 @@ class FlightApp:
     # -- one frame -------------------------------------------------------------------------------------------------
     async def on_frame(self, frame: Frame) -> None:
         """Pair the frame with its pose, run the pipeline and let the landing logic decide."""
-        if self._start_stage is not StartStage.STARTED:
+        if not self.start_sequence.started:
             self.outcome.frames_before_start += 1
             return
         if self.guidance.phase in TERMINAL:
@@ -348,8 +330,8 @@ class FlightApp:
             mode = status.mode.value
             await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
             return
-        if self._start_stage is not StartStage.STARTED:
-            await self._start_step(state)
+        if not self.start_sequence.started:
+            await self._start_step(state, self.start_sequence.step(state, status))
             return
         if self.guidance.phase is LandingPhase.LAND and not status.in_air:
             self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
@@ -365,59 +347,32 @@ class FlightApp:
         if decision is not None:
             await self.apply(decision, "silence", state, silent_s=silent_s)
 
-    async def _start_step(self, state: VehicleState) -> None:
-        """Arm and take off when configured (retrying while the autopilot refuses), climb, then start the search."""
-        start = self.config.start
-        if self._first_tick_t_s is None:
-            self._first_tick_t_s = state.t_s
-        if state.t_s - self._first_tick_t_s > START_TIMEOUT_S:
-            stage = self._start_stage.value
-            raise VehicleError(self.link.name, f"not ready to search {START_TIMEOUT_S:g} s after the start ({stage})")
-        takeoff = start.arm_and_takeoff and not self.dry_run
-        if not takeoff and not self.dry_run and self._start_stage is StartStage.WAITING:
-            # The field: the pilot flies to the area and hands over by switching to a handover mode. No timeout:
-            # the companion waits as long as the pilot flies, and never starts a vehicle that is on the ground.
-            self._first_tick_t_s = state.t_s
-            status = self.link.status
-            if not (status.armed and status.in_air and status.mode in start.handover_modes):
-                if not self._waiting_logged:
-                    self._waiting_logged = True
-                    modes = ", ".join(m.value for m in start.handover_modes)
-                    logger.info("waiting for the pilot's handover: armed, in the air and in %s", modes)
-                    self.recorder.write(RecordKind.WAITING_FOR_HANDOVER, state.t_s, modes=modes)
-                return
-            self.recorder.write(RecordKind.HANDOVER, state.t_s, mode=status.mode.value, altitude_m=state.altitude_m)
-            self._start_stage = StartStage.CLIMBING  # past the wait; nothing to climb
-        if takeoff and self._start_stage is StartStage.WAITING:
-            if state.t_s - self._last_takeoff_try_t_s < TAKEOFF_RETRY_S:
-                return
-            self._last_takeoff_try_t_s = state.t_s
+    async def _start_step(self, state: VehicleState, step: StartStep) -> None:
+        """Do what the start sequence asks at this tick: record, take off, send a transit setpoint, or start."""
+        if step.action is StartAction.TIMED_OUT:
+            raise VehicleError(self.link.name, step.reason)
+        if step.waiting_for_modes is not None:
+            logger.info("waiting for the pilot's handover: armed, in the air and in %s", step.waiting_for_modes)
+            self.recorder.write(RecordKind.WAITING_FOR_HANDOVER, state.t_s, modes=step.waiting_for_modes)
+        if step.handed_over is not None:
+            mode = step.handed_over.value
+            self.recorder.write(RecordKind.HANDOVER, state.t_s, mode=mode, altitude_m=state.altitude_m)
+        if step.action is StartAction.TAKE_OFF:
             try:
-                await self.link.take_off(start.takeoff_altitude_m)
-            except VehicleError as exc:  # pre-arm checks not passed yet: try again later (vehicle time)
+                await self.link.take_off(step.altitude_m)
+            except VehicleError as exc:  # pre-arm checks not passed yet: the sequence asks again later (vehicle time)
                 self.outcome.takeoff_refusals += 1
                 logger.info("takeoff not accepted yet: %s", exc)
                 return
-            self._start_stage = StartStage.CLIMBING
-            self.recorder.write(RecordKind.TAKEOFF, state.t_s, altitude_m=start.takeoff_altitude_m)
-            return
-        if takeoff and state.altitude_m < start.takeoff_altitude_m - 0.5:
-            return
-        if start.start_north_m is not None and start.start_east_m is not None and not self.dry_run:
+            self.start_sequence.took_off()
+            self.recorder.write(RecordKind.TAKEOFF, state.t_s, altitude_m=step.altitude_m)
+        elif step.action is StartAction.TRANSIT:
             # Fly to the start pose first (SITL campaigns): through the same safety filter as every setpoint.
-            self._start_stage = StartStage.TRANSIT
-            n, e, alt = start.start_north_m, start.start_east_m, start.takeoff_altitude_m
-            if math.hypot(state.north_m - n, state.east_m - e) > START_TOLERANCE_M:
-                if self._transit_yaw_deg is None:
-                    self._transit_yaw_deg = state.yaw_deg  # held: see LandingGuidance.safe_setpoint
-                setpoint = self.guidance.safe_setpoint(state, n, e, alt, self._transit_yaw_deg)
-                await self._send(
-                    Decision(state.t_s, LandingPhase.IDLE, CommandKind.SETPOINT, setpoint, None, "transit")
-                )
-                return
-        self._start_stage = StartStage.STARTED
-        self._last_frame_t_s = state.t_s  # perception silence counts from here
-        await self.apply(self.guidance.start(state), "start", state)
+            setpoint = self.guidance.safe_setpoint(state, step.north_m, step.east_m, step.altitude_m, step.yaw_deg)
+            await self._send(Decision(state.t_s, LandingPhase.IDLE, CommandKind.SETPOINT, setpoint, None, "transit"))
+        elif step.action is StartAction.START:
+            self._last_frame_t_s = state.t_s  # perception silence counts from here
+            await self.apply(self.guidance.start(state), "start", state)
 
     # -- what the drivers see (companion.app.drivers.FlightLoop) ----------------------------------------------------
     @property
@@ -465,21 +420,12 @@ class FlightApp:
             self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act
         self.done.set()
 
-    async def _beat(self) -> None:
-        """The event loop's heartbeat for the stall watchdog."""
-        while not self.done.is_set():
-            self._beat_wall = time.monotonic()
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(self.done.wait(), self.config.vehicle.decision_watchdog_s / 5)
-
-    def _stall_watchdog(self) -> None:
-        limit = self.config.vehicle.decision_watchdog_s
-        while not self._stop.wait(limit / 4):
-            if self._offboard and self._commanding and time.monotonic() - self._beat_wall > limit:
-                logger.error("decision loop stalled for %.2f s: stopping offboard", time.monotonic() - self._beat_wall)
-                self.link.stop_offboard_blocking()
-                self._offboard = False
-                self._commanding = False
+    def _stalled(self, stalled_s: float) -> None:
+        """The stall watchdog's action, on its thread: stop offboard, and command nothing more in this flight."""
+        logger.error("decision loop stalled for %.2f s: stopping offboard", stalled_s)
+        self.link.stop_offboard_blocking()
+        self._offboard = False
+        self._commanding = False
 
     # -- the flight ------------------------------------------------------------------------------------------------
     async def run(self, timeout_s: float) -> FlightOutcome:
@@ -493,9 +439,8 @@ class FlightApp:
             self.lockstep = None
         self.outcome.lockstep = self.lockstep is not None
         self.recorder.write(RecordKind.CLOCK, None, lockstep=self.outcome.lockstep)
-        watchdog = threading.Thread(target=self._stall_watchdog, name="stall-watchdog", daemon=True)
         if self.lockstep is None:
-            watchdog.start()
+            self.watchdog.start()
         if self.lockstep is not None:
             drivers = [LockstepDriver(self, self.lockstep).run()]
         else:
@@ -503,7 +448,7 @@ class FlightApp:
             drivers = [free.frames(), free.ticks()]
         tasks: list[asyncio.Task[Any]] = [
             *(asyncio.create_task(driver) for driver in drivers),
-            asyncio.create_task(self._beat(), name="beat"),
+            asyncio.create_task(self.watchdog.heartbeat(self.done), name="beat"),
             asyncio.create_task(self.done.wait(), name="done"),
         ]
         try:
@@ -523,9 +468,7 @@ class FlightApp:
             _, pending = await asyncio.wait(tasks, timeout=CANCEL_GRACE_S)
             for task in pending:
                 logger.error("task %s did not stop within %g s of its cancellation", task.get_name(), CANCEL_GRACE_S)
-            self._stop.set()
-            if watchdog.is_alive():
-                watchdog.join(timeout=2.0)
+            self.watchdog.stop()
             self._executor.shutdown(wait=True)
             if self.lockstep is not None:
                 self.lockstep.release()
