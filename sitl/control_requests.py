@@ -11,7 +11,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from companion.vehicle.sim_control import Command, Event, RequestError, flag, lockstep_ack, number
+from companion.vehicle.sim_control import Command, Event, RequestError, flag, frames_wanted, lockstep_ack, number
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MAX_SENDERS_REPORTED, MavlinkServer
@@ -80,7 +80,7 @@ class ControlRequests:
                 components = {f"ned_mps[{i}]": v for i, v in enumerate(wind)}
                 v.dynamics.set_wind(np.array([number(components, k, -MAX_WIND_MPS, MAX_WIND_MPS) for k in components]))
             elif cmd == Command.LOCKSTEP_SUBSCRIBE:
-                v.lockstep.subscribe(addr)  # the pending tick goes (again) to this client
+                v.lockstep.subscribe(addr, frames_wanted(request))  # the pending tick goes (again) to this client
                 reply["tick_period_s"] = v.config.lockstep_period_s
             elif cmd == Command.LOCKSTEP_RELEASE:  # the client is leaving: run free from here on
                 v.lockstep.release()
@@ -139,6 +139,7 @@ class ControlRequests:
                 "dropped": v.camera.server.stats.dropped,
                 "clients": v.camera.server.stats.clients,
                 "refused": v.camera.server.stats.refused,
+                "not_wanted": v.camera.server.stats.not_wanted,
             },
             "handler_errors": v.handler_errors,
             "control_malformed": v.control.malformed if v.control is not None else 0,

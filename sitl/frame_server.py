@@ -28,6 +28,7 @@ class FrameStats:
     dropped: int = 0
     clients: int = 0
     refused: int = 0  # connections turned away while a client was connected
+    not_wanted: int = 0  # lockstep frames not drawn: the client asked for none (before its flight starts)
 
 
 class FrameServer:

@@ -41,6 +41,7 @@ class LockstepGate:
         self.next_tick_s = 0.0
         self.released = False  # the client left the lockstep: the SITL runs free
         self.latched_setpoint: SetpointNedYaw | None = None  # the setpoint acknowledged with the last tick
+        self.frames_wanted = True  # the client wants a camera frame with the next tick
         self.setpoints_between_ticks = 0  # ignored: arrived between ticks and not the acknowledged setpoint
         self._sent_wall = math.nan  # when the current tick went out (NaN: not yet)
         self._ack: dict[str, Any] | None = None
@@ -48,8 +49,9 @@ class LockstepGate:
         self._frame_client_lost_wall = math.nan
 
     # -- the client --------------------------------------------------------------------------------------------
-    def subscribe(self, addr: Address) -> None:
-        """``addr`` becomes the client (the pending tick is sent to it again); refused (ValueError) when this SITL
+    def subscribe(self, addr: Address, frames: bool = True) -> None:
+        """``addr`` becomes the client (the pending tick is sent to it again), with a camera frame at each tick
+        unless ``frames`` is False (until an acknowledgement asks for them); refused (ValueError) when this SITL
         does not step, or another client acknowledged a tick within :data:`LIVE_CLIENT_S`."""
         if not self.enabled:
             raise ValueError("this SITL does not run in lockstep")
@@ -57,6 +59,7 @@ class LockstepGate:
         if self.client is not None and addr != self.client and live:
             raise ValueError(f"lockstep has a live client (it acknowledged a tick within {LIVE_CLIENT_S:g} s)")
         self.client = addr
+        self.frames_wanted = frames
         self.released = False
         self._sent_wall = math.nan
 
@@ -103,6 +106,8 @@ class LockstepGate:
     def passed(self, latest_setpoint: SetpointNedYaw | None) -> None:
         """The current tick was acknowledged and its MAVLink received: on to the next; ``latest_setpoint`` holds
         until then (a late re-send of an older one between ticks is ignored)."""
+        if self._ack is not None:
+            self.frames_wanted = bool(self._ack.get("frames", True))
         self._ack = None
         self.seq += 1
         self.next_tick_s += self.period_s

@@ -16,7 +16,17 @@ from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import WeatherKind
+from sitl.world.scene_cache import KeyedCache
 from sitl.world.weather import WeatherSchedule, apply_weather
+
+PARKS: KeyedCache[Park] = KeyedCache("parks", capacity=2)
+"""The parks of the last scenes this process flew (sitl.world.scene_cache)."""
+
+
+def _park(config: SitlConfig) -> Park:
+    park = Park(config.seed, roi_side_m=config.scenario.roi_side_m, ground=config.scenario.ground)
+    park.ground_bgr.setflags(write=False)  # shared by the missions of one scene: nobody may paint on it
+    return park
 
 
 class SimCamera:
@@ -31,7 +41,7 @@ class SimCamera:
             float(rng.uniform(scenario.sun_azimuth_deg.low, scenario.sun_azimuth_deg.high)),
             float(rng.uniform(scenario.ambient.low, scenario.ambient.high)),
         )
-        self.park = Park(config.seed, roi_side_m=scenario.roi_side_m, ground=scenario.ground)
+        self.park = PARKS.get((config.seed, scenario.roi_side_m, scenario.ground), lambda: _park(config))
         self.crowd = Crowd(scenario, config.seed)
         self.weather = WeatherSchedule(scenario, config.seed)
         self.intrinsics = PinholeCamera.from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)
@@ -66,6 +76,12 @@ class SimCamera:
         sent = self.server.send(encode_frame(self.seq, t_s, image))
         self.seq += 1
         return sent
+
+    def skip(self) -> None:
+        """A frame the lockstep client does not want: not drawn, counted, its sequence number passed (the frames
+        after it are the frames they would have been)."""
+        self.server.stats.not_wanted += 1
+        self.seq += 1
 
     def people_at(self, t_s: float) -> dict[str, Any]:
         """Ground truth at simulated time ``t_s`` (the crowd walks there first, as a frame would)."""

@@ -248,12 +248,15 @@ class SitlVehicle:
                     select.select(sockets, [], [], 0.05)  # waiting for the frame client
                     self.clock.resync()
                     return False
-                self.camera.capture(self.clock.now_s, self.dynamics.state())
-                frame_seq = self.camera.seq - 1
-                if not self.camera.server.flush(time.monotonic() + gate.timeout_s):
-                    logger.error("lockstep: the frame client did not take frame %d; stopping", frame_seq)
-                    self._stop_with(3)
-                    return False
+                if not gate.frames_wanted:
+                    self.camera.skip()  # the client does not look at frames yet (before its flight starts)
+                else:
+                    self.camera.capture(self.clock.now_s, self.dynamics.state())
+                    frame_seq = self.camera.seq - 1
+                    if not self.camera.server.flush(time.monotonic() + gate.timeout_s):
+                        logger.error("lockstep: the frame client did not take frame %d; stopping", frame_seq)
+                        self._stop_with(3)
+                        return False
             self._send_tick_pose()
             self._write_truth()
             self.control.send(Tick(gate.seq, self.clock.now_s, frame_seq).to_event(), gate.client)

@@ -15,7 +15,9 @@ from onnx import TensorProto, helper
 from companion.perception.blob_model import build_blob_density_model, save_model
 from companion.perception.density import (
     CONTRACT_METADATA_KEY,
+    ChannelOrder,
     DensityModelContract,
+    InputEncoder,
     OnnxDensityModel,
     TensorLayout,
     downscaled_size,
@@ -99,6 +101,46 @@ def test_contract_from_metadata_and_nhwc_bgr_normalization(tmp_path: Path) -> No
     frame[..., 0], frame[..., 1], frame[..., 2] = 50, 60, 70  # B, G, R
     # ((50-10) + (60-20) + (70-30)) / 2 / 3 = 20 in every cell.
     np.testing.assert_allclose(model.predict(frame).values, 20.0, rtol=1e-6)
+
+
+def reference_tensor(frame_bgr: np.ndarray, c: DensityModelContract) -> np.ndarray:
+    """The contract's input, written out as arithmetic over the whole frame."""
+    image = frame_bgr[:, :, ::-1] if c.channel_order is ChannelOrder.RGB else frame_bgr
+    x = image.astype(np.float32) * np.float32(c.scale)
+    x = (x - np.asarray(c.mean, dtype=np.float32)) / np.asarray(c.std, dtype=np.float32)
+    return np.ascontiguousarray(x.transpose(2, 0, 1)[None] if c.layout is TensorLayout.NCHW else x[None])
+
+
+@pytest.mark.parametrize("layout", ["nchw", "nhwc"])
+@pytest.mark.parametrize("order", ["rgb", "bgr"])
+@pytest.mark.parametrize(
+    ("scale", "mean", "std"), [(1 / 255, (0.45, 0.45, 0.45), (0.25, 0.25, 0.25)), (1.0, (10, 20, 30), (2, 3, 4))]
+)
+def test_the_input_tensor_is_the_contracts_arithmetic_to_the_bit(
+    layout: str, order: str, scale: float, mean: tuple[float, ...], std: tuple[float, ...]
+) -> None:
+    c = DensityModelContract.model_validate(
+        {**CONTRACT, "layout": layout, "channel_order": order, "scale": scale, "mean": mean, "std": std}
+    )
+    rng = np.random.default_rng(7)
+    frame = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    frame[0, :3] = [[0, 0, 0], [255, 255, 255], [0, 128, 255]]  # both ends of the byte range
+    encoder = InputEncoder(c)
+    encoder.encode(255 - frame)  # the buffer holds another frame's tensor first: every value is written anew
+    tensor = encoder.encode(frame)
+    expected = reference_tensor(frame, c)
+    assert tensor.dtype == np.float32
+    assert tensor.flags.c_contiguous
+    assert tensor.shape == expected.shape
+    assert np.array_equal(tensor.view(np.uint32), expected.view(np.uint32))  # the same bits, not only close
+
+
+def test_the_shipped_models_input_is_the_contracts_arithmetic_to_the_bit() -> None:
+    model = OnnxDensityModel(Path(__file__).resolve().parents[1] / "models" / "density" / "slz_lite.onnx")
+    c = model.contract
+    frame = np.random.default_rng(3).integers(0, 256, (c.input_height_px, c.input_width_px, 3), dtype=np.uint8)
+    expected = reference_tensor(frame, c)
+    assert np.array_equal(InputEncoder(c).encode(frame).view(np.uint32), expected.view(np.uint32))
 
 
 def test_contract_from_a_sidecar_file(tmp_path: Path) -> None:

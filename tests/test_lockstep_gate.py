@@ -33,6 +33,23 @@ def test_ticks_pass_only_with_the_acknowledgement_of_the_tick_out() -> None:
     assert gate.at_tick(0.1)
 
 
+def test_frames_follow_the_subscription_then_each_acknowledgement() -> None:
+    gate = LockstepGate(enabled=True, period_s=0.1, timeout_s=10.0)
+    assert gate.frames_wanted  # a client that says nothing gets a frame with every tick
+    gate.subscribe(CLIENT, frames=False)
+    assert not gate.frames_wanted
+    for seq, frames in enumerate([False, False, True, True]):
+        gate.sent()
+        gate.acknowledge(CLIENT, {"seq": seq, "frames": frames})
+        assert gate.pending_ack() is not None
+        gate.passed(None)
+        assert gate.frames_wanted is frames  # for the next tick
+    gate.sent()
+    gate.acknowledge(CLIENT, {"seq": 4})  # an acknowledgement without the flag: frames
+    gate.passed(None)
+    assert gate.frames_wanted
+
+
 def test_a_stranger_can_neither_acknowledge_nor_take_a_live_lockstep() -> None:
     gate = LockstepGate(enabled=True, period_s=0.1, timeout_s=10.0)
     gate.subscribe(CLIENT)

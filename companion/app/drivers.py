@@ -38,6 +38,12 @@ class FlightLoop(Protocol):
         """The camera has failed in this flight (no more frames will come)."""
         ...
 
+    @property
+    def wants_frames(self) -> bool:
+        """Frames are looked at now (before its start a flight drops them: a simulator in lockstep need not draw
+        them)."""
+        ...
+
     def frames(self) -> AsyncIterator[Frame]:
         """The camera's frames (an async generator: the driver closes it)."""
         ...
@@ -127,10 +133,14 @@ class LockstepDriver:
                 return None
 
     async def run(self) -> None:
-        """Tick by tick until the flight is done: the tick's pose, its frame, the decisions, the acknowledgement."""
+        """Tick by tick until the flight is done: the tick's pose, its frame, the decisions, the acknowledgement.
+
+        The camera stream is read from the first tick whose acknowledgement asks for frames (the flight's start; the
+        lockstep was opened without them), or from the first frame that comes anyway: before that nothing waits on
+        it, so a camera that has nothing to send is not a silent one."""
         app = self.app
         queue: asyncio.Queue[Frame | None] = asyncio.Queue()
-        reader = asyncio.create_task(self._read_frames(queue), name="frames")
+        reader: asyncio.Task[None] | None = None
         link_lost_after_s = app.link_lost_after_s
         try:
             while not app.done.is_set():
@@ -141,16 +151,22 @@ class LockstepDriver:
                     app.link_lost(link_lost_after_s)
                     return
                 if tick.frame_seq is not None and not app.camera_is_lost:
+                    if reader is None:
+                        reader = asyncio.create_task(self._read_frames(queue), name="frames")
                     frame = await self._frame_of(tick, queue)
                     if frame is not None:
                         await app.on_frame(frame)
                 state = app.vehicle_state()
                 if state is not None and not app.done.is_set():
                     await app.on_tick(state)
-                self.lockstep.ack(tick, app.take_tick_setpoint())
+                frames = app.wants_frames
+                if frames and reader is None:
+                    reader = asyncio.create_task(self._read_frames(queue), name="frames")
+                self.lockstep.ack(tick, app.take_tick_setpoint(), frames)
         finally:
-            reader.cancel()
-            await asyncio.gather(reader, return_exceptions=True)
+            if reader is not None:
+                reader.cancel()
+                await asyncio.gather(reader, return_exceptions=True)
 
 
 class FreeRunningDriver:

@@ -383,6 +383,10 @@ class FlightApp:
     def camera_is_lost(self) -> bool:
         return self.outcome.camera_lost
 
+    @property
+    def wants_frames(self) -> bool:
+        return self.start_sequence.started
+
     def frames(self) -> AsyncIterator[Frame]:
         return self.source.frames()
 
@@ -435,7 +439,7 @@ class FlightApp:
         self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
         await self.source.open()  # a missing camera fails the start, before the vehicle is touched
         await self.link.connect(cfg.vehicle.connect_timeout_s)
-        if self.lockstep is not None and not await self.lockstep.open():
+        if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
             self.lockstep = None
         self.outcome.lockstep = self.lockstep is not None
         self.recorder.write(RecordKind.CLOCK, None, lockstep=self.outcome.lockstep)

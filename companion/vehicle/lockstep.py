@@ -29,6 +29,7 @@ from companion.vehicle.sim_control import (
     ack_expecting,
     decode_event,
     encode,
+    subscribe_request,
 )
 
 logger = logging.getLogger(__name__)
@@ -78,8 +79,9 @@ class LockstepClient:
         self._transport: asyncio.DatagramTransport | None = None
         self._protocol: _Protocol | None = None
 
-    async def open(self) -> bool:
-        """Subscribe; True when the simulator steps with us, False when it runs free (it said so)."""
+    async def open(self, frames: bool = True) -> bool:
+        """Subscribe; True when the simulator steps with us, False when it runs free (it said so). ``frames`` False:
+        the ticks come without camera frames until an acknowledgement asks for them."""
         loop = asyncio.get_running_loop()
         try:
             transport, protocol = await loop.create_datagram_endpoint(
@@ -88,7 +90,7 @@ class LockstepClient:
         except OSError as exc:
             raise LockstepError(self.url, f"cannot open a socket: {exc}") from None
         self._transport, self._protocol = transport, protocol
-        self._send(encode(Command.LOCKSTEP_SUBSCRIBE, id=1))
+        self._send(subscribe_request(1, frames))
         reply = await self._next(lambda e: e.get("id") == 1, "the reply to lockstep_subscribe")
         if reply.get("event") == Event.ERROR:
             logger.info("%s runs free (%s): no lockstep", self.url, reply.get("error"))
@@ -125,10 +127,10 @@ class LockstepClient:
         except RequestError as exc:
             raise LockstepError(self.url, f"malformed tick: {exc}") from None
 
-    def ack(self, tick: Tick, setpoint: SetpointNedYaw | None = None) -> None:
+    def ack(self, tick: Tick, setpoint: SetpointNedYaw | None = None, frames: bool = True) -> None:
         """Let the simulator pass ``tick`` once it has received ``setpoint``, the position setpoint sent while handling
-        the tick (None: nothing to wait for)."""
-        self._send(ack_expecting(tick, setpoint))
+        the tick (None: nothing to wait for); ``frames``: whether the next tick should come with a camera frame."""
+        self._send(ack_expecting(tick, setpoint, frames))
 
     def release(self) -> None:
         """Leave the lockstep: the simulator runs free from here (its own failsafes act without us)."""

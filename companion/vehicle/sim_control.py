@@ -111,13 +111,29 @@ def same_setpoint(arrived: SetpointNedYaw | tuple[float, ...], wanted: SetpointN
     return bool(np.array_equal(arrived_ned, wanted_ned)) and not abs(arrived[3] - float(wanted[3])) > 1e-4
 
 
-def ack_expecting(tick: Tick, setpoint: SetpointNedYaw | None) -> bytes:
+def ack_expecting(tick: Tick, setpoint: SetpointNedYaw | None, frames: bool = True) -> bytes:
     """``lockstep_ack`` of a client that cannot count its MAVLink messages (MAVSDK re-sends on its own thread): the
-    SITL moves on once the position setpoint it names has arrived (or at once, with None)."""
+    SITL moves on once the position setpoint it names has arrived (or at once, with None). ``frames``: whether the
+    client wants a camera frame with the next tick (see :func:`lockstep_ack`)."""
     expect: dict[str, Any] = {}
     if setpoint is not None:
         expect["setpoint"] = [float(v) for v in setpoint]
-    return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect)
+    if frames:
+        return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect)
+    return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect, frames=False)
+
+
+def subscribe_request(request_id: int, frames: bool = True) -> bytes:
+    """``lockstep_subscribe``; ``frames`` False: no camera frame with the ticks until an acknowledgement asks for
+    them again (a client that does not look at frames before its flight starts)."""
+    if frames:
+        return encode(Command.LOCKSTEP_SUBSCRIBE, id=request_id)
+    return encode(Command.LOCKSTEP_SUBSCRIBE, id=request_id, frames=False)
+
+
+def frames_wanted(request: dict[str, Any]) -> bool:
+    """The optional ``frames`` flag of a ``lockstep_subscribe`` or ``lockstep_ack`` (absent: True)."""
+    return True if "frames" not in request else flag(request, "frames")
 
 
 def ack_counting(seq: int, mavlink_sent: int, system_id: int, component_id: int) -> bytes:
@@ -211,12 +227,16 @@ def flag(request: dict[str, Any], key: str) -> bool:
 
 def lockstep_ack(request: dict[str, Any]) -> dict[str, Any]:
     """A checked ``lockstep_ack``: ``seq`` and either ``expect`` (a setpoint of four numbers and/or command counts)
-    or the client's own count of MAVLink messages (``mavlink_sent`` from ``sysid``/``compid``)."""
+    or the client's own count of MAVLink messages (``mavlink_sent`` from ``sysid``/``compid``); ``frames`` (optional,
+    default true): whether the next tick comes with a camera frame. A frame skipped that way is not drawn, and its
+    sequence number passes as if it had been (a frame's pixels depend on its instant and number only)."""
     seq = whole_number(request, "seq", 0, 1 << 53)
+    frames = frames_wanted(request)
     expect = request.get("expect")
     if expect is None:
         return {
             "seq": seq,
+            "frames": frames,
             "mavlink_sent": whole_number(request, "mavlink_sent", 0, 1 << 53),
             "sysid": whole_number(request, "sysid", 0, 255),
             "compid": whole_number(request, "compid", 0, 255),
@@ -240,4 +260,4 @@ def lockstep_ack(request: dict[str, Any]) -> dict[str, Any]:
                 raise RequestError("expect.commands: keys are MAV_CMD ids")
             counts[int(key)] = whole_number(commands, key, 0, 1 << 31)
         checked["commands"] = counts
-    return {"seq": seq, "expect": checked}
+    return {"seq": seq, "frames": frames, "expect": checked}

@@ -27,6 +27,7 @@ from companion.geometry import F64Array, PinholeCamera, Pose
 from sitl.render.meshes import bake_lighting, object_mesh, person_mesh, shadow_mesh
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
+from sitl.world.scene_cache import KeyedCache
 
 U8Image = npt.NDArray[np.uint8]
 
@@ -49,6 +50,11 @@ class Light:
     sun_dir_enu: F64Array  # (3,) unit vector the light travels along (pointing down)
     ambient: float
     sun_rgb: F64Array  # (3,) relative colour of sunlight
+
+    @property
+    def key(self) -> tuple[float, ...]:
+        """Everything this light is made of, as a cache key."""
+        return (*(float(v) for v in self.sun_dir_enu), float(self.ambient), *(float(v) for v in self.sun_rgb))
 
     @classmethod
     def from_angles(cls, elevation_deg: float, azimuth_deg: float, ambient: float, warmth: float = 0.0) -> Light:
@@ -90,6 +96,12 @@ class _Bgr:
 _PATCHED: list[bool] = []
 DRAW_ORDER: weakref.WeakKeyDictionary[Any, dict[Any, int]] = weakref.WeakKeyDictionary()
 """Per pyrender scene: its mesh nodes in the order they were added (see :func:`_patch_pyrender`)."""
+
+# What the last scenes' seeds determined, kept across the missions of this process (sitl.world.scene_cache): the
+# park's lit ground texture and its objects for two scenes, each person's lit mesh for a few hundred people.
+LIT_GROUNDS: KeyedCache[npt.NDArray[np.uint8]] = KeyedCache("lit grounds", capacity=2)
+OBJECT_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("park objects", capacity=2)
+PERSON_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("person meshes", capacity=512)
 
 
 def _patch_pyrender(pyrender: Any, GL: Any) -> None:
@@ -215,9 +227,7 @@ class WorldRenderer:
         corners = np.array([[-e, -e, 0.0], [e, -e, 0.0], [e, e, 0.0], [-e, e, 0.0]])  # ENU
         uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # texture row 0 is north: v = 1 at north
         ground = trimesh.Trimesh(vertices=corners, faces=[[0, 1, 2], [0, 2, 3]], process=False)
-        image = self.park.ground_bgr[:, :, ::-1]
-        light = self.light.ambient + (1 - self.light.ambient) * max(0.0, -float(self.light.sun_dir_enu[2]))
-        lit = np.clip(image.astype(np.float32) * light * self.light.sun_rgb[None, None, :], 0, 255).astype(np.uint8)
+        lit = LIT_GROUNDS.get((self.park.key, self.light.key), self._lit_ground)
         from OpenGL import GL
 
         # Nearest texel, no mipmaps: trilinear sampling of the full-screen ground cost a software rasterizer ~6 ms,
@@ -230,16 +240,33 @@ class WorldRenderer:
         )
         self._black[self._add(pr.Mesh([primitive]))] = (0, 0, 0)
         if self.park.objects:
-            objects = trimesh.util.concatenate([object_mesh(o) for o in self.park.objects])
-            bake_lighting(objects, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
+            objects = OBJECT_MESHES.get((self.park.key, self.light.key), self._objects_mesh).copy()
             self._black[self._add(pr.Mesh.from_trimesh(objects, smooth=True))] = (0, 0, 0)
 
+    def _lit_ground(self) -> npt.NDArray[np.uint8]:
+        """The ground texture under this light, RGB (read-only: it is shared through LIT_GROUNDS)."""
+        image = self.park.ground_bgr[:, :, ::-1]
+        light = self.light.ambient + (1 - self.light.ambient) * max(0.0, -float(self.light.sun_dir_enu[2]))
+        lit = np.clip(image.astype(np.float32) * light * self.light.sun_rgb[None, None, :], 0, 255).astype(np.uint8)
+        lit.setflags(write=False)
+        return lit
+
+    def _objects_mesh(self) -> trimesh.Trimesh:
+        """The park's objects in one mesh, lit."""
+        objects = trimesh.util.concatenate([object_mesh(o) for o in self.park.objects])
+        bake_lighting(objects, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
+        return objects
+
     def _person(self, index: int) -> trimesh.Trimesh:
+        """Person ``index`` at the origin, lit (a copy: the caller moves it)."""
         a = self.crowd.appearances[index]
-        heading = float(np.random.default_rng([index, 6]).uniform(-math.pi, math.pi))
-        mesh = person_mesh(a, heading)
-        bake_lighting(mesh, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
-        return mesh
+
+        def build() -> trimesh.Trimesh:
+            heading = float(np.random.default_rng([index, 6]).uniform(-math.pi, math.pi))
+            mesh = person_mesh(a, heading)
+            return bake_lighting(mesh, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
+
+        return PERSON_MESHES.get((a, index, self.light.key), build).copy()
 
     def _shadow(self, index: int, north_m: float, east_m: float) -> trimesh.Trimesh:
         a = self.crowd.appearances[index]

@@ -137,6 +137,8 @@ class Park:
         ground: GroundKind = GroundKind.PROCEDURAL,
     ) -> None:
         rng = np.random.default_rng([seed, 5])
+        self.key = (seed, roi_side_m, extent_m, texture_res_m, style, paint, ground)
+        """Everything this park is made from (a cache key: two parks with one key are the same park)."""
         self.style = style
         self.extent_m = extent_m
         self.texture_res_m = texture_res_m

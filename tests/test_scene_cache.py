@@ -1,0 +1,79 @@
+"""What a seed determines is kept across the missions of one SITL process, under keys made of everything that feeds
+it: a scene built from the caches draws the pixels a scene built anew draws, and a different light or seed is a
+different entry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from sitl.render.camera import LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES, Light, WorldRenderer
+from sitl.world.crowd import Crowd
+from sitl.world.park import Park
+from sitl.world.scenario import ScenarioConfig
+from sitl.world.scene_cache import KeyedCache
+
+CAMERA = PinholeCamera.from_hfov(320, 240, 90.0)
+NADIR = T_body_camera_from_mount()
+POSE = Pose.from_ned_euler(2.0, -1.0, -16.0, 0.03, -0.02, 0.4)
+CACHES = (LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES)
+
+
+@pytest.mark.unit
+def test_the_least_recently_used_entry_goes_first_and_hits_are_counted() -> None:
+    cache: KeyedCache[str] = KeyedCache("test", capacity=2)
+    built: list[str] = []
+
+    def build(value: str) -> str:
+        built.append(value)
+        return value
+
+    assert cache.get("a", lambda: build("a")) == "a"
+    assert cache.get("b", lambda: build("b")) == "b"
+    assert cache.get("a", lambda: build("a again")) == "a"  # a hit, and "a" is now the most recent
+    assert cache.get("c", lambda: build("c")) == "c"  # "b" goes
+    assert cache.get("b", lambda: build("b again")) == "b again"
+    assert built == ["a", "b", "c", "b again"]
+    assert (cache.hits, cache.misses, len(cache)) == (1, 4, 2)
+    with pytest.raises(ValueError, match="capacity"):
+        KeyedCache("empty", capacity=0)
+
+
+def renderer(seed: int, light: Light) -> WorldRenderer:
+    return WorldRenderer(Park(seed), Crowd(ScenarioConfig(moving_fraction=0.3), seed), CAMERA, NADIR, light)
+
+
+@pytest.mark.integration
+def test_a_scene_from_the_caches_draws_the_pixels_of_a_scene_built_anew() -> None:
+    light = Light.from_angles(55.0, 200.0, 0.5)
+    for cache in CACHES:
+        cache.clear()
+    fresh = renderer(33, light)
+    people = len(fresh.crowd)
+    assert people > 0
+    assert fresh.crowd.moving.any()
+    assert not fresh.crowd.moving.all()  # still people and walkers: both kinds of mesh come from the cache
+    hits_before = [cache.hits for cache in CACHES]
+    cached = renderer(33, light)
+    hits = [cache.hits - before for cache, before in zip(CACHES, hits_before, strict=True)]
+    try:
+        assert hits[0] == 1
+        assert hits[1] == (1 if fresh.park.objects else 0)
+        assert hits[2] == people
+        for t_s in (0.0, 2.5):  # the walkers have moved by the second frame
+            a, b = fresh.render(POSE, t_s), cached.render(POSE, t_s)
+            np.testing.assert_array_equal(a.image_bgr, b.image_bgr)
+            np.testing.assert_array_equal(a.person_mask, b.person_mask)
+        assert a.person_mask.any()
+        # Another light (the same seed): another entry, not the cached one.
+        misses = PERSON_MESHES.misses
+        other = renderer(33, Light.from_angles(30.0, 200.0, 0.5))
+        try:
+            assert PERSON_MESHES.misses - misses == people
+            assert not np.array_equal(other.render(POSE, 2.5).image_bgr, fresh.render(POSE, 2.5).image_bgr)
+        finally:
+            other.close()
+    finally:
+        fresh.close()
+        cached.close()
