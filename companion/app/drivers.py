@@ -142,6 +142,10 @@ class LockstepDriver:
         queue: asyncio.Queue[Frame | None] = asyncio.Queue()
         reader: asyncio.Task[None] | None = None
         link_lost_after_s = app.link_lost_after_s
+
+        def read_frames() -> asyncio.Task[None]:
+            return reader or asyncio.create_task(self._read_frames(queue), name="frames")
+
         try:
             while not app.done.is_set():
                 tick = await self.lockstep.next_tick()
@@ -151,8 +155,7 @@ class LockstepDriver:
                     app.link_lost(link_lost_after_s)
                     return
                 if tick.frame_seq is not None and not app.camera_is_lost:
-                    if reader is None:
-                        reader = asyncio.create_task(self._read_frames(queue), name="frames")
+                    reader = read_frames()
                     frame = await self._frame_of(tick, queue)
                     if frame is not None:
                         await app.on_frame(frame)
@@ -160,8 +163,8 @@ class LockstepDriver:
                 if state is not None and not app.done.is_set():
                     await app.on_tick(state)
                 frames = app.wants_frames
-                if frames and reader is None:
-                    reader = asyncio.create_task(self._read_frames(queue), name="frames")
+                if frames:
+                    reader = read_frames()
                 self.lockstep.ack(tick, app.take_tick_setpoint(), frames)
         finally:
             if reader is not None:

@@ -118,17 +118,18 @@ def ack_expecting(tick: Tick, setpoint: SetpointNedYaw | None, frames: bool = Tr
     expect: dict[str, Any] = {}
     if setpoint is not None:
         expect["setpoint"] = [float(v) for v in setpoint]
-    if frames:
-        return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect)
-    return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect, frames=False)
+    return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect, **_frames_field(frames))
 
 
 def subscribe_request(request_id: int, frames: bool = True) -> bytes:
     """``lockstep_subscribe``; ``frames`` False: no camera frame with the ticks until an acknowledgement asks for
     them again (a client that does not look at frames before its flight starts)."""
-    if frames:
-        return encode(Command.LOCKSTEP_SUBSCRIBE, id=request_id)
-    return encode(Command.LOCKSTEP_SUBSCRIBE, id=request_id, frames=False)
+    return encode(Command.LOCKSTEP_SUBSCRIBE, id=request_id, **_frames_field(frames))
+
+
+def _frames_field(frames: bool) -> dict[str, bool]:
+    """The ``frames`` flag as a request carries it: only when False (absent means frames, as older clients send)."""
+    return {} if frames else {"frames": False}
 
 
 def frames_wanted(request: dict[str, Any]) -> bool:
