@@ -24,7 +24,7 @@ from sitl.campaign.metrics import (
     with_obstacles,
 )
 from sitl.campaign.report import PAPER_TABLE1, build_report, completed, paper_comparison, people_density
-from sitl.campaign.runner import CampaignError, missions_to_fly, worker_instances
+from sitl.campaign.runner import CampaignError, missions_to_fly, scene_groups, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, holm, mcnemar_exact, paired_mean_difference, rate_difference, wilson
 from sitl.campaign.worker import error_result
@@ -359,6 +359,19 @@ def test_a_result_of_an_earlier_metrics_definition_is_flown_again_on_resume() ->
         )
         == []
     )
+
+
+def test_a_scene_s_missions_go_to_one_worker_together_run_by_run() -> None:
+    spec = load_campaign_spec(REPO_ROOT / "mission_configs" / "campaigns" / "paper_table1_roi_sample.yaml")
+    todo = missions_to_fly(spec.missions(), {})
+    groups = scene_groups(todo)
+    assert sorted(p.mission_id for group in groups for p in group) == sorted(p.mission_id for p in todo)
+    for group in groups:  # one scene each: one condition, one run, so one seed; each strategy once
+        assert len({(p.condition.name, p.run, p.seed) for p in group}) == 1
+        assert len({p.strategy.name for p in group}) == len(group)
+    assert [len(g) for g in groups[:4]] == [3, 2, 2, 2]  # static flies random too
+    assert [g[0].run for g in groups] == sorted(g[0].run for g in groups)  # a stopped campaign: cells even
+    assert len(groups) == 4 * spec.runs
 
 
 def test_random_baseline_results_drawn_around_the_vehicle_are_flown_again() -> None:

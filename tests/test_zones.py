@@ -224,3 +224,21 @@ def test_a_bad_landing_area_is_named(area: list[tuple[float, float]], message: s
     with pytest.raises(ConfigError, match="landing_area_ne_m") as error:
         validate_config(ZoneConfig, {"landing_area_ne_m": area}, prefix="perception.zones")
     assert message in str(error.value)
+
+
+def test_bounds_masks_kept_per_grid_give_the_same_zones_on_every_grid() -> None:
+    """A finder keeps each grid's bounds mask (a hovering vehicle's frames share grids): on grids it has seen, on
+    new ones and once older grids were dropped, its zones are those of a finder that sees the grid first."""
+    from companion.perception.zones import BOUNDS_MASKS_KEPT
+
+    fence = [(-12.0, -8.0), (-12.0, 12.0), (6.0, 12.0), (6.0, -8.0)]
+    config = ZoneConfig(n_proposals=5, vehicle_radius_m=0.5, margin_m=0.5, landing_area_ne_m=L_SHAPE)
+    finder = ZoneFinder(config, fence_ne_m=fence)
+    rng = np.random.default_rng(7)
+    grids = [GridSpec(-20.0 + 0.1 * k, -10.0 - 0.1 * k, 0.1, 300, 400) for k in range(BOUNDS_MASKS_KEPT + 4)]
+    for grid in [*grids, grids[0], grids[-1], grids[-1]]:
+        free = rng.random((grid.rows, grid.cols)) > 0.002
+        occupancy = HeadPlaneOccupancy(grid, free=free, known=np.ones_like(free))
+        fresh = ZoneFinder(config, fence_ne_m=fence).find(occupancy)
+        assert finder.find(occupancy) == fresh
+    assert len(finder._bounds_masks) == BOUNDS_MASKS_KEPT

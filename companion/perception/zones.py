@@ -23,6 +23,10 @@ from companion.geometry import inside_polygon
 from companion.perception.config import ZoneConfig
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
 
+BOUNDS_MASKS_KEPT = 16
+"""Grids whose bounds masks a :class:`ZoneFinder` keeps (a hover's few snapped grids; 160 KB each at the default
+400 x 400 cells)."""
+
 
 @dataclass(frozen=True)
 class Zone:
@@ -100,13 +104,31 @@ class ZoneFinder:
         self._bounds_ne_m = [
             np.asarray(polygon, np.float64) for polygon in (config.landing_area_ne_m, fence_ne_m) if polygon is not None
         ]
+        # The grid is snapped to whole cells (HeadPlaneProjector.grid_for), so frames of a vehicle that hovers or
+        # descends share grids: their bounds masks are computed once (a few grids kept; the same arrays either way).
+        self._bounds_masks: dict[GridSpec, npt.NDArray[np.uint8]] = {}
+
+    def _bounds_mask(self, grid: GridSpec) -> npt.NDArray[np.uint8] | None:
+        """1 where a cell's centre lies inside every bound (landing area, fence), shape (rows, cols); None: none."""
+        if not self._bounds_ne_m:
+            return None
+        mask = self._bounds_masks.get(grid)
+        if mask is None:
+            mask = landing_area_mask(self._bounds_ne_m[0], grid)
+            for polygon in self._bounds_ne_m[1:]:
+                mask &= landing_area_mask(polygon, grid)
+            if len(self._bounds_masks) >= BOUNDS_MASKS_KEPT:
+                del self._bounds_masks[next(iter(self._bounds_masks))]  # the oldest
+            self._bounds_masks[grid] = mask
+        return mask
 
     def find(self, occupancy: HeadPlaneOccupancy) -> list[Zone]:
         """Zones of one head-plane occupancy map, largest first."""
         grid = occupancy.grid
         free = occupancy.free.astype(np.uint8)
-        for polygon in self._bounds_ne_m:
-            free &= landing_area_mask(polygon, grid)
+        bounds = self._bounds_mask(grid)
+        if bounds is not None:
+            free &= bounds
         free[[0, -1], :] = 0
         free[:, [0, -1]] = 0
         dist = np.asarray(cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_5), dtype=np.float32)

@@ -1,4 +1,5 @@
-"""Run a campaign: its missions in parallel worker processes, each result appended (and fsync'd) as it finishes.
+"""Run a campaign: its missions in parallel worker processes, a scene's missions by one worker in a row, each result
+appended (and fsync'd) as its scene finishes.
 
 A campaign folder holds ``spec.yaml`` (the spec it was started with), ``results.jsonl`` (one line per finished
 mission), ``segments.jsonl`` (when each run of the campaign flew, at which commit, with how many workers: see
@@ -89,9 +90,29 @@ def _init_worker(instances: Any, warm: bool) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _fly_one(spec_json: dict[str, Any], mission_id: str, out_dir: str, keep: bool) -> dict[str, Any]:
-    """In a local worker process: :func:`fly_one` on the worker's SITL instance (and its warm processes)."""
-    return fly_one(spec_json, mission_id, out_dir, keep, _worker_instance, _worker_warm)
+def _fly_scene(
+    spec_json: dict[str, Any], mission_ids: list[str], out_dir: str, keep: bool
+) -> list[tuple[str, dict[str, Any] | Exception]]:
+    """In a local worker process: :func:`fly_one` for each mission of one scene, one after the other, on the worker's
+    SITL instance (and its warm processes, whose caches then build the scene once); each mission's result, or the
+    exception it raised."""
+    outcomes: list[tuple[str, dict[str, Any] | Exception]] = []
+    for mission_id in mission_ids:
+        try:
+            outcomes.append((mission_id, fly_one(spec_json, mission_id, out_dir, keep, _worker_instance, _worker_warm)))
+        except Exception as exc:  # a mission's own failure: recorded, flown again on resume
+            outcomes.append((mission_id, exc))
+    return outcomes
+
+
+def scene_groups(todo: list[MissionPlan]) -> list[list[MissionPlan]]:
+    """``todo`` grouped by scene (condition and run: one seed, so one park, one crowd, one weather), each group in
+    ``todo``'s order, the groups in the order of their first mission. A warm worker that flies a scene's strategies
+    in a row builds its scene once (:mod:`sitl.world.scene_cache`); spread over workers, each would build it."""
+    groups: dict[tuple[str, int], list[MissionPlan]] = {}
+    for plan in todo:
+        groups.setdefault((plan.condition.name, plan.run), []).append(plan)
+    return list(groups.values())
 
 
 def _stop_workers(pool: concurrent.futures.ProcessPoolExecutor) -> None:
@@ -181,8 +202,9 @@ def _run_local(
     record: Callable[[str, dict[str, Any] | BaseException], None],
     warm: bool,
 ) -> None:
-    """Fly ``todo`` in ``workers`` spawned worker processes (each with its warm processes when ``warm``); each result
-    (or exception) to ``record`` as it ends."""
+    """Fly ``todo`` in ``workers`` spawned worker processes (each with its warm processes when ``warm``), a scene's
+    missions by one worker in a row (:func:`scene_groups`); each result (or exception) to ``record`` as its scene
+    ends."""
     context = multiprocessing.get_context("spawn")
     instances = None
     if worker_ids is not None:
@@ -192,19 +214,23 @@ def _run_local(
     with concurrent.futures.ProcessPoolExecutor(
         max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(instances, warm)
     ) as pool:
-        futures = {pool.submit(_fly_one, spec_json, p.mission_id, str(out_dir), keep_runs): p for p in todo}
+        futures = {
+            pool.submit(_fly_scene, spec_json, [p.mission_id for p in group], str(out_dir), keep_runs): group
+            for group in scene_groups(todo)
+        }
         try:
             for future in concurrent.futures.as_completed(futures):
                 try:
-                    outcome: dict[str, Any] | BaseException = future.result()
+                    outcomes: list[tuple[str, dict[str, Any] | Exception]] = future.result()
                 except BrokenProcessPool as exc:  # a worker died: the missions not finished stay unflown
                     raise CampaignError(
                         f"a worker process died ({exc}); the missions not finished are flown when the "
                         "campaign is started again"
                     ) from None
-                except Exception as exc:  # a mission's own failure: recorded, flown again on resume
-                    outcome = exc
-                record(futures[future].mission_id, outcome)
+                except Exception as exc:  # the results could not come back (one that cannot be unpickled)
+                    outcomes = [(p.mission_id, exc) for p in futures[future]]
+                for mission_id, outcome in outcomes:
+                    record(mission_id, outcome)
         except BaseException:  # Ctrl-C or a dead worker: no more missions, those in flight stopped
             _stop_workers(pool)
             raise
@@ -273,7 +299,7 @@ def run_campaign(
                     result |= stamp | {"finished_utc": utc_now()}
                     results.write(json.dumps(result, separators=(",", ":")) + "\n")
                     results.flush()
-                    os.fsync(results.fileno())  # a kill loses at most the missions in flight
+                    os.fsync(results.fileno())  # a kill loses at most the scenes in flight
                     done[result["mission_id"]] = result
                     flown_here += "error" not in result
                     if on_result is not None:

@@ -31,8 +31,10 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 
 # A mission's processes compute on one thread each: a campaign flies one mission per CPU, and the libraries' idle
 # worker threads spin-wait for the next call (OpenCV's parallel_for pool called sched_yield about 30,000 times a second
-# in each process: docs/results/campaign_throughput.md). Set in the environment by hand, a variable wins.
-SINGLE_THREAD_ENV = {"OPENCV_FOR_THREADS_NUM": "1", "OPENBLAS_NUM_THREADS": "1"}
+# in each process: docs/results/campaign_throughput.md). Mesa's llvmpipe rasterizes in the rendering thread itself
+# (LP_NUM_THREADS=0: no hand-off to its own threads; the same pixels, each tile is drawn alike on any thread). Set in
+# the environment by hand, a variable wins.
+SINGLE_THREAD_ENV = {"OPENCV_FOR_THREADS_NUM": "1", "OPENBLAS_NUM_THREADS": "1", "LP_NUM_THREADS": "0"}
 
 
 def child_env() -> dict[str, str]:
