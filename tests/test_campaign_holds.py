@@ -35,6 +35,8 @@ def test_each_hold_is_explained_by_kind_from_the_flight_log() -> None:
     no_map = "no map saw the footprint free in the last 12 s; 6 re-selections used up: hold"
     assert hold_cause([], no_map) == "no fresh free map"
     assert hold_cause([], "zone 3 shrank to 0.80 m; 6 re-selections used up: hold") == "zone shrank"
+    walker = "a person kept walking towards the footprint for 20 s; 6 re-selections used up: hold"
+    assert hold_cause([], walker) == "walker kept coming"
     assert hold_cause([], "perception silent 5.0 s: land") == "perception silent"
     assert hold_cause([], "something new") == "other"
     assert {hold_cause(searching, r) for r in (TIME_LIMIT, USED_UP, "x")} <= set(HOLD_CAUSES)

@@ -6,6 +6,7 @@ Each test reads like a flight: where the vehicle is, what perception reports, wh
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import (
     CommandKind,
+    Decision,
     FailsafeAction,
     GuidanceConfig,
     LandingGuidance,
@@ -183,7 +185,7 @@ def test_a_zone_outside_the_geofence_is_never_approached() -> None:
 
 
 def test_no_landing_without_a_recent_map_of_a_free_footprint() -> None:
-    g = _guidance()
+    g = _guidance(walkers={"enabled": False})  # the walker gate would first send it back up to look
     # Descend blind (nothing known around the vehicle), the zone still tracked: at 2 m it must not land.
     state = VehicleState(0.0, 0.0, 0.0, -2.0, 0.0)
     g.start(state)
@@ -275,7 +277,7 @@ def test_used_up_reselections_hold_and_never_land() -> None:
 
 
 def test_below_the_models_altitude_range_maps_do_not_decide() -> None:
-    g = _guidance(perception_min_altitude_m=6.0)
+    g = _guidance(perception_min_altitude_m=6.0, walkers={"enabled": False})  # no look at the gate (tested below)
     _descending_over(g, 7.0)  # this frame's map (free footprint) is the landing map
     low = VehicleState(1.0, 0.2, 0.0, -4.0, 0.0)
     d = g.on_frame(_frame(1.0, [], None, _map(person_at=(0.3, 0.0))), low)
@@ -330,3 +332,76 @@ def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climb
         assert t < 10.0
     d = g.on_frame(_frame(t + 0.1, [other], other_target, _map()), state)
     assert d.phase is LandingPhase.DESCENT  # back up: the new zone may be descended onto
+
+
+def _walker_map(t_s: float) -> HeadPlaneOccupancy:
+    """A walker at 1.2 m/s on a line 2 m from the landing point (0.2, 0): from 4.1 m south-west, past it at 3 s."""
+    heading = np.array([1.0, 1.0]) / math.sqrt(2.0)
+    aside = np.array([1.0, -1.0]) / math.sqrt(2.0) * 2.0
+    n, e = np.array([0.2, 0.0]) - heading * 3.6 + aside + heading * 1.2 * t_s
+    return _map(person_at=(float(n), float(e)))
+
+
+def _descend_with(g: LandingGuidance, maps: Callable[[float], HeadPlaneOccupancy], t_limit_s: float) -> list[Decision]:
+    """Fly the descent over zone 3 from 14 m (the vehicle reaches each setpoint by the next frame) until it lands,
+    aborts or ``t_limit_s`` passes; the decisions."""
+    state = _descending_over(g, 14.0)
+    zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
+    decisions = []
+    t = 0.1
+    while t < t_limit_s:
+        t += 0.1
+        d = g.on_frame(_frame(t, [zone], target, maps(t)), state)
+        decisions.append(d)
+        if d.kind is not CommandKind.SETPOINT or d.phase is not LandingPhase.DESCENT:
+            break
+        assert d.setpoint is not None
+        state = _fly(state, -d.setpoint.down_m, d.setpoint.north_m, d.setpoint.east_m, t)
+    return decisions
+
+
+def test_a_descent_looks_at_the_gate_above_the_blind_last_metres_then_lands() -> None:
+    g = _guidance()
+    c = g.config
+    gate_m = c.perception_min_altitude_m + c.land_tolerance_m
+    decisions = _descend_with(g, lambda t: _map(), t_limit_s=60.0)
+    assert decisions[-1].kind is CommandKind.LAND
+    at_gate = [d.t_s for d in decisions if d.setpoint is not None and -d.setpoint.down_m == pytest.approx(gate_m)]
+    assert at_gate[-1] - at_gate[0] >= c.walkers.window_s - 0.1 - 1e-9  # watched that long, nobody walking
+    assert at_gate[-1] - at_gate[0] <= c.walkers.window_s + 0.5
+    assert g.walkers.waits == 0
+
+
+def test_someone_walking_in_at_the_gate_holds_the_descent_there_until_they_have_passed() -> None:
+    g = _guidance()
+    c = g.config
+    gate_m = c.perception_min_altitude_m + c.land_tolerance_m
+    walk_from_s = 1.0  # as the vehicle reaches the gate (each frame's setpoint is reached by the next)
+    decisions = _descend_with(g, lambda t: _map() if t < walk_from_s else _walker_map(t - walk_from_s), 90.0)
+    assert decisions[-1].kind is CommandKind.LAND
+    waited = [d for d in decisions if "walking" in d.reason or "closing" in d.reason]
+    assert waited, "the walker was not seen coming"
+    assert g.walkers.waits == 1
+    for d in decisions:  # never below the gate before the walker has gone by
+        if d.t_s <= waited[-1].t_s:
+            assert d.setpoint is not None
+            assert -d.setpoint.down_m >= gate_m - 1e-9
+    # The walker's closest pass (2 m from the point, at 3.0 s of its walk) came before the descent went on.
+    went_on = next(d.t_s for d in decisions if d.t_s > waited[-1].t_s)
+    assert went_on - walk_from_s > 3.0
+
+
+def test_a_person_who_keeps_walking_in_makes_the_descent_refuse_the_point() -> None:
+    g = _guidance(walkers={"max_wait_s": 2.0})
+
+    # Someone walks straight at the point from 4.5 m north at 0.5 m/s, and stops 2.5 m short (outside the
+    # footprint): closing in for 4 s, longer than the gate waits.
+    def coming(t: float) -> HeadPlaneOccupancy:
+        return _map(person_at=(0.2 + max(2.5, 4.5 - 0.5 * max(0.0, t - 1.0)), 0.0))
+
+    decisions = _descend_with(g, coming, 60.0)
+    last = decisions[-1]
+    assert last.phase is LandingPhase.SEARCH
+    assert "kept walking towards the footprint" in last.reason
+    assert g.reselections == 1
+    assert all(d.kind is not CommandKind.LAND for d in decisions)

@@ -24,7 +24,10 @@
   and zones near the refused point are not chosen for a while (``commitment.refused_memory_s``).
   Below ``blind_altitude_m`` the head plane is too close to the camera to see the whole zone, and below
   ``perception_min_altitude_m`` (4.5 m, the same) the maps are not trusted at all (the whole view then lies within the
-  footprint and its margin): the descent continues on the last map that saw the whole footprint free.
+  footprint and its margin): the descent continues on the last map that saw the whole footprint free. So it first
+  stops at a gate just above that floor and watches for people walking towards the landing point
+  (:mod:`companion.guidance.walker_watch`): it goes on once nobody seen would reach the footprint by touchdown, and a
+  wait longer than ``walkers.max_wait_s`` refuses the point like an aborted descent.
 - **land**: at or below ``land_altitude_m`` over the target, a landing is commanded only when a map no older than
   ``landing_map_max_age_s`` saw the whole footprint (vehicle radius plus margin) free, and no later frame saw a person
   in it. Otherwise the vehicle climbs back and re-selects.
@@ -47,9 +50,13 @@ from companion.config import StrictModel
 from companion.guidance.commitment import CommitmentConfig, TargetCommitment
 from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence
+from companion.guidance.walker_watch import WalkerWatch, WalkerWatchConfig
 from companion.perception.pipeline import FrameResult
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target
 from companion.vehicle.link import Setpoint
+
+GATE_SLACK_M = 0.5
+"""The walker gate's maps are those taken within this of its altitude (the vehicle settles onto it from above)."""
 
 
 class FailsafeAction(str, enum.Enum):
@@ -125,6 +132,10 @@ class GuidanceConfig(StrictModel):
     )
     commitment: CommitmentConfig = Field(
         default_factory=CommitmentConfig, description="How firmly a chosen zone is kept (issue 33)."
+    )
+    walkers: WalkerWatchConfig = Field(
+        default_factory=WalkerWatchConfig,
+        description="A descent waits above the blind last metres while someone walks towards its landing point.",
     )
     blind_landing: bool = Field(
         default=False,
@@ -223,6 +234,7 @@ class LandingGuidance:
     ) -> None:
         self.config = config
         self.commitment = TargetCommitment(config.commitment, policy, geofence, footprint_radius_m, min_zone_radius_m)
+        self.walkers = WalkerWatch(config.walkers, footprint_radius_m)
         self.geofence = geofence
         self.footprint_radius_m = footprint_radius_m
         self.min_zone_radius_m = min_zone_radius_m
@@ -376,6 +388,7 @@ class LandingGuidance:
         ):
             self._locked = target
             self._unsafe_frames = 0
+            self.walkers.reset()
             self._enter(LandingPhase.DESCENT, state.t_s)
             return self._descent(result, state)
         return self._setpoint(
@@ -445,7 +458,11 @@ class LandingGuidance:
         if c.blind_landing or (trusted and footprint.known_fraction >= c.footprint_known_fraction and footprint.clear):
             self._landing_map_s = state.t_s
         offset = math.hypot(locked.north_m - state.north_m, locked.east_m - state.east_m)
-        if state.altitude_m <= c.land_altitude_m + c.land_tolerance_m and offset <= c.capture_radius_m:
+        gate = self._walker_gate(result, state, locked, trusted)
+        if isinstance(gate, Decision):
+            return gate
+        low = state.altitude_m <= c.land_altitude_m + c.land_tolerance_m and offset <= c.capture_radius_m
+        if low and gate is None:
             age = math.inf if self._landing_map_s is None else state.t_s - self._landing_map_s
             if age > c.landing_map_max_age_s:
                 return self._abort_descent(
@@ -461,15 +478,39 @@ class LandingGuidance:
                 f"land on zone {locked.track_id} (map {age:.1f} s old)",
             )
         goal_alt = c.approach_height_m if offset <= c.capture_radius_m else state.altitude_m
-        return self._setpoint(
-            state,
-            LandingPhase.DESCENT,
-            locked,
-            f"descend over zone {locked.track_id} (offset {offset:.2f} m)",
-            locked.north_m,
-            locked.east_m,
-            goal_alt,
-        )
+        reason = f"descend over zone {locked.track_id} (offset {offset:.2f} m)"
+        if gate is not None:
+            gate_m, watch_says = gate
+            goal_alt = max(goal_alt, gate_m)
+            if watch_says:
+                reason = f"wait at {gate_m:.1f} m over zone {locked.track_id}: {watch_says}"
+        return self._setpoint(state, LandingPhase.DESCENT, locked, reason, locked.north_m, locked.east_m, goal_alt)
+
+    def _walker_gate(
+        self, result: FrameResult, state: VehicleState, locked: Target, trusted: bool
+    ) -> Decision | tuple[float, str] | None:
+        """The gate above the blind last metres (:mod:`companion.guidance.walker_watch`): None once passed (or
+        without a watch), else the lowest altitude allowed now and what the watch sees, or an abort when someone
+        kept walking in for too long."""
+        c = self.config
+        watch = self.walkers
+        if not c.walkers.enabled or c.blind_landing or watch.passed:
+            return None
+        gate_m = c.perception_min_altitude_m + c.land_tolerance_m
+        if not trusted:  # sank past the floor while stopping at the gate: back up, where the maps see
+            return gate_m, "back up to the gate"
+        if state.altitude_m > gate_m + GATE_SLACK_M:
+            watch.reset()  # only maps taken at the gate count: higher up, standing people drift in (parallax)
+            return gate_m, ""
+        approach = watch.observe(result.head_plane, locked.north_m, locked.east_m, state.t_s)
+        if watch.ready(approach, state.t_s):
+            return None
+        if watch.waited_too_long(state.t_s):
+            watch.reset()
+            return self._abort_descent(
+                state, f"a person kept walking towards the footprint for {c.walkers.max_wait_s:g} s"
+            )
+        return gate_m, approach.describe() if approach is not None else "watching"
 
     def _search_waypoint(self, state: VehicleState) -> tuple[float, float]:
         """Expanding square around where the search began, one leg per ``search_timeout_s``, inside the fence."""

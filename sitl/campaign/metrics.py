@@ -143,6 +143,8 @@ HOLD_CAUSES = {
     "person in the footprint": "every descent allowed was aborted, the last one for a person seen in the footprint",
     "no fresh free map": "every descent allowed was aborted, the last one because no recent map saw the footprint free",
     "zone shrank": "every descent allowed was aborted, the last one because the zone shrank below the footprint",
+    "walker kept coming": "every descent allowed was aborted, the last one because someone kept walking towards the "
+    "footprint while the descent waited at the walker gate",
     "nothing free": "the time limit, with no zone chosen in its last 30 s: nothing free in view",
     "time limit while searching": "the time limit, searching between zones (a zone chosen in the last 30 s)",
     "time limit while approaching": "the time limit on the way to a chosen zone",
@@ -170,6 +172,8 @@ def hold_cause(decisions: list[DecisionRecord], reason: str) -> str:
             return "no fresh free map"
         if "shrank" in reason:
             return "zone shrank"
+        if "kept walking towards the footprint" in reason:
+            return "walker kept coming"
         return "other"
     if "perception silent" in reason:
         return "perception silent"
