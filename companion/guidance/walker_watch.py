@@ -92,6 +92,17 @@ def sector_distances_m(
 ) -> F64Array:
     """The nearest occupied (seen, not free) cell centre in each direction around a point, within ``radius_m``.
 
+    Parameters
+    ----------
+    head_plane : HeadPlaneOccupancy
+        One frame's map.
+    north_m, east_m : float
+        The point (NED, m): the landing point.
+    radius_m : float
+        Cells farther than this are not looked at.
+    sectors : int
+        Directions, each ``360 / sectors`` degrees wide.
+
     Returns
     -------
     ndarray, shape (sectors,)
