@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from companion.perception.projection import HeadPlaneOccupancy
 
@@ -23,17 +24,25 @@ class FootprintView:
         return not self.occupied_seen
 
 
+def square_around(
+    head_plane: HeadPlaneOccupancy, north_m: float, east_m: float, radius_m: float
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """The rows and the columns of a map whose cell centres lie within ``radius_m`` of a point, north and east
+    separately: the square around a disc (either may be empty)."""
+    g = head_plane.grid
+    rows = np.nonzero(np.abs(g.north_centres_m - north_m) <= radius_m)[0]
+    cols = np.nonzero(np.abs(g.east_centres_m - east_m) <= radius_m)[0]
+    return rows, cols
+
+
 def footprint_view(head_plane: HeadPlaneOccupancy, north_m: float, east_m: float, radius_m: float) -> FootprintView:
     """Inspect the cells of a head-plane map within ``radius_m`` of a point."""
     g = head_plane.grid
-    n = g.north_centres_m
-    e = g.east_centres_m
-    rows = np.nonzero(np.abs(n - north_m) <= radius_m)[0]
-    cols = np.nonzero(np.abs(e - east_m) <= radius_m)[0]
+    rows, cols = square_around(head_plane, north_m, east_m, radius_m)
     total = math.pi * radius_m**2 / g.resolution_m**2
     if not len(rows) or not len(cols):
         return FootprintView(0.0, False)
-    nn, ee = np.meshgrid(n[rows], e[cols], indexing="ij")
+    nn, ee = np.meshgrid(g.north_centres_m[rows], g.east_centres_m[cols], indexing="ij")
     inside = np.hypot(nn - north_m, ee - east_m) <= radius_m
     known = head_plane.known[np.ix_(rows, cols)] & inside
     occupied = known & ~head_plane.free[np.ix_(rows, cols)]

@@ -32,6 +32,7 @@ import numpy.typing as npt
 from pydantic import Field
 
 from companion.config import StrictModel
+from companion.guidance.footprint import square_around
 from companion.perception.projection import HeadPlaneOccupancy
 
 F64Array = npt.NDArray[np.float64]
@@ -112,8 +113,7 @@ def sector_distances_m(
     g = head_plane.grid
     n = g.north_centres_m
     e = g.east_centres_m
-    rows = np.nonzero(np.abs(n - north_m) <= radius_m)[0]
-    cols = np.nonzero(np.abs(e - east_m) <= radius_m)[0]
+    rows, cols = square_around(head_plane, north_m, east_m, radius_m)
     out = np.full(sectors, np.inf)
     if not len(rows) or not len(cols):
         return out
