@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from companion.cache import KeyedCache
 from companion.camera.frames import encode_frame
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from sitl.config import SitlConfig
@@ -16,11 +17,10 @@ from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import WeatherKind
-from sitl.world.scene_cache import KeyedCache
 from sitl.world.weather import WeatherSchedule, apply_weather
 
 PARKS: KeyedCache[Park] = KeyedCache("parks", capacity=2)
-"""The parks of the last scenes this process flew (sitl.world.scene_cache)."""
+"""The parks of the last scenes this process flew (see the scene caches in :mod:`sitl.render.camera`)."""
 
 
 def _park(config: SitlConfig) -> Park:

@@ -21,6 +21,7 @@ PACKAGES = ("companion", "sitl")
 
 # Longest matching prefix wins. A module may import modules on its own floor or below.
 FLOORS: dict[str, int] = {
+    "companion.cache": 0,
     "companion.config": 0,
     "companion.geometry": 0,
     "companion.camera": 1,

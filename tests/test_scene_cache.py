@@ -12,32 +12,11 @@ from sitl.render.camera import LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES, Light,
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import ScenarioConfig
-from sitl.world.scene_cache import KeyedCache
 
 CAMERA = PinholeCamera.from_hfov(320, 240, 90.0)
 NADIR = T_body_camera_from_mount()
 POSE = Pose.from_ned_euler(2.0, -1.0, -16.0, 0.03, -0.02, 0.4)
 CACHES = (LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES)
-
-
-@pytest.mark.unit
-def test_the_least_recently_used_entry_goes_first_and_hits_are_counted() -> None:
-    cache: KeyedCache[str] = KeyedCache("test", capacity=2)
-    built: list[str] = []
-
-    def build(value: str) -> str:
-        built.append(value)
-        return value
-
-    assert cache.get("a", lambda: build("a")) == "a"
-    assert cache.get("b", lambda: build("b")) == "b"
-    assert cache.get("a", lambda: build("a again")) == "a"  # a hit, and "a" is now the most recent
-    assert cache.get("c", lambda: build("c")) == "c"  # "b" goes
-    assert cache.get("b", lambda: build("b again")) == "b again"
-    assert built == ["a", "b", "c", "b again"]
-    assert (cache.hits, cache.misses, len(cache)) == (1, 4, 2)
-    with pytest.raises(ValueError, match="capacity"):
-        KeyedCache("empty", capacity=0)
 
 
 def renderer(seed: int, light: Light) -> WorldRenderer:

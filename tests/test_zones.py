@@ -242,3 +242,4 @@ def test_bounds_masks_kept_per_grid_give_the_same_zones_on_every_grid() -> None:
         fresh = ZoneFinder(config, fence_ne_m=fence).find(occupancy)
         assert finder.find(occupancy) == fresh
     assert len(finder._bounds_masks) == BOUNDS_MASKS_KEPT
+    assert (finder._bounds_masks.hits, finder._bounds_masks.misses) == (2, len(grids) + 1)  # grids[0] was dropped

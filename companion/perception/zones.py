@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.cache import KeyedCache
 from companion.geometry import inside_polygon
 from companion.perception.config import ZoneConfig
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
@@ -106,21 +107,21 @@ class ZoneFinder:
         ]
         # The grid is snapped to whole cells (HeadPlaneProjector.grid_for), so frames of a vehicle that hovers or
         # descends share grids: their bounds masks are computed once (a few grids kept; the same arrays either way).
-        self._bounds_masks: dict[GridSpec, npt.NDArray[np.uint8]] = {}
+        self._bounds_masks: KeyedCache[npt.NDArray[np.uint8]] = KeyedCache("bounds masks", BOUNDS_MASKS_KEPT)
 
     def _bounds_mask(self, grid: GridSpec) -> npt.NDArray[np.uint8] | None:
         """1 where a cell's centre lies inside every bound (landing area, fence), shape (rows, cols); None: none."""
         if not self._bounds_ne_m:
             return None
-        mask = self._bounds_masks.get(grid)
-        if mask is None:
-            mask = landing_area_mask(self._bounds_ne_m[0], grid)
-            for polygon in self._bounds_ne_m[1:]:
+        bounds_ne_m = self._bounds_ne_m
+
+        def build() -> npt.NDArray[np.uint8]:
+            mask = landing_area_mask(bounds_ne_m[0], grid)
+            for polygon in bounds_ne_m[1:]:
                 mask &= landing_area_mask(polygon, grid)
-            if len(self._bounds_masks) >= BOUNDS_MASKS_KEPT:
-                del self._bounds_masks[next(iter(self._bounds_masks))]  # the oldest
-            self._bounds_masks[grid] = mask
-        return mask
+            return mask
+
+        return self._bounds_masks.get(grid, build)
 
     def find(self, occupancy: HeadPlaneOccupancy) -> list[Zone]:
         """Zones of one head-plane occupancy map, largest first."""

@@ -108,7 +108,8 @@ def _fly_scene(
 def scene_groups(todo: list[MissionPlan]) -> list[list[MissionPlan]]:
     """``todo`` grouped by scene (condition and run: one seed, so one park, one crowd, one weather), each group in
     ``todo``'s order, the groups in the order of their first mission. A warm worker that flies a scene's strategies
-    in a row builds its scene once (:mod:`sitl.world.scene_cache`); spread over workers, each would build it."""
+    in a row builds its scene once (the scene caches of :mod:`sitl.render.camera`); spread over workers, each would
+    build it."""
     groups: dict[tuple[str, int], list[MissionPlan]] = {}
     for plan in todo:
         groups.setdefault((plan.condition.name, plan.run), []).append(plan)

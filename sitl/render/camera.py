@@ -23,11 +23,11 @@ import numpy as np
 import numpy.typing as npt
 import trimesh
 
+from companion.cache import KeyedCache
 from companion.geometry import F64Array, PinholeCamera, Pose
 from sitl.render.meshes import bake_lighting, object_mesh, person_mesh, shadow_mesh
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
-from sitl.world.scene_cache import KeyedCache
 
 U8Image = npt.NDArray[np.uint8]
 
@@ -97,8 +97,11 @@ _PATCHED: list[bool] = []
 DRAW_ORDER: weakref.WeakKeyDictionary[Any, dict[Any, int]] = weakref.WeakKeyDictionary()
 """Per pyrender scene: its mesh nodes in the order they were added (see :func:`_patch_pyrender`)."""
 
-# What the last scenes' seeds determined, kept across the missions of this process (sitl.world.scene_cache): the
-# park's lit ground texture and its objects for two scenes, each person's lit mesh for a few hundred people.
+# What the last scenes' seeds determined, kept across the missions of this process: the park's lit ground texture and
+# its objects for two scenes, each person's lit mesh for a few hundred people. A campaign flies every scene once per
+# strategy and a warm worker flies a scene's strategies in a row, so the second and third missions find the scene
+# built. Each value is a pure function of its key, made of everything that feeds it (seed, scenario fields, light):
+# the same mission draws the same pixels, cached or not.
 LIT_GROUNDS: KeyedCache[npt.NDArray[np.uint8]] = KeyedCache("lit grounds", capacity=2)
 OBJECT_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("park objects", capacity=2)
 PERSON_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("person meshes", capacity=512)

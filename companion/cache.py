@@ -1,10 +1,9 @@
-"""What a seed determines, kept across the missions of one warm SITL process.
+"""Small least-recently-used caches of built values, for values that are pure functions of their key.
 
-A campaign flies every scene once per strategy, one after the other, and a warm worker's SITL process often flies two
-of them in a row: the park's texture and objects and each person's lit mesh are then the ones it built for the last
-mission. They are pure functions of their inputs, so each is kept under a key made of *everything* that feeds it
-(seed, scenario fields, light), and a hit hands out the same values the build would make: the same mission draws the
-same pixels, cached or not. Small least-recently-used caches, per process; nothing is shared between processes.
+The key must hold *everything* that feeds the value, so that a hit hands out what the build would make and the caller
+sees the same arrays, cached or not. Used by the zone finder (the bounds mask of each snapped grid) and by the SITL
+(what a scene's seed determines: :data:`sitl.render.camera.LIT_GROUNDS` and its neighbours). Per process; nothing is
+shared between processes.
 """
 
 from __future__ import annotations
