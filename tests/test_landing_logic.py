@@ -313,12 +313,12 @@ def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
 
 def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
     g = _guidance(commitment={"refused_radius_m": 0.0})  # the climb alone, without the refused point's exclusion
-    state = _descending_over(g, 5.0)
+    state = _descending_over(g, 6.0)  # low, above the walker gate (at the gate a person is waited out)
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(g.config.unsafe_frames_to_abort):
         d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
     assert d.phase is LandingPhase.SEARCH
-    climb_to = 5.0 + g.config.climb_back_m
+    climb_to = 6.0 + g.config.climb_back_m
     # Another free zone right under the vehicle: approached (climbing), not descended onto from 4 m.
     other, other_target = _track(4, 0.3, 0.1, 3.0), Target(0.3, 0.1, 3.0, 4)
     t = 1.0
@@ -403,5 +403,36 @@ def test_a_person_who_keeps_walking_in_makes_the_descent_refuse_the_point() -> N
     last = decisions[-1]
     assert last.phase is LandingPhase.SEARCH
     assert "kept walking towards the footprint" in last.reason
+    assert g.reselections == 1
+    assert all(d.kind is not CommandKind.LAND for d in decisions)
+
+
+def test_a_person_seen_in_the_footprint_at_the_gate_is_waited_out_there_then_the_descent_lands() -> None:
+    g = _guidance()
+    c = g.config
+    gate_m = c.perception_min_altitude_m + c.land_tolerance_m
+    # Each setpoint is reached by the next frame: from 14 m the vehicle is at the gate from about 1.0 s. Someone is
+    # seen in the footprint there for 1.5 s (longer than unsafe_frames_to_abort frames), then the footprint is free.
+    seen_s = (1.2, 2.7)
+    decisions = _descend_with(g, lambda t: _map(person_at=(0.5, 0.3)) if seen_s[0] <= t < seen_s[1] else _map(), 60.0)
+    assert decisions[-1].kind is CommandKind.LAND
+    assert g.reselections == 0  # never refused
+    held = [d for d in decisions if "a person seen inside the footprint" in d.reason]
+    assert len(held) >= c.unsafe_frames_to_abort  # would have aborted above the gate
+    for d in decisions:  # not below the gate while the footprint was seen occupied, nor before a look after it
+        if d.t_s < seen_s[1] + c.walkers.clear_frames * 0.1 - 1e-9:
+            assert d.setpoint is not None
+            assert -d.setpoint.down_m >= gate_m - 1e-9
+
+
+def test_a_person_who_stays_in_the_footprint_at_the_gate_makes_the_descent_refuse_the_point() -> None:
+    g = _guidance(walkers={"max_wait_s": 3.0})
+    decisions = _descend_with(g, lambda t: _map(person_at=(0.5, 0.3)) if t >= 1.2 else _map(), 60.0)
+    last = decisions[-1]
+    assert last.phase is LandingPhase.SEARCH
+    assert "person seen inside the footprint at the gate" in last.reason
+    assert last.setpoint is not None
+    assert -last.setpoint.down_m > g.config.perception_min_altitude_m + g.config.land_tolerance_m  # climbs back
+    assert last.t_s - 1.2 == pytest.approx(3.0, abs=0.25)  # after the gate's wait, not at the frames' limit
     assert g.reselections == 1
     assert all(d.kind is not CommandKind.LAND for d in decisions)

@@ -26,8 +26,10 @@
   ``perception_min_altitude_m`` (4.5 m, the same) the maps are not trusted at all (the whole view then lies within the
   footprint and its margin): the descent continues on the last map that saw the whole footprint free. So it first
   stops at a gate just above that floor and watches for people walking towards the landing point
-  (:mod:`companion.guidance.walker_watch`): it goes on once nobody seen would reach the footprint by touchdown, and a
-  wait longer than ``walkers.max_wait_s`` refuses the point like an aborted descent.
+  (:mod:`companion.guidance.walker_watch`): it goes on once nobody seen would reach the footprint by touchdown and
+  the footprint is seen free, and a wait longer than ``walkers.max_wait_s`` refuses the point like an aborted
+  descent. At the gate a person seen in the footprint is waited out rather than refused at once: the vehicle hovers
+  there, above the heads, and a false positive of the low maps that flickers passes.
 - **land**: at or below ``land_altitude_m`` over the target, a landing is commanded only when a map no older than
   ``landing_map_max_age_s`` saw the whole footprint (vehicle radius plus margin) free, and no later frame saw a person
   in it. Otherwise the vehicle climbs back and re-selects.
@@ -448,6 +450,13 @@ class LandingGuidance:
         # The footprint is where the vehicle will touch down: around the landing point, not under the vehicle now.
         footprint = footprint_view(result.head_plane, locked.north_m, locked.east_m, self.footprint_radius_m)
         unsafe = trusted and (footprint.occupied_seen or shrunk) and not c.blind_landing
+        # At the walker gate the vehicle hovers 3 m above the heads and descends no further until the footprint is
+        # seen free: there a person (or a false positive that flickers) in the footprint is waited out, up to the
+        # gate's limit, instead of refusing the point at once (the maps at 4.5-5 m are the model's least sure).
+        blocked = None
+        if unsafe and self._at_gate(state):
+            blocked = "a person seen inside the footprint" if footprint.occupied_seen else "the zone shrank"
+            unsafe = False
         self._unsafe_frames = self._unsafe_frames + 1 if unsafe else 0
         if self._unsafe_frames >= c.unsafe_frames_to_abort:
             self._unsafe_frames = 0
@@ -458,7 +467,7 @@ class LandingGuidance:
         if c.blind_landing or (trusted and footprint.known_fraction >= c.footprint_known_fraction and footprint.clear):
             self._landing_map_s = state.t_s
         offset = math.hypot(locked.north_m - state.north_m, locked.east_m - state.east_m)
-        gate = self._walker_gate(result, state, locked, trusted)
+        gate = self._walker_gate(result, state, locked, trusted, blocked)
         if isinstance(gate, Decision):
             return gate
         low = state.altitude_m <= c.land_altitude_m + c.land_tolerance_m and offset <= c.capture_radius_m
@@ -486,30 +495,45 @@ class LandingGuidance:
                 reason = f"wait at {gate_m:.1f} m over zone {locked.track_id}: {watch_says}"
         return self._setpoint(state, LandingPhase.DESCENT, locked, reason, locked.north_m, locked.east_m, goal_alt)
 
+    def _gate_m(self) -> float:
+        """The walker gate's altitude (m above ground): just above the floor below which no map decides."""
+        return self.config.perception_min_altitude_m + self.config.land_tolerance_m
+
+    def _at_gate(self, state: VehicleState) -> bool:
+        """Whether this map is one of the walker gate's: the vehicle stops there, the gate not passed yet."""
+        c = self.config
+        if not c.walkers.enabled or c.blind_landing or self.walkers.passed:
+            return False
+        return c.perception_min_altitude_m <= state.altitude_m <= self._gate_m() + GATE_SLACK_M
+
     def _walker_gate(
-        self, result: FrameResult, state: VehicleState, locked: Target, trusted: bool
+        self, result: FrameResult, state: VehicleState, locked: Target, trusted: bool, blocked: str | None
     ) -> Decision | tuple[float, str] | None:
         """The gate above the blind last metres (:mod:`companion.guidance.walker_watch`): None once passed (or
         without a watch), else the lowest altitude allowed now and what the watch sees, or an abort when someone
-        kept walking in for too long."""
+        kept walking in, or stayed in the footprint (``blocked``: what this map saw there), for too long."""
         c = self.config
         watch = self.walkers
         if not c.walkers.enabled or c.blind_landing or watch.passed:
             return None
-        gate_m = c.perception_min_altitude_m + c.land_tolerance_m
+        gate_m = self._gate_m()
         if not trusted:  # sank past the floor while stopping at the gate: back up, where the maps see
             return gate_m, "back up to the gate"
         if state.altitude_m > gate_m + GATE_SLACK_M:
             watch.reset()  # only maps taken at the gate count: higher up, standing people drift in (parallax)
             return gate_m, ""
         approach = watch.observe(result.head_plane, locked.north_m, locked.east_m, state.t_s)
-        if watch.ready(approach, state.t_s):
+        if watch.ready(approach, state.t_s, blocked=blocked is not None):
             return None
         if watch.waited_too_long(state.t_s):
             watch.reset()
-            return self._abort_descent(
-                state, f"a person kept walking towards the footprint for {c.walkers.max_wait_s:g} s"
-            )
+            if blocked is not None and approach is None:
+                reason = f"person seen inside the footprint at the gate for {c.walkers.max_wait_s:g} s"
+            else:
+                reason = f"a person kept walking towards the footprint for {c.walkers.max_wait_s:g} s"
+            return self._abort_descent(state, reason)
+        if blocked is not None:
+            return gate_m, blocked
         return gate_m, approach.describe() if approach is not None else "watching"
 
     def _search_waypoint(self, state: VehicleState) -> tuple[float, float]:

@@ -14,8 +14,10 @@ have left at touchdown is the distance now less the closing speed times ``blind_
 below the gate once the gate's maps span ``window_s`` and none of the last ``clear_frames`` predicts a person inside
 the footprint by touchdown; a wait longer than ``max_wait_s`` refuses the point (someone keeps coming). Only maps
 taken at the gate count: higher up, a descending camera sees the bodies of people standing near the point drift
-towards it on the head plane (parallax), which is no walk. A person standing still has no closing speed, and a
-person already in the footprint is the descent's own check (an abort).
+towards it on the head plane (parallax), which is no walk. A person standing still has no closing speed; a person
+already in the footprint is the descent's own check, which at the gate waits too (the vehicle hovers there, 3 m
+above the heads, and the maps at 4.5-5 m are the model's least sure: a false positive that flickers passes, a person
+who stays refuses the point after ``max_wait_s``).
 
 This module has no I/O; times are vehicle-clock seconds, distances metres on the head plane (north/east, NED).
 """
@@ -207,13 +209,16 @@ class WalkerWatch:
                 worst = Approach(sector, float(distances[sector]), closing, left)
         return worst
 
-    def ready(self, approach: Approach | None, t_s: float) -> bool:
+    def ready(self, approach: Approach | None, t_s: float, blocked: bool = False) -> bool:
         """Whether the descent may go below the gate after this map (see the module docstring). Once True, it stays
-        True until :meth:`reset` (the vehicle is then below the floor, where no map decides)."""
+        True until :meth:`reset` (the vehicle is then below the floor, where no map decides).
+
+        ``blocked``: this map saw the footprint itself occupied (the descent's own check, which at the gate waits
+        rather than refuses): a wait like someone walking in, bounded by the same ``max_wait_s``."""
         c = self.config
         if self.passed:
             return True
-        if approach is not None:
+        if approach is not None or blocked:
             self._clear_frames = 0
             if self.waiting_since_s is None:
                 self.waiting_since_s = t_s
