@@ -436,3 +436,34 @@ def test_a_person_who_stays_in_the_footprint_at_the_gate_makes_the_descent_refus
     assert last.t_s - 1.2 == pytest.approx(3.0, abs=0.25)  # after the gate's wait, not at the frames' limit
     assert g.reselections == 1
     assert all(d.kind is not CommandKind.LAND for d in decisions)
+
+
+def test_a_person_seen_in_the_footprint_after_the_gate_and_above_the_floor_sends_the_descent_back_to_the_gate() -> None:
+    g = _guidance(walkers={"max_wait_s": 3.0})
+    c = g.config
+    gate_m = c.perception_min_altitude_m + c.land_tolerance_m
+    state = _descending_over(g, gate_m)
+    zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
+    t = 0.1
+    while not g.walkers.passed:  # a free footprint at the gate: the look, then the gate is passed
+        t += 0.1
+        state = VehicleState(t, 0.0, 0.0, -gate_m, 0.0)
+        g.on_frame(_frame(t, [zone], target, _map()), state)
+        assert t < 5.0
+    state = VehicleState(t, 0.2, 0.0, -(c.perception_min_altitude_m + 0.1), 0.0)  # on the way down, above the floor
+    occupied = _map(person_at=(0.5, 0.3))
+    t += 0.1
+    d = g.on_frame(_frame(t, [zone], target, occupied), state)
+    assert d.phase is LandingPhase.DESCENT
+    assert d.setpoint is not None
+    assert -d.setpoint.down_m == pytest.approx(gate_m)  # back up to the gate, not an abort
+    assert not g.walkers.passed
+    since = t
+    while d.phase is LandingPhase.DESCENT:  # still there: the wait is bounded like any wait at the gate
+        t += 0.1
+        state = VehicleState(t, 0.2, 0.0, -gate_m, 0.0)
+        d = g.on_frame(_frame(t, [zone], target, occupied), state)
+        assert t - since < 4.0
+    assert d.phase is LandingPhase.SEARCH
+    assert "person seen inside the footprint at the gate" in d.reason
+    assert t - since == pytest.approx(3.0, abs=0.25)

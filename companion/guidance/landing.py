@@ -453,10 +453,15 @@ class LandingGuidance:
         # At the walker gate the vehicle hovers 3 m above the heads and descends no further until the footprint is
         # seen free: there a person (or a false positive that flickers) in the footprint is waited out, up to the
         # gate's limit, instead of refusing the point at once (the maps at 4.5-5 m are the model's least sure).
+        # Between the gate and the floor the same holds after the gate was passed: the descent goes back to the gate
+        # and watches again, its wait still counted from when it began (so a presence that comes and goes cannot
+        # hold the vehicle there past the gate's limit).
         blocked = None
-        if unsafe and self._at_gate(state):
+        if unsafe and self._in_gate_band(state):
             blocked = "a person seen inside the footprint" if footprint.occupied_seen else "the zone shrank"
             unsafe = False
+            if self.walkers.passed:
+                self.walkers.rearm(state.t_s)
         self._unsafe_frames = self._unsafe_frames + 1 if unsafe else 0
         if self._unsafe_frames >= c.unsafe_frames_to_abort:
             self._unsafe_frames = 0
@@ -499,10 +504,10 @@ class LandingGuidance:
         """The walker gate's altitude (m above ground): just above the floor below which no map decides."""
         return self.config.perception_min_altitude_m + self.config.land_tolerance_m
 
-    def _at_gate(self, state: VehicleState) -> bool:
-        """Whether this map is one of the walker gate's: the vehicle stops there, the gate not passed yet."""
+    def _in_gate_band(self, state: VehicleState) -> bool:
+        """Whether the vehicle is between the walker gate (with its slack) and the floor, with a watch to keep."""
         c = self.config
-        if not c.walkers.enabled or c.blind_landing or self.walkers.passed:
+        if not c.walkers.enabled or c.blind_landing:
             return False
         return c.perception_min_altitude_m <= state.altitude_m <= self._gate_m() + GATE_SLACK_M
 
