@@ -461,7 +461,7 @@ class LandingGuidance:
             blocked = "a person seen inside the footprint" if footprint.occupied_seen else "the zone shrank"
             unsafe = False
             if self.walkers.passed:
-                self.walkers.rearm(state.t_s)
+                self.walkers.rearm()
         self._unsafe_frames = self._unsafe_frames + 1 if unsafe else 0
         if self._unsafe_frames >= c.unsafe_frames_to_abort:
             self._unsafe_frames = 0

@@ -176,14 +176,13 @@ class WalkerWatch:
         self.waiting_since_s = None
         self.passed = False
 
-    def rearm(self, t_s: float) -> None:
+    def rearm(self) -> None:
         """The gate was passed but the footprint is seen occupied before the floor: watch again from the gate,
-        keeping the wait's start (``t_s`` if none), so that :meth:`waited_too_long` still bounds the whole wait."""
+        keeping the wait's start, so that :meth:`waited_too_long` still bounds the whole wait (the blocked map that
+        follows starts the wait through :meth:`ready` when none had begun)."""
         waiting_since_s = self.waiting_since_s
         self.reset()
-        if waiting_since_s is None:
-            self.waits += 1
-        self.waiting_since_s = t_s if waiting_since_s is None else waiting_since_s
+        self.waiting_since_s = waiting_since_s
 
     def observe(self, head_plane: HeadPlaneOccupancy, north_m: float, east_m: float, t_s: float) -> Approach | None:
         """Take one map taken at the gate; the most threatening approach (None: nobody walks in).
