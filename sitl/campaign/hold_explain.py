@@ -1,0 +1,251 @@
+"""Why a mission held, from its flight log and the SITL's ground truth: every time the map turned a landing point down.
+
+A hold's kind (:func:`sitl.campaign.metrics.hold_cause`) says how the mission ended; this says what led there. Each
+time the companion gave up a landing point, its flight log names why: a committed zone was *released* (a person seen
+in its footprint for several frames, it shrank, it was lost, its footprint left the fence), or a descent was
+*aborted* (a person seen in the footprint, the zone shrank, no fresh map saw it free, someone kept walking in, or the
+walker gate's wait ran out). For the refusals that name a person, the ground truth says how far the nearest body
+really was from the refused point at that instant, so a hold reads as one of:
+
+- people really were there (a body's edge inside the footprint: ``vehicle_radius_m + margin_m``);
+- the map keeps a wider berth than the footprint (the nearest body a little outside it: the occupancy's blob and
+  its dilation, by design);
+- the map saw people where nobody was (the nearest body far away: false positives).
+
+Times are vehicle-clock seconds (the flight log and the truth share the SITL's clock); positions world NED metres;
+distances horizontal, to a body's edge (centre distance minus body radius). :func:`explain_run` reads a mission's
+folder; :func:`explain_hold` works on records already read.
+"""
+
+from __future__ import annotations
+
+import bisect
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from companion.app.flight_log import DecisionRecord, FlightLog
+from sitl.truth import TruthHeader, TruthRecord, body_edges_m, read_truth
+
+RELEASE = re.compile(r"released: ([^;]+)")
+ABORT_MARKERS = (": climb back and re-select", " re-selections used up")
+GATE_BLOCKED = re.compile(r"wait at [0-9.]+ m over zone \d+: a person seen inside the footprint")
+
+
+def release_kind(text: str) -> str:
+    """A release's cause, without zone numbers: 'person in the footprint', 'zone shrank', 'zone lost',
+    'footprint left the geofence' or 'other'."""
+    if "person seen inside" in text:
+        return "person in the footprint"
+    if "shrank" in text:
+        return "zone shrank"
+    if "not seen for" in text:
+        return "zone lost"
+    if "left the geofence" in text:
+        return "footprint left the geofence"
+    return "other"
+
+
+def abort_kind(text: str) -> str:
+    """An aborted descent's cause (the text before ``: climb back`` or ``; N re-selections used up``)."""
+    if "at the gate for" in text:
+        return "person in the footprint at the gate, wait limit"
+    if "kept walking towards the footprint" in text:
+        return "walker kept coming"
+    if "person seen inside the footprint" in text:
+        return "person in the footprint"
+    if "shrank" in text:
+        return "zone shrank"
+    if "no map saw the footprint free" in text:
+        return "no fresh free map"
+    return "other"
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """One landing point given up because the map saw a person in its footprint.
+
+    Attributes
+    ----------
+    t_s : float
+        Vehicle time of the refusal.
+    event : str
+        ``release`` (a committed zone, before any descent), ``abort`` (a descent) or ``gate`` (one map at the walker
+        gate that saw the footprint occupied: the descent waited).
+    north_m, east_m : float
+        The refused landing point (world NED).
+    nearest_edge_m : float
+        True distance from the point to the nearest body's edge at ``t_s``.
+    """
+
+    t_s: float
+    event: str
+    north_m: float
+    east_m: float
+    nearest_edge_m: float
+
+
+@dataclass
+class HoldExplanation:
+    """What a flight log and its truth say about why a mission did not land.
+
+    Attributes
+    ----------
+    footprint_radius_m : float
+        ``vehicle_radius_m + margin_m``: the disc the map must see free.
+    vehicle_radius_m : float
+        The vehicle's own radius: a body's edge closer than this to a touchdown is a body in the footprint.
+    zones_chosen : int
+        Commitments and switches.
+    releases : Counter
+        Released zones by :func:`release_kind`.
+    aborts : Counter
+        Aborted descents by :func:`abort_kind`.
+    refusals : list of Refusal
+        Every release, abort and gate map that named a person, with the truth's nearest body.
+    """
+
+    footprint_radius_m: float
+    vehicle_radius_m: float
+    zones_chosen: int = 0
+    releases: Counter[str] = field(default_factory=Counter)
+    aborts: Counter[str] = field(default_factory=Counter)
+    refusals: list[Refusal] = field(default_factory=list)
+
+    def person_refusals(self, event: str | None = None) -> list[Refusal]:
+        """The refusals of one ``event`` kind (all when None)."""
+        return [r for r in self.refusals if event is None or r.event == event]
+
+    def verdict(self) -> str:
+        """Where the refusals' nearest bodies were: 'people there' (most had a body in the footprint), 'wide berth'
+        (most had the nearest body within 3 m of the footprint's edge, none in it), 'false positives' (most had
+        nobody within 3 m of the edge), 'mixed', or 'no person named' (no refusal named a person)."""
+        refusals = self.person_refusals("release") + self.person_refusals("abort")
+        if not refusals:
+            refusals = self.person_refusals()
+        if not refusals:
+            return "no person named"
+        edges = np.array([r.nearest_edge_m for r in refusals])
+        inside = float(np.mean(edges < self.footprint_radius_m))
+        near = float(np.mean((edges >= self.footprint_radius_m) & (edges < self.footprint_radius_m + 3.0)))
+        if inside > 0.5:
+            return "people there"
+        if near > 0.5:
+            return "wide berth"
+        if 1.0 - inside - near > 0.5:
+            return "false positives"
+        return "mixed"
+
+    def summary(self) -> str:
+        """One line for a report."""
+        parts = [f"{self.zones_chosen} zones chosen"]
+        if self.releases:
+            parts.append("released: " + ", ".join(f"{n} {k}" for k, n in self.releases.most_common()))
+        if self.aborts:
+            parts.append("descents aborted: " + ", ".join(f"{n} {k}" for k, n in self.aborts.most_common()))
+        for event, name in (("release", "releases"), ("abort", "aborts"), ("gate", "gate maps")):
+            edges = np.array([r.nearest_edge_m for r in self.person_refusals(event)])
+            if len(edges):
+                inside = int((edges < self.footprint_radius_m).sum())
+                parts.append(
+                    f"nearest body at the {name} for a person: {np.min(edges):.1f}-{np.max(edges):.1f} m "
+                    f"(median {np.median(edges):.1f}), {inside} of {len(edges)} inside the "
+                    f"{self.footprint_radius_m:g} m footprint"
+                )
+        return "; ".join(parts) + f" -> {self.verdict()}"
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-able (refusals summarised by event: count, inside the footprint, min / median / max nearest body)."""
+        by_event: dict[str, Any] = {}
+        for event in ("release", "abort", "gate"):
+            edges = np.array([r.nearest_edge_m for r in self.person_refusals(event)])
+            if len(edges):
+                by_event[event] = {
+                    "count": len(edges),
+                    "inside_footprint": int((edges < self.footprint_radius_m).sum()),
+                    "within_vehicle_radius": int((edges < self.vehicle_radius_m).sum()),
+                    "nearest_edge_m": [round(float(v), 2) for v in (edges.min(), np.median(edges), edges.max())],
+                }
+        return {
+            "zones_chosen": self.zones_chosen,
+            "releases": dict(self.releases),
+            "aborts": dict(self.aborts),
+            "person_refusals": by_event,
+            "verdict": self.verdict(),
+            "summary": self.summary(),
+        }
+
+
+class TruthAt:
+    """The ground-truth record nearest a vehicle time (the truth is written at the SITL's rate, the log per frame)."""
+
+    def __init__(self, header: TruthHeader, records: list[TruthRecord]) -> None:
+        self.header = header
+        self.records = records
+        self._times = [r.t_s for r in records]
+
+    def nearest_edge_m(self, t_s: float, north_m: float, east_m: float) -> float:
+        """Distance from a point to the nearest body's edge at ``t_s`` (inf with nobody in the scene)."""
+        record: TruthRecord | None = None
+        if self.records:
+            i = bisect.bisect_left(self._times, t_s)
+            near = [j for j in (i - 1, i) if 0 <= j < len(self.records)]
+            record = self.records[min(near, key=lambda j: abs(self._times[j] - t_s))]
+        return float(body_edges_m(self.header, record, north_m, east_m).min())
+
+
+def explain_hold(
+    decisions: list[DecisionRecord], truth: TruthAt, vehicle_radius_m: float, margin_m: float
+) -> HoldExplanation:
+    """Go through a flight's decisions in order and collect every landing point it gave up, and why.
+
+    Parameters
+    ----------
+    decisions : list of DecisionRecord
+        The flight log's decisions, in order.
+    truth : TruthAt
+        The mission's ground truth.
+    vehicle_radius_m, margin_m : float
+        The perception's zone config (the footprint is their sum).
+    """
+    out = HoldExplanation(footprint_radius_m=vehicle_radius_m + margin_m, vehicle_radius_m=vehicle_radius_m)
+    target: dict[str, Any] | None = None  # the point the previous decision flew to
+
+    def refuse(t_s: float, event: str) -> None:
+        if target is not None:
+            n, e = float(target["north_m"]), float(target["east_m"])
+            out.refusals.append(Refusal(t_s, event, n, e, truth.nearest_edge_m(t_s, n, e)))
+
+    for d in decisions:
+        reason = d.reason
+        out.zones_chosen += reason.count("committed to zone") + reason.count("switched from zone")
+        for text in RELEASE.findall(reason):
+            kind = release_kind(text)
+            out.releases[kind] += 1
+            if kind == "person in the footprint":
+                refuse(d.t_s, "release")
+        if any(marker in reason for marker in ABORT_MARKERS):
+            kind = abort_kind(reason)
+            out.aborts[kind] += 1
+            if "person" in kind:
+                refuse(d.t_s, "abort")
+        elif GATE_BLOCKED.search(reason):
+            refuse(d.t_s, "gate")
+        if d.target is not None:
+            target = d.target
+    return out
+
+
+def explain_run(run_dir: Path) -> HoldExplanation:
+    """:func:`explain_hold` for a mission's folder (``flight/`` and ``truth.jsonl``, as a campaign or a replay writes
+    them), with the footprint of the config its flight log holds."""
+    flight = FlightLog.read(Path(run_dir) / "flight")
+    header, records = read_truth(Path(run_dir) / "truth.jsonl")
+    zones = flight.config["perception"]["zones"]
+    return explain_hold(
+        flight.decisions(), TruthAt(header, records), float(zones["vehicle_radius_m"]), float(zones["margin_m"])
+    )
