@@ -4,7 +4,8 @@ Issue 33 asks that a hold be a decision the flight log explains, never a timeout
 each mission's result, not its flight log; this flies each SLZ mission of a campaign folder that did not land again,
 in lockstep, with ``slz campaign replay`` (which checks that the replay gives the campaign's result: the same seed
 decides the same), and reads its flight log and truth with :mod:`sitl.campaign.hold_explain`: every landing point the
-companion gave up and why, and for the ones it gave up for a person, how far the nearest body really was.
+companion gave up and why, for the ones it gave up for a person how far the nearest body really was, and whether a
+disc as large as the footprint was truly free in the landing area (what a perfect map would have landed on).
 
 Run: ``.venv/bin/python bench/hold_replays.py runs/campaigns/paper_table1_roi [--jobs 2] [--resume]`` (a replay
 takes one to five minutes of one core; ``--jobs`` flies that many at once, each SITL on its own ports). Writes the
@@ -97,8 +98,10 @@ def main() -> int:
     causes = Counter(str(r["recorded"]["hold_cause"]) for r in rows)
     verdicts = Counter(r["explanation"]["verdict"] for r in rows)
     same = sum(r["same_as_campaign"] for r in rows)
+    free = sum((r["explanation"]["free_share"] or 0.0) >= 0.5 for r in rows)
     sys.stdout.write(
-        f"{len(rows)} holds: by cause {dict(causes)}; by what the truth says {dict(verdicts)}; "
+        f"{len(rows)} holds: by cause {dict(causes)}; by what the truth says {dict(verdicts)}; {free} with a truly "
+        f"free disc of the footprint's size in the landing area for most of the flight; "
         f"{same} of {len(rows)} replays gave the campaign's result\n"
     )
     save_report(
@@ -108,6 +111,7 @@ def main() -> int:
             "holds": rows,
             "by_cause": dict(causes),
             "by_verdict": dict(verdicts),
+            "truly_free_most_of_the_flight": free,
         },
         out,
     )

@@ -125,3 +125,22 @@ def test_a_mission_folder_is_read_with_its_own_footprint(tmp_path: Path) -> None
     assert math.isclose(explained.footprint_radius_m, 1.2)
     assert [round(r.nearest_edge_m, 3) for r in explained.refusals] == [0.75]
     assert explained.verdict() == "people there"  # 0.75 m: inside this vehicle's 1.2 m footprint
+
+
+def test_the_truly_free_disc_is_measured_inside_the_area_between_the_bodies() -> None:
+    """Two bodies 10 m apart in a 20 m square: the largest disc that neither enters and that stays in the square has
+    its centre midway between the far corners' reach; measured on a 0.25 m grid, within the grid's half-diagonal."""
+    area = np.array([[-10.0, -10.0], [-10.0, 10.0], [10.0, 10.0], [10.0, -10.0]])
+    truth = _truth({0.0: [(0.0, -5.0), (0.0, 5.0)]})
+    radius = truth.largest_free_radius_m(0.0, area)
+    # A disc centred on the north-south axis at north x touches the square's edge at 10 - |x| and the bodies'
+    # edges at hypot(x, 5) - 0.25: the best centre makes them equal, at |x| = 10 - r.
+    best = next(r for r in np.arange(0.0, 10.0, 0.001) if math.hypot(10.0 - r, 5.0) - 0.25 <= r)
+    assert abs(radius - best) <= 0.25 / math.sqrt(2) + 1e-3
+    log = [_decision(float(t), "search", "no target: search pattern", None) for t in range(0, 21)]
+    lattice = np.arange(-10.5, 10.6, 1.5)
+    crowd = _truth({0.0: [(float(n), float(e)) for n in lattice for e in lattice]})
+    explained = explain_hold(log, crowd, VEHICLE_RADIUS_M, MARGIN_M, area)
+    assert len(explained.free_radii_m) == 5  # every 5 s from 0 to 20 s
+    assert explained.free_share() == 0.0  # bodies every 1.5 m: at most 1.06 m to a centre, 0.81 m to an edge
+    assert max(explained.free_radii_m) < explained.footprint_radius_m

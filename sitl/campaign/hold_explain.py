@@ -12,9 +12,14 @@ really was from the refused point at that instant, so a hold reads as one of:
   its dilation, by design);
 - the map saw people where nobody was (the nearest body far away: false positives).
 
+And whether a perfect map would have landed: every few seconds of the flight, the largest disc inside the landing
+area (or the geofence) that no body's edge enters, from the truth. When such a disc as large as the footprint was
+there most of the time, the hold is the map's caution, not the scene's crowd.
+
 Times are vehicle-clock seconds (the flight log and the truth share the SITL's clock); positions world NED metres;
 distances horizontal, to a body's edge (centre distance minus body radius). :func:`explain_run` reads a mission's
-folder; :func:`explain_hold` works on records already read.
+folder (the landing area, else the geofence, from the config its flight log holds); :func:`explain_hold` works on
+records already read.
 """
 
 from __future__ import annotations
@@ -27,12 +32,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from companion.app.flight_log import DecisionRecord, FlightLog
-from sitl.truth import TruthHeader, TruthRecord, body_edges_m, read_truth
+from companion.geometry import inside_polygon
+from sitl.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth
 
 RELEASE = re.compile(r"released: ([^;]+)")
 ABORT_MARKERS = (": climb back and re-select", " re-selections used up")
+FREE_SAMPLE_S = 5.0
+"""How often (vehicle seconds) the truth's largest free disc is measured over a flight."""
 GATE_BLOCKED = re.compile(r"wait at [0-9.]+ m over zone \d+: a person seen inside the footprint")
 
 
@@ -107,6 +116,8 @@ class HoldExplanation:
         Aborted descents by :func:`abort_kind`.
     refusals : list of Refusal
         Every release, abort and gate map that named a person, with the truth's nearest body.
+    free_radii_m : list of float
+        The largest truly free disc's radius in the landing area, every ``FREE_SAMPLE_S`` of the flight.
     """
 
     footprint_radius_m: float
@@ -115,6 +126,13 @@ class HoldExplanation:
     releases: Counter[str] = field(default_factory=Counter)
     aborts: Counter[str] = field(default_factory=Counter)
     refusals: list[Refusal] = field(default_factory=list)
+    free_radii_m: list[float] = field(default_factory=list)
+
+    def free_share(self) -> float | None:
+        """The share of the samples in which a disc as large as the footprint was truly free (None: no sample)."""
+        if not self.free_radii_m:
+            return None
+        return float(np.mean(np.array(self.free_radii_m) >= self.footprint_radius_m))
 
     def person_refusals(self, event: str | None = None) -> list[Refusal]:
         """The refusals of one ``event`` kind (all when None)."""
@@ -156,6 +174,12 @@ class HoldExplanation:
                     f"(median {np.median(edges):.1f}), {inside} of {len(edges)} inside the "
                     f"{self.footprint_radius_m:g} m footprint"
                 )
+        share = self.free_share()
+        if share is not None:
+            parts.append(
+                f"truly free disc of the footprint's size in {100 * share:.0f} % of the flight "
+                f"(largest free radius median {np.median(self.free_radii_m):.2f} m)"
+            )
         return "; ".join(parts) + f" -> {self.verdict()}"
 
     def to_json(self) -> dict[str, Any]:
@@ -175,6 +199,10 @@ class HoldExplanation:
             "releases": dict(self.releases),
             "aborts": dict(self.aborts),
             "person_refusals": by_event,
+            "free_share": self.free_share(),
+            "free_radius_m": [round(float(q), 2) for q in np.quantile(self.free_radii_m, (0.0, 0.5, 1.0))]
+            if self.free_radii_m
+            else None,
             "verdict": self.verdict(),
             "summary": self.summary(),
         }
@@ -188,18 +216,49 @@ class TruthAt:
         self.records = records
         self._times = [r.t_s for r in records]
 
+    def at(self, t_s: float) -> TruthRecord | None:
+        """The record nearest ``t_s`` (None without records: the header's scene)."""
+        if not self.records:
+            return None
+        i = bisect.bisect_left(self._times, t_s)
+        near = [j for j in (i - 1, i) if 0 <= j < len(self.records)]
+        return self.records[min(near, key=lambda j: abs(self._times[j] - t_s))]
+
     def nearest_edge_m(self, t_s: float, north_m: float, east_m: float) -> float:
         """Distance from a point to the nearest body's edge at ``t_s`` (inf with nobody in the scene)."""
-        record: TruthRecord | None = None
-        if self.records:
-            i = bisect.bisect_left(self._times, t_s)
-            near = [j for j in (i - 1, i) if 0 <= j < len(self.records)]
-            record = self.records[min(near, key=lambda j: abs(self._times[j] - t_s))]
-        return float(body_edges_m(self.header, record, north_m, east_m).min())
+        return float(body_edges_m(self.header, self.at(t_s), north_m, east_m).min())
+
+    def largest_free_radius_m(self, t_s: float, area_ne_m: npt.NDArray[np.float64], step_m: float = 0.25) -> float:
+        """The radius (m) of the largest disc inside the polygon ``area_ne_m`` ((K, 2) north/east m) that no body's
+        edge enters at ``t_s``, its centre on a ``step_m`` grid (so within ``step_m / sqrt(2)`` of the exact one)."""
+        lo, hi = area_ne_m.min(axis=0), area_ne_m.max(axis=0)
+        north, east = np.meshgrid(
+            np.arange(lo[0] + step_m / 2, hi[0], step_m), np.arange(lo[1] + step_m / 2, hi[1], step_m), indexing="ij"
+        )
+        inside = inside_polygon(area_ne_m, north, east)
+        points = np.stack([north[inside], east[inside]], axis=1)  # (P, 2)
+        if not len(points):
+            return 0.0
+        clear = np.full(len(points), np.inf)
+        positions, radii = people_at(self.header, self.at(t_s))
+        for (n, e), r in zip(positions, radii, strict=True):
+            np.minimum(clear, np.hypot(points[:, 0] - n, points[:, 1] - e) - r, out=clear)
+        a, b = area_ne_m, np.roll(area_ne_m, -1, axis=0)
+        for (n0, e0), (n1, e1) in zip(a, b, strict=True):  # the disc stays inside the area: its edges bound it
+            d_n, d_e = n1 - n0, e1 - e0
+            length2 = d_n * d_n + d_e * d_e
+            t = np.clip(((points[:, 0] - n0) * d_n + (points[:, 1] - e0) * d_e) / max(length2, 1e-12), 0.0, 1.0)
+            edge = np.hypot(points[:, 0] - (n0 + t * d_n), points[:, 1] - (e0 + t * d_e))
+            np.minimum(clear, edge, out=clear)
+        return float(max(0.0, clear.max()))
 
 
 def explain_hold(
-    decisions: list[DecisionRecord], truth: TruthAt, vehicle_radius_m: float, margin_m: float
+    decisions: list[DecisionRecord],
+    truth: TruthAt,
+    vehicle_radius_m: float,
+    margin_m: float,
+    area_ne_m: npt.NDArray[np.float64] | None = None,
 ) -> HoldExplanation:
     """Go through a flight's decisions in order and collect every landing point it gave up, and why.
 
@@ -211,6 +270,9 @@ def explain_hold(
         The mission's ground truth.
     vehicle_radius_m, margin_m : float
         The perception's zone config (the footprint is their sum).
+    area_ne_m : ndarray, shape (K, 2), optional
+        Where zones may lie (the landing area, else the geofence): the truly free disc is looked for there, every
+        ``FREE_SAMPLE_S`` from the first frame's decision to the last (not looked for without it).
     """
     out = HoldExplanation(footprint_radius_m=vehicle_radius_m + margin_m, vehicle_radius_m=vehicle_radius_m)
     target: dict[str, Any] | None = None  # the point the previous decision flew to
@@ -237,6 +299,10 @@ def explain_hold(
             refuse(d.t_s, "gate")
         if d.target is not None:
             target = d.target
+    flying = [d.t_s for d in decisions if d.source == "frame"]
+    if area_ne_m is not None and flying:
+        for t_s in np.arange(flying[0], flying[-1] + 1e-9, FREE_SAMPLE_S):
+            out.free_radii_m.append(truth.largest_free_radius_m(float(t_s), area_ne_m))
     return out
 
 
@@ -245,7 +311,13 @@ def explain_run(run_dir: Path) -> HoldExplanation:
     them), with the footprint of the config its flight log holds."""
     flight = FlightLog.read(Path(run_dir) / "flight")
     header, records = read_truth(Path(run_dir) / "truth.jsonl")
-    zones = flight.config["perception"]["zones"]
+    config = flight.config
+    zones = config["perception"]["zones"]
+    area = zones.get("landing_area_ne_m") or config.get("geofence", {}).get("polygon_ne_m")
     return explain_hold(
-        flight.decisions(), TruthAt(header, records), float(zones["vehicle_radius_m"]), float(zones["margin_m"])
+        flight.decisions(),
+        TruthAt(header, records),
+        float(zones["vehicle_radius_m"]),
+        float(zones["margin_m"]),
+        None if area is None else np.asarray(area, dtype=np.float64),
     )
