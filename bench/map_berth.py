@@ -1,0 +1,162 @@
+"""How wide a berth the occupancy map keeps around people, measured against the truth on replayed flights.
+
+The holds of the ROI table are the map's caution (``bench/hold_replays.py``): the points it refused for a person had
+the nearest body 2-3 m away, while a disc of 3 m or more was truly free. This measures that caution directly. For
+frames of replayed missions (folders with ``flight/`` recorded with png frames and ``truth.jsonl``, as ``slz campaign
+replay`` writes them), the density model runs once per frame and the occupancy and head-plane projection run for
+each variant of the occupancy config (threshold, dilation); then, on every known head-plane cell inside the landing
+area whose true clearance (to the nearest body's edge) is between 0.5 and 6 m:
+
+- **berth** = true clearance - the map's clearance (distance to the nearest cell it calls occupied), metres: how much
+  further from people the map keeps a landing point than the bodies ask. Reported by the vehicle's altitude band.
+- **bodies seen**: of the bodies whose head cell lies well inside the known map, the share with an occupied cell
+  within 0.3 m of it (the recall of the map on the head plane).
+
+Run: ``.venv/bin/python bench/map_berth.py runs/hold_replays/paper_table1_roi/*/*/* [--every 25]`` (one model run
+per sampled frame, about 30 ms, then the variants). Prints the table with the machine's context and writes JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO_ROOT))
+
+from bench.machine import machine_context, save_report  # noqa: E402
+from companion.app.flight_log import FlightLog, RecordKind  # noqa: E402
+from companion.app.replay import config_from_header  # noqa: E402
+from companion.geometry import Pose, inside_polygon  # noqa: E402
+from companion.perception.density import input_scale, predict_downscaled  # noqa: E402
+from companion.perception.occupancy import OccupancyMapper  # noqa: E402
+from companion.perception.pipeline import SlzPipeline  # noqa: E402
+from sitl.campaign.hold_explain import TruthAt  # noqa: E402
+from sitl.truth import people_at, read_truth  # noqa: E402
+
+VARIANTS: dict[str, tuple[float, float]] = {
+    "shipped (threshold 0.01, dilation 0.5 m)": (0.01, 0.5),
+    "dilation 0.25 m": (0.01, 0.25),
+    "dilation 0": (0.01, 0.0),
+    "threshold 0.03": (0.03, 0.5),
+    "threshold 0.03, dilation 0.25 m": (0.03, 0.25),
+}
+"""Name: (density_threshold people per cell, dilation_m)."""
+BANDS = ((20.0, "above 20 m"), (8.0, "8-20 m"), (0.0, "below 8 m"))
+SEEN_WITHIN_CELLS = 3  # 0.3 m on the 0.1 m head-plane grid
+CLEARANCE_RANGE_M = (0.5, 6.0)
+
+
+def band_of(altitude_m: float) -> str:
+    """The altitude band a frame's numbers go into."""
+    return next(name for floor, name in BANDS if altitude_m > floor)
+
+
+def measure(folders: list[Path], every: int) -> dict[str, Any]:
+    """Berths (a sample of cells) and bodies seen, per variant and altitude band."""
+    out: dict[str, Any] = {v: {"berth_m": {}, "seen": 0, "bodies": 0} for v in VARIANTS}
+    frames = 0
+    for folder in folders:
+        flight = FlightLog.read(folder / "flight")
+        header = flight.first(RecordKind.HEADER)
+        if header is None:
+            raise SystemExit(f"{folder}: no flight log header")
+        config = config_from_header(header["config"])
+        pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
+        area = np.asarray(config.perception.zones.landing_area_ne_m or config.geofence.polygon_ne_m, np.float64)
+        truth_header, records = read_truth(folder / "truth.jsonl")
+        truth = TruthAt(truth_header, records)
+        paths = flight.frame_paths()
+        for record in flight.of(RecordKind.FRAME_RESULT)[::every]:
+            raw = cv2.imread(str(paths[int(record["seq"])]), cv2.IMREAD_COLOR)
+            if raw is None:
+                raise SystemExit(f"{folder}: frame {record['seq']} not saved (replay with png frames)")
+            image = np.asarray(raw, dtype=np.uint8)
+            frames += 1
+            pose = Pose(np.asarray(record["T_world_body"], np.float64))
+            band = band_of(-float(pose.position_ned_m[2]))
+            gsd = pipeline.projector.finest_gsd_m_per_px(pose)
+            density = predict_downscaled(pipeline.density_model, image, input_scale(gsd, pipeline.min_gsd_m_per_px))
+            density_camera = pipeline.projector.camera.scaled(1.0 / density.stride_x, 1.0 / density.stride_y)
+            positions, radii = people_at(truth_header, truth.at(float(record["t_s"])))
+            for name, (threshold, dilation_m) in VARIANTS.items():
+                occupancy_config = config.perception.occupancy.model_copy(
+                    update={"density_threshold": threshold, "dilation_m": dilation_m}
+                )
+                occupancy = OccupancyMapper(occupancy_config).compute(density, gsd)
+                head_plane = pipeline.projector.project(occupancy.values, density_camera, pose)
+                grid = head_plane.grid
+                occupied = head_plane.known & ~head_plane.free
+                north, east = np.meshgrid(grid.north_centres_m, grid.east_centres_m, indexing="ij")
+                not_occupied = (~occupied).astype(np.uint8)
+                map_clearance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, 5) * grid.resolution_m
+                true_clearance = np.full(north.shape, np.inf)
+                for (n, e), r in zip(positions, radii, strict=True):
+                    np.minimum(true_clearance, np.hypot(north - n, east - e) - r, out=true_clearance)
+                low, high = CLEARANCE_RANGE_M
+                cells = (
+                    head_plane.known
+                    & inside_polygon(area, north, east)
+                    & (true_clearance > low)
+                    & (true_clearance < high)
+                )
+                berth = (true_clearance[cells] - map_clearance[cells])[::7]  # a sample: neighbours agree
+                out[name]["berth_m"].setdefault(band, []).extend(berth.tolist())
+                k = SEEN_WITHIN_CELLS
+                for n, e in positions:
+                    row, col = (round(v) for v in grid.world_to_cell(float(n), float(e)))
+                    if k <= row < grid.rows - k and k <= col < grid.cols - k:
+                        window = (slice(row - k, row + k + 1), slice(col - k, col + k + 1))
+                        if head_plane.known[window].all():
+                            out[name]["bodies"] += 1
+                            out[name]["seen"] += bool(occupied[window].any())
+        sys.stdout.write(f"{folder}: done\n")
+    return {"frames": frames, "variants": out}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description="The occupancy map's berth around people, against the truth.")
+    parser.add_argument("folders", type=Path, nargs="+", help="replayed mission folders (png frames, truth)")
+    parser.add_argument("--every", type=int, default=25, help="use every N-th processed frame")
+    parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench/results/map_berth.json")
+    args = parser.parse_args()
+    measured = measure(args.folders, max(1, args.every))
+    rows = []
+    sys.stdout.write(f"{measured['frames']} frames of {len(args.folders)} missions\n")
+    sys.stdout.write("| variant | berth m, median [p10, p90] | by altitude band (median) | bodies seen |\n")
+    sys.stdout.write("| --- | --- | --- | --- |\n")
+    for name, found in measured["variants"].items():
+        every_band = np.concatenate([np.asarray(v) for v in found["berth_m"].values()])
+        by_band = {band: round(float(np.median(v)), 2) for band, v in found["berth_m"].items()}
+        q10, q50, q90 = (float(q) for q in np.quantile(every_band, (0.1, 0.5, 0.9)))
+        seen = found["seen"] / max(1, found["bodies"])
+        rows.append(
+            {
+                "variant": name,
+                "berth_m_p10_p50_p90": [round(q, 3) for q in (q10, q50, q90)],
+                "berth_m_median_by_band": by_band,
+                "cells_sampled": len(every_band),
+                "bodies_seen": found["seen"],
+                "bodies": found["bodies"],
+            }
+        )
+        bands = ", ".join(f"{band} {value:.2f}" for band, value in by_band.items())
+        sys.stdout.write(
+            f"| {name} | {q50:.2f} [{q10:.2f}, {q90:.2f}] | {bands} | {found['seen']} / {found['bodies']} "
+            f"({100 * seen:.2f} %) |\n"
+        )
+    save_report(
+        {"machine": machine_context(), "folders": [str(f) for f in args.folders], "frames": measured["frames"],
+         "every": args.every, "variants": rows},
+        args.out,
+    )  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
