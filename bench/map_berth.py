@@ -11,6 +11,9 @@ area whose true clearance (to the nearest body's edge) is between 0.5 and 6 m:
   further from people the map keeps a landing point than the bodies ask. Reported by the vehicle's altitude band.
 - **bodies seen**: of the bodies whose head cell lies well inside the known map, the share with an occupied cell
   within 0.3 m of it (the recall of the map on the head plane).
+- **ground called occupied**: of the known cells in the landing area more than 2 m from every body's edge, the share
+  the map calls occupied (false positives away from people), by the scene's sun elevation: below 30 degrees a
+  person's shadow is more than 2.9 m long.
 
 Run: ``.venv/bin/python bench/map_berth.py runs/hold_replays/paper_table1_roi/*/*/* [--every 25]`` (one model run
 per sampled frame, about 30 ms, then the variants). Prints the table with the machine's context and writes JSON.
@@ -32,11 +35,14 @@ sys.path.insert(0, str(REPO_ROOT))
 from bench.machine import machine_context, save_report  # noqa: E402
 from companion.app.flight_log import FlightLog, RecordKind  # noqa: E402
 from companion.app.replay import config_from_header  # noqa: E402
+from companion.config import load_yaml_config  # noqa: E402
 from companion.geometry import Pose, inside_polygon  # noqa: E402
 from companion.perception.density import input_scale, predict_downscaled  # noqa: E402
 from companion.perception.occupancy import OccupancyMapper  # noqa: E402
 from companion.perception.pipeline import SlzPipeline  # noqa: E402
 from sitl.campaign.hold_explain import TruthAt  # noqa: E402
+from sitl.config import SitlConfig  # noqa: E402
+from sitl.sim_camera import scene_light  # noqa: E402
 from sitl.truth import people_at, read_truth  # noqa: E402
 
 VARIANTS: dict[str, tuple[float, float]] = {
@@ -50,6 +56,8 @@ VARIANTS: dict[str, tuple[float, float]] = {
 BANDS = ((20.0, "above 20 m"), (8.0, "8-20 m"), (0.0, "below 8 m"))
 SEEN_WITHIN_CELLS = 3  # 0.3 m on the 0.1 m head-plane grid
 CLEARANCE_RANGE_M = (0.5, 6.0)
+AWAY_FROM_PEOPLE_M = 2.0
+LOW_SUN_DEG = 30.0
 
 
 def band_of(altitude_m: float) -> str:
@@ -59,9 +67,13 @@ def band_of(altitude_m: float) -> str:
 
 def measure(folders: list[Path], every: int) -> dict[str, Any]:
     """Berths (a sample of cells) and bodies seen, per variant and altitude band."""
-    out: dict[str, Any] = {v: {"berth_m": {}, "seen": 0, "bodies": 0} for v in VARIANTS}
+    out: dict[str, Any] = {v: {"berth_m": {}, "seen": 0, "bodies": 0, "ground": {}} for v in VARIANTS}
     frames = 0
+    suns = {}
     for folder in folders:
+        sun_deg = scene_light(load_yaml_config(SitlConfig, folder / "sitl.yaml", section="sitl")).elevation_deg
+        suns[str(folder)] = round(sun_deg, 1)
+        sun_band = f"sun below {LOW_SUN_DEG:g} deg" if sun_deg < LOW_SUN_DEG else f"sun {LOW_SUN_DEG:g} deg or higher"
         flight = FlightLog.read(folder / "flight")
         header = flight.first(RecordKind.HEADER)
         if header is None:
@@ -107,6 +119,10 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                 )
                 berth = (true_clearance[cells] - map_clearance[cells])[::7]  # a sample: neighbours agree
                 out[name]["berth_m"].setdefault(band, []).extend(berth.tolist())
+                away = head_plane.known & inside_polygon(area, north, east) & (true_clearance > AWAY_FROM_PEOPLE_M)
+                ground = out[name]["ground"].setdefault(sun_band, [0, 0])
+                ground[0] += int((away & occupied).sum())
+                ground[1] += int(away.sum())
                 k = SEEN_WITHIN_CELLS
                 for n, e in positions:
                     row, col = (round(v) for v in grid.world_to_cell(float(n), float(e)))
@@ -115,8 +131,8 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                         if head_plane.known[window].all():
                             out[name]["bodies"] += 1
                             out[name]["seen"] += bool(occupied[window].any())
-        sys.stdout.write(f"{folder}: done\n")
-    return {"frames": frames, "variants": out}
+        sys.stdout.write(f"{folder}: sun {sun_deg:.1f} deg, done\n")
+    return {"frames": frames, "variants": out, "sun_elevation_deg": suns}
 
 
 def main() -> int:
@@ -128,13 +144,16 @@ def main() -> int:
     measured = measure(args.folders, max(1, args.every))
     rows = []
     sys.stdout.write(f"{measured['frames']} frames of {len(args.folders)} missions\n")
-    sys.stdout.write("| variant | berth m, median [p10, p90] | by altitude band (median) | bodies seen |\n")
-    sys.stdout.write("| --- | --- | --- | --- |\n")
+    sys.stdout.write(
+        "| variant | berth m, median [p10, p90] | by altitude band (median) | bodies seen | ground called occupied |\n"
+    )
+    sys.stdout.write("| --- | --- | --- | --- | --- |\n")
     for name, found in measured["variants"].items():
         every_band = np.concatenate([np.asarray(v) for v in found["berth_m"].values()])
         by_band = {band: round(float(np.median(v)), 2) for band, v in found["berth_m"].items()}
         q10, q50, q90 = (float(q) for q in np.quantile(every_band, (0.1, 0.5, 0.9)))
         seen = found["seen"] / max(1, found["bodies"])
+        ground = {sun: occupied / max(1, total) for sun, (occupied, total) in sorted(found["ground"].items())}
         rows.append(
             {
                 "variant": name,
@@ -143,16 +162,18 @@ def main() -> int:
                 "cells_sampled": len(every_band),
                 "bodies_seen": found["seen"],
                 "bodies": found["bodies"],
+                "ground_called_occupied": ground,
             }
         )
         bands = ", ".join(f"{band} {value:.2f}" for band, value in by_band.items())
+        grounds = ", ".join(f"{sun} {100 * share:.1f} %" for sun, share in ground.items())
         sys.stdout.write(
             f"| {name} | {q50:.2f} [{q10:.2f}, {q90:.2f}] | {bands} | {found['seen']} / {found['bodies']} "
-            f"({100 * seen:.2f} %) |\n"
+            f"({100 * seen:.2f} %) | {grounds} |\n"
         )
     save_report(
         {"machine": machine_context(), "folders": [str(f) for f in args.folders], "frames": measured["frames"],
-         "every": args.every, "variants": rows},
+         "every": args.every, "sun_elevation_deg": measured["sun_elevation_deg"], "variants": rows},
         args.out,
     )  # fmt: skip
     return 0

@@ -29,18 +29,24 @@ def _park(config: SitlConfig) -> Park:
     return park
 
 
+def scene_light(config: SitlConfig) -> Light:
+    """The sun and ambient light of a mission's scene: drawn from its seed within the scenario's ranges."""
+    scenario = config.scenario
+    rng = np.random.default_rng([config.seed, 8])
+    return Light.from_angles(
+        float(rng.uniform(scenario.sun_elevation_deg.low, scenario.sun_elevation_deg.high)),
+        float(rng.uniform(scenario.sun_azimuth_deg.low, scenario.sun_azimuth_deg.high)),
+        float(rng.uniform(scenario.ambient.low, scenario.ambient.high)),
+    )
+
+
 class SimCamera:
     """World + renderer + frame server for one SITL vehicle (see the module docstring)."""
 
     def __init__(self, config: SitlConfig) -> None:
         cam = config.camera
         scenario = config.scenario
-        rng = np.random.default_rng([config.seed, 8])
-        self.light = Light.from_angles(
-            float(rng.uniform(scenario.sun_elevation_deg.low, scenario.sun_elevation_deg.high)),
-            float(rng.uniform(scenario.sun_azimuth_deg.low, scenario.sun_azimuth_deg.high)),
-            float(rng.uniform(scenario.ambient.low, scenario.ambient.high)),
-        )
+        self.light = scene_light(config)
         self.park = PARKS.get((config.seed, scenario.roi_side_m, scenario.ground), lambda: _park(config))
         self.crowd = Crowd(scenario, config.seed)
         self.weather = WeatherSchedule(scenario, config.seed)

@@ -211,3 +211,18 @@ def test_the_park_layout_alone_has_the_same_objects_as_the_painted_park(seed: in
     assert not layout.painted
     assert layout.ground_bgr.shape == (1, 1, 3)
     assert painted.ground_bgr.shape == (1800, 1800, 3)
+
+
+def test_the_scene_light_comes_from_the_seed_within_the_scenario_ranges() -> None:
+    """The light a mission's camera draws with is a function of its seed (the same for a replay and a benchmark that
+    reads the mission's config), and its sun lies within the scenario's elevation range."""
+    from sitl.config import SitlConfig
+    from sitl.render.camera import Light
+    from sitl.sim_camera import scene_light
+
+    low_sun = ScenarioConfig.model_validate({"sun_elevation_deg": {"low": 20.0, "high": 30.0}})
+    lights = [scene_light(SitlConfig(seed=seed, scenario=low_sun)) for seed in range(20)]
+    assert all(20.0 <= light.elevation_deg <= 30.0 for light in lights)
+    assert scene_light(SitlConfig(seed=7, scenario=low_sun)).key == lights[7].key
+    assert len({light.key for light in lights}) == 20
+    assert math.isclose(Light.from_angles(25.0, 140.0, 0.3).elevation_deg, 25.0)

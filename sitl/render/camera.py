@@ -56,6 +56,11 @@ class Light:
         """Everything this light is made of, as a cache key."""
         return (*(float(v) for v in self.sun_dir_enu), float(self.ambient), *(float(v) for v in self.sun_rgb))
 
+    @property
+    def elevation_deg(self) -> float:
+        """The sun's elevation above the horizon (a person's shadow is ``height / tan(elevation)`` long)."""
+        return math.degrees(math.asin(float(np.clip(-self.sun_dir_enu[2], -1.0, 1.0))))
+
     @classmethod
     def from_angles(cls, elevation_deg: float, azimuth_deg: float, ambient: float, warmth: float = 0.0) -> Light:
         """Sun at an elevation above the horizon and an azimuth from north towards east."""
