@@ -28,6 +28,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
@@ -40,10 +41,11 @@ from companion.geometry import Pose, inside_polygon  # noqa: E402
 from companion.perception.density import input_scale, predict_downscaled  # noqa: E402
 from companion.perception.occupancy import OccupancyMapper  # noqa: E402
 from companion.perception.pipeline import SlzPipeline  # noqa: E402
+from companion.perception.projection import HeadPlaneOccupancy  # noqa: E402
 from sitl.campaign.hold_explain import TruthAt  # noqa: E402
 from sitl.config import SitlConfig  # noqa: E402
 from sitl.sim_camera import scene_light  # noqa: E402
-from sitl.truth import people_at, read_truth  # noqa: E402
+from sitl.truth import clearance_m, people_at, read_truth  # noqa: E402
 
 VARIANTS: dict[str, tuple[float, float]] = {
     "shipped (threshold 0.01, dilation 0.5 m)": (0.01, 0.5),
@@ -63,6 +65,23 @@ LOW_SUN_DEG = 30.0
 def band_of(altitude_m: float) -> str:
     """The altitude band a frame's numbers go into."""
     return next(name for floor, name in BANDS if altitude_m > floor)
+
+
+def bodies_seen(
+    head_plane: HeadPlaneOccupancy, occupied: npt.NDArray[np.bool_], positions_ne_m: npt.NDArray[np.float64]
+) -> tuple[int, int]:
+    """Of the bodies whose head cell lies well inside the known map (a window of ``SEEN_WITHIN_CELLS`` around it all
+    known), how many have an occupied cell in that window: (seen, counted)."""
+    grid, k = head_plane.grid, SEEN_WITHIN_CELLS
+    seen = counted = 0
+    for n, e in positions_ne_m:
+        row, col = (round(v) for v in grid.world_to_cell(float(n), float(e)))
+        if k <= row < grid.rows - k and k <= col < grid.cols - k:
+            window = (slice(row - k, row + k + 1), slice(col - k, col + k + 1))
+            if head_plane.known[window].all():
+                counted += 1
+                seen += bool(occupied[window].any())
+    return seen, counted
 
 
 def measure(folders: list[Path], every: int) -> dict[str, Any]:
@@ -107,30 +126,19 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                 north, east = np.meshgrid(grid.north_centres_m, grid.east_centres_m, indexing="ij")
                 not_occupied = (~occupied).astype(np.uint8)
                 map_clearance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, 5) * grid.resolution_m
-                true_clearance = np.full(north.shape, np.inf)
-                for (n, e), r in zip(positions, radii, strict=True):
-                    np.minimum(true_clearance, np.hypot(north - n, east - e) - r, out=true_clearance)
+                true_clearance = clearance_m(positions, radii, north, east)
+                known_in_area = head_plane.known & inside_polygon(area, north, east)
                 low, high = CLEARANCE_RANGE_M
-                cells = (
-                    head_plane.known
-                    & inside_polygon(area, north, east)
-                    & (true_clearance > low)
-                    & (true_clearance < high)
-                )
+                cells = known_in_area & (true_clearance > low) & (true_clearance < high)
                 berth = (true_clearance[cells] - map_clearance[cells])[::7]  # a sample: neighbours agree
                 out[name]["berth_m"].setdefault(band, []).extend(berth.tolist())
-                away = head_plane.known & inside_polygon(area, north, east) & (true_clearance > AWAY_FROM_PEOPLE_M)
+                away = known_in_area & (true_clearance > AWAY_FROM_PEOPLE_M)
                 ground = out[name]["ground"].setdefault(sun_band, [0, 0])
                 ground[0] += int((away & occupied).sum())
                 ground[1] += int(away.sum())
-                k = SEEN_WITHIN_CELLS
-                for n, e in positions:
-                    row, col = (round(v) for v in grid.world_to_cell(float(n), float(e)))
-                    if k <= row < grid.rows - k and k <= col < grid.cols - k:
-                        window = (slice(row - k, row + k + 1), slice(col - k, col + k + 1))
-                        if head_plane.known[window].all():
-                            out[name]["bodies"] += 1
-                            out[name]["seen"] += bool(occupied[window].any())
+                seen, counted = bodies_seen(head_plane, occupied, positions)
+                out[name]["seen"] += seen
+                out[name]["bodies"] += counted
         sys.stdout.write(f"{folder}: sun {sun_deg:.1f} deg, done\n")
     return {"frames": frames, "variants": out, "sun_elevation_deg": suns}
 

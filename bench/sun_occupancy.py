@@ -27,18 +27,19 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
 from bench.machine import machine_context, save_report  # noqa: E402
+from bench.map_berth import bodies_seen  # noqa: E402
 from companion.config import load_yaml_config  # noqa: E402
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount, inside_polygon  # noqa: E402
 from companion.perception.config import PerceptionConfig  # noqa: E402
 from companion.perception.pipeline import SlzPipeline  # noqa: E402
 from sitl.render.camera import Light, WorldRenderer  # noqa: E402
+from sitl.truth import clearance_m  # noqa: E402
 from sitl.world.crowd import Crowd  # noqa: E402
 from sitl.world.park import Park  # noqa: E402
 from sitl.world.scenario import ScenarioConfig  # noqa: E402
 
 ALTITUDES_M = (40.0, 20.0, 8.0)
 AWAY_FROM_PEOPLE_M = 3.0
-SEEN_WITHIN_CELLS = 3
 AZIMUTH_DEG = 135.0
 AMBIENT = 0.45
 
@@ -77,21 +78,14 @@ def measure(seeds: int, suns_deg: list[float]) -> dict[str, Any]:
                     grid = head_plane.grid
                     occupied = head_plane.known & ~head_plane.free
                     north, east = np.meshgrid(grid.north_centres_m, grid.east_centres_m, indexing="ij")
-                    clearance = np.full(north.shape, np.inf)
-                    for (n, e), r in zip(positions, radii, strict=True):
-                        np.minimum(clearance, np.hypot(north - n, east - e) - r, out=clearance)
+                    clearance = clearance_m(positions, radii, north, east)
                     away = head_plane.known & inside_polygon(roi, north, east) & (clearance > AWAY_FROM_PEOPLE_M)
                     found["occupied"] += int((away & occupied).sum())
                     found["away"] += int(away.sum())
                     found["zones_m"].append(max((z.radius_m for z in result.zones), default=0.0))
-                    k = SEEN_WITHIN_CELLS
-                    for n, e in positions:
-                        row, col = (round(v) for v in grid.world_to_cell(float(n), float(e)))
-                        if k <= row < grid.rows - k and k <= col < grid.cols - k:
-                            window = (slice(row - k, row + k + 1), slice(col - k, col + k + 1))
-                            if head_plane.known[window].all():
-                                found["bodies"] += 1
-                                found["seen"] += bool(occupied[window].any())
+                    seen, counted = bodies_seen(head_plane, occupied, positions)
+                    found["seen"] += seen
+                    found["bodies"] += counted
             finally:
                 renderer.close()
         sys.stdout.write(f"seed {seed}: done\n")

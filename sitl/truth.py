@@ -145,6 +145,16 @@ def body_edges_m(header: TruthHeader, record: TruthRecord | None, north_m: float
     return np.asarray(np.hypot(positions[:, 0] - north_m, positions[:, 1] - east_m) - radii)
 
 
+def clearance_m(positions_ne_m: F64Array, radii_m: F64Array, north_m: npt.ArrayLike, east_m: npt.ArrayLike) -> F64Array:
+    """Horizontal distance (m) from each point to the nearest body's edge (inf with nobody), the broadcast shape of
+    ``north_m`` and ``east_m``; ``positions_ne_m`` (N, 2) and ``radii_m`` (N,) as :func:`people_at` gives them."""
+    north, east = np.asarray(north_m, np.float64), np.asarray(east_m, np.float64)
+    clear = np.full(np.broadcast_shapes(north.shape, east.shape), np.inf)
+    for (n, e), r in zip(positions_ne_m, radii_m, strict=True):
+        np.minimum(clear, np.hypot(north - n, east - e) - r, out=clear)
+    return clear
+
+
 def touchdown(records: list[TruthRecord]) -> TruthRecord | None:
     """The first ground-truth record on the ground after having flown, or None."""
     flown = False

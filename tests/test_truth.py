@@ -15,6 +15,8 @@ from sitl.truth import (
     TruthHeader,
     TruthRecord,
     body_edges_m,
+    clearance_m,
+    people_at,
     read_truth,
     touchdown,
 )
@@ -64,3 +66,16 @@ def test_a_broken_log_names_its_file_and_line(tmp_path: Path) -> None:
                                                          "mode": "POSCTL", "landed_state": "IN_AIR"}]))  # fmt: skip
     with pytest.raises(TruthError, match="schema version 99"):
         read_truth(write(tmp_path / "c.jsonl", [{**header, "schema_version": 99}]))
+
+
+def test_the_clearance_of_many_points_is_the_nearest_body_edge_of_each() -> None:
+    header = TruthHeader(1, 0.0, np.array([[0.0, 0.0], [4.0, 0.0]]), np.array([0.3, 0.2]), (False, True))
+    north, east = np.meshgrid(np.linspace(-2.0, 6.0, 9), np.linspace(-3.0, 3.0, 7), indexing="ij")
+    clear = clearance_m(*people_at(header, None), north, east)
+    assert clear.shape == (9, 7)
+    expected = [
+        [body_edges_m(header, None, n, e).min() for n, e in zip(row_n, row_e, strict=True)]
+        for row_n, row_e in zip(north, east, strict=True)
+    ]
+    np.testing.assert_allclose(clear, expected)
+    assert clearance_m(np.zeros((0, 2)), np.zeros(0), [1.0], [2.0]).tolist() == [np.inf]

@@ -36,7 +36,7 @@ import numpy.typing as npt
 
 from companion.app.flight_log import DecisionRecord, FlightLog
 from companion.geometry import inside_polygon
-from sitl.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth
+from sitl.truth import TruthHeader, TruthRecord, body_edges_m, clearance_m, people_at, read_truth
 
 RELEASE = re.compile(r"released: ([^;]+)")
 ABORT_MARKERS = (": climb back and re-select", " re-selections used up")
@@ -239,10 +239,7 @@ class TruthAt:
         points = np.stack([north[inside], east[inside]], axis=1)  # (P, 2)
         if not len(points):
             return 0.0
-        clear = np.full(len(points), np.inf)
-        positions, radii = people_at(self.header, self.at(t_s))
-        for (n, e), r in zip(positions, radii, strict=True):
-            np.minimum(clear, np.hypot(points[:, 0] - n, points[:, 1] - e) - r, out=clear)
+        clear = clearance_m(*people_at(self.header, self.at(t_s)), points[:, 0], points[:, 1])
         a, b = area_ne_m, np.roll(area_ne_m, -1, axis=0)
         for (n0, e0), (n1, e1) in zip(a, b, strict=True):  # the disc stays inside the area: its edges bound it
             d_n, d_e = n1 - n0, e1 - e0
