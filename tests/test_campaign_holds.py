@@ -31,6 +31,8 @@ def test_each_hold_is_explained_by_kind_from_the_flight_log() -> None:
     assert hold_cause(descending, TIME_LIMIT) == "time limit while descending"
     between = [*chosen_late, _decision(299.0, "search", "no target yet: hold; released: zone 1 not seen", False)]
     assert hold_cause(between, TIME_LIMIT) == "time limit while searching"
+    climbing = [*descending, _decision(299.5, "search", "climbing back to 20.0 m before choosing again", False)]
+    assert hold_cause(climbing, TIME_LIMIT) == "time limit while climbing back"
     assert hold_cause(searching, USED_UP) == "person in the footprint"
     no_map = "no map saw the footprint free in the last 12 s; 6 re-selections used up: hold"
     assert hold_cause([], no_map) == "no fresh free map"

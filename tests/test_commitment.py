@@ -217,3 +217,23 @@ def test_recorded_chase_is_one_commitment() -> None:
     assert sum(e.startswith("zone 1 seen again") or " seen again as " in e for e in events) >= 5
     assert any("footprint left the geofence" in e for e in events)
     assert chosen_frames >= 0.95 * len(frames)
+
+
+def test_a_zone_just_above_the_footprint_is_not_chosen_but_a_chosen_one_is_kept_down_to_it() -> None:
+    c = _commitment(choose_margin_m=0.3)  # the smallest zone radius is 1.0 m: chosen from 1.3 m, kept down to 1.0 m
+    assert _choose(c, 0.0, [_track(1, 5, 0, 1.25)]) == (None, None)  # would flicker out of the map: not chosen
+    chosen, event = _choose(c, 0.1, [_track(1, 5, 0, 1.25), _track(2, -5, 0, 1.35)])
+    assert chosen == 2
+    assert event is not None
+    assert "committed to zone 2" in event
+    assert _choose(c, 0.2, [_track(2, -5, 0, 1.05)]) == (2, None)  # shrank, still above the footprint: kept
+    chosen, event = _choose(c, 0.3, [_track(2, -5, 0, 0.95)])
+    assert chosen is None
+    assert event == "released: zone 2 shrank to 0.95 m"
+    # A rival must be eligible too: a 1.29 m zone (23 % bigger, over this switch margin) never replaces a kept
+    # 1.05 m one; a 1.4 m one does.
+    c = _commitment(choose_margin_m=0.3, switch_after_s=0.0, switch_margin=0.1)
+    _choose(c, 0.0, [_track(3, 5, 0, 1.4)])
+    for k in range(1, 20):
+        assert _choose(c, 0.1 * k, [_track(3, 5, 0, 1.05), _track(4, -5, 0, 1.29)]) == (3, None)
+    assert _choose(c, 2.0, [_track(3, 5, 0, 1.05), _track(5, -5, 0, 1.4)])[0] == 5

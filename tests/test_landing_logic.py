@@ -263,7 +263,7 @@ def test_used_up_reselections_hold_and_never_land() -> None:
     zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
     g.on_frame(_frame(0.2, [zone], target, occupied), state)
     assert g.on_frame(_frame(0.25, [zone], target, occupied), state).phase is LandingPhase.SEARCH
-    climbed = VehicleState(0.3, state.north_m, state.east_m, -(14.0 + g.config.climb_back_m), 0.0)
+    climbed = VehicleState(0.3, state.north_m, state.east_m, -g.config.search_altitude_m, 0.0)  # back up
     # The refused zone is not chosen again; one 5 m away is.
     assert g.on_frame(_frame(0.3, [zone], target, _map()), climbed).target is None
     other, other_target = _track(4, 0.2, 5.0, 3.0), Target(0.2, 5.0, 3.0, 4)
@@ -311,27 +311,38 @@ def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
     assert not g.commanding
 
 
-def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
-    g = _guidance(commitment={"refused_radius_m": 0.0})  # the climb alone, without the refused point's exclusion
+@pytest.mark.parametrize(("climb_back_m", "climb_to_m"), [(None, 20.0), (4.0, 10.0)])
+def test_after_an_abort_low_down_nothing_is_chosen_until_the_vehicle_has_climbed_back(
+    climb_back_m: float | None, climb_to_m: float
+) -> None:
+    # None (the default): back to the altitude the search started from (20 m here), where the policy sees the whole
+    # search area; a number: that much higher. The refused point's exclusion is off: the climb alone is tested.
+    g = _guidance(commitment={"refused_radius_m": 0.0}, climb_back_m=climb_back_m)
     state = _descending_over(g, 6.0)  # low, above the walker gate (at the gate a person is waited out)
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(g.config.unsafe_frames_to_abort):
         d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
     assert d.phase is LandingPhase.SEARCH
-    climb_to = 6.0 + g.config.climb_back_m
-    # Another free zone right under the vehicle: approached (climbing), not descended onto from 4 m.
+    refused_at = (state.north_m, state.east_m)
+    # Another free zone right under the vehicle: not chosen on the way up, where the view is a few metres wide.
     other, other_target = _track(4, 0.3, 0.1, 3.0), Target(0.3, 0.1, 3.0, 4)
     t = 1.0
-    while state.altitude_m < climb_to - g.config.land_tolerance_m:
+    while state.altitude_m < climb_to_m - g.config.land_tolerance_m:
         t += 0.1
         d = g.on_frame(_frame(t, [other], other_target, _map()), state)
-        assert d.phase is LandingPhase.APPROACH, f"at {state.altitude_m:.1f} m"
+        assert d.phase is LandingPhase.SEARCH, f"at {state.altitude_m:.1f} m"
+        assert d.target is None
+        assert g.commitment.committed_id is None
         assert d.setpoint is not None
-        assert -d.setpoint.down_m > state.altitude_m  # climbing
+        assert -d.setpoint.down_m == pytest.approx(climb_to_m)  # climbing, over the refused point
+        assert (d.setpoint.north_m, d.setpoint.east_m) == pytest.approx(refused_at)
         state = _fly(state, min(-d.setpoint.down_m, state.altitude_m + 0.5), d.setpoint.north_m, d.setpoint.east_m, t)
         assert t < 10.0
+    assert state.altitude_m < climb_to_m + 0.5
     d = g.on_frame(_frame(t + 0.1, [other], other_target, _map()), state)
-    assert d.phase is LandingPhase.DESCENT  # back up: the new zone may be descended onto
+    assert d.phase is LandingPhase.DESCENT  # back up: chosen, and descended onto (it lies under the vehicle)
+    assert d.target is not None
+    assert d.target.track_id == 4
 
 
 def _walker_map(t_s: float) -> HeadPlaneOccupancy:

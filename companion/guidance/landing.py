@@ -20,8 +20,11 @@
   refined by the target's track while it is seen near it) and the vehicle descends towards ``approach_height_m``
   above ground (the paper: 2 m above the zone). When for ``unsafe_frames_to_abort`` frames in a row a person is seen
   inside the footprint around the landing point, or the tracked zone is narrower than ``min_zone_radius_m``, the
-  vehicle climbs back by ``climb_back_m`` and searches again; a new descent starts only once it is back up there,
-  and zones near the refused point are not chosen for a while (``commitment.refused_memory_s``).
+  vehicle climbs back over the refused point to the altitude it searched from (or by ``climb_back_m``) and chooses
+  again only once it is up there, where the policy sees the whole search area again; zones near the refused point
+  are not chosen for a while (``commitment.refused_memory_s``). Choosing on the way up chose among the refused
+  point's neighbours in a view a few metres wide (issue 33: in the ROI table's holds, the zones chosen after an
+  abort were chosen at 10 m, median, with a radius of 1.1 m, and 4 in 5 of them were given up again).
   Below ``blind_altitude_m`` the head plane is too close to the camera to see the whole zone, and below
   ``perception_min_altitude_m`` (4.5 m, the same) the maps are not trusted at all (the whole view then lies within the
   footprint and its margin): the descent continues on the last map that saw the whole footprint free. So it first
@@ -57,6 +60,9 @@ from companion.perception.pipeline import FrameResult
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target
 from companion.vehicle.link import Setpoint
 
+CLIMBING_BACK = "climbing back to"
+"""How the reason of a frame spent climbing back after an aborted descent begins (campaign hold causes read it)."""
+
 GATE_SLACK_M = 0.5
 """The walker gate's maps are those taken within this of its altitude (the vehicle settles onto it from above)."""
 
@@ -91,7 +97,13 @@ class GuidanceConfig(StrictModel):
     autopilot_z_time_constant_s: float = Field(
         default=1.0, gt=0.0, le=10.0, description="1 / the autopilot's vertical position gain (PX4 MPC_Z_P = 1/s)."
     )
-    climb_back_m: float = Field(default=4.0, ge=0.0, le=50.0, description="Climb after an aborted descent.")
+    climb_back_m: float | None = Field(
+        default=None,
+        ge=0.0,
+        le=120.0,
+        description="Climb after an aborted descent before choosing again (metres). None: back to the altitude the "
+        "search started from, where the policy sees the whole search area.",
+    )
     blind_altitude_m: float = Field(
         default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
     )
@@ -121,7 +133,13 @@ class GuidanceConfig(StrictModel):
         "minimum) to abort the descent. A person stays in the map from frame to frame; the model's false positives "
         "flicker (runs of 1-2 frames measured in SITL descents).",
     )
-    max_reselections: int = Field(default=6, ge=0, le=100, description="Aborted descents before the failsafe.")
+    max_reselections: int = Field(
+        default=12,
+        ge=0,
+        le=100,
+        description="Aborted descents before the failsafe (hold). The mission's time limit is the budget that "
+        "bounds the attempts; this only stops a vehicle that keeps being refused from trying for ever.",
+    )
     hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
     failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
     failsafe_action: FailsafeAction = FailsafeAction.LAND
@@ -251,7 +269,9 @@ class LandingGuidance:
         self._search_origin: tuple[float, float] | None = None
         self._search_started_s = 0.0
         self._search_altitude_m = config.search_altitude_m
-        self._reclimb_m: float | None = None  # after an aborted descent: no new descent below this altitude
+        self._start_altitude_m = config.search_altitude_m  # the altitude the search started from
+        self._reclimb_m: float | None = None  # after an aborted descent: climbing back to it, no choice below it
+        self._reclimb_ne_m: tuple[float, float] | None = None  # where the climb back holds (the refused point)
         self._resume_phase = LandingPhase.SEARCH
         self._heading_deg: float | None = None
         self._started_s: float | None = None
@@ -307,11 +327,16 @@ class LandingGuidance:
             # Never the configured "land": the map has just refused a landing here. Hold, and the pilot decides.
             used = f"{reason}; {self.reselections - 1} re-selections used up"
             return self._failsafe(state, used, FailsafeAction.HOLD)
-        climb_to = min(state.altitude_m + self.config.climb_back_m, self.config.search_altitude_m)
+        climb_back_m = self.config.climb_back_m
+        if climb_back_m is None:
+            climb_to = self._start_altitude_m
+        else:
+            climb_to = min(state.altitude_m + climb_back_m, self._start_altitude_m)
         self._search_altitude_m = max(climb_to, state.altitude_m)
-        # The next descent starts from there, not from here: low down the camera sees a few metres around the
-        # footprint, and a zone next to the one just refused would be captured at once, again and again.
+        # The next choice is made from there, not from here: low down the camera sees a few metres around the
+        # footprint, and a zone next to the one just refused would be chosen (and descended onto) at once.
         self._reclimb_m = climb_to if climb_to > state.altitude_m else None
+        self._reclimb_ne_m = (state.north_m, state.east_m)
         return self._setpoint(
             state,
             LandingPhase.SEARCH,
@@ -343,6 +368,7 @@ class LandingGuidance:
         self._heading_deg = state.yaw_deg
         altitude = max(state.altitude_m, self.config.search_altitude_m)
         self._search_altitude_m = altitude
+        self._start_altitude_m = altitude
         return self._setpoint(state, LandingPhase.SEARCH, None, "mission start", state.north_m, state.east_m, altitude)
 
     def on_frame(self, result: FrameResult, state: VehicleState) -> Decision:
@@ -360,6 +386,20 @@ class LandingGuidance:
             self._enter(self._resume_phase, state.t_s)
         if self.phase is LandingPhase.DESCENT:
             return self._descent(result, state)
+        if self._reclimb_m is not None:
+            if state.altitude_m < self._reclimb_m - c.land_tolerance_m:
+                self._last_target_s = state.t_s  # no search pattern while climbing back
+                north_m, east_m = self._reclimb_ne_m or (state.north_m, state.east_m)
+                return self._setpoint(
+                    state,
+                    LandingPhase.SEARCH,
+                    None,
+                    f"{CLIMBING_BACK} {self._reclimb_m:.1f} m before choosing again",
+                    north_m,
+                    east_m,
+                    self._reclimb_m,
+                )
+            self._reclimb_m = None  # climbed back (within the slack position control leaves)
         target, event = self._choose(result, state)
         note = "" if event is None else f"; {event}"
         if target is None:
@@ -380,14 +420,8 @@ class LandingGuidance:
             )
         self._last_target_s = state.t_s
         self._search_origin = None
-        if self._reclimb_m is not None and state.altitude_m >= self._reclimb_m - c.land_tolerance_m:
-            self._reclimb_m = None  # climbed back (within the slack position control leaves)
         offset = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
-        if (
-            offset <= c.capture_radius_m
-            and (target.radius_m >= self.min_zone_radius_m or c.blind_landing)
-            and self._reclimb_m is None
-        ):
+        if offset <= c.capture_radius_m and (target.radius_m >= self.min_zone_radius_m or c.blind_landing):
             self._locked = target
             self._unsafe_frames = 0
             self.walkers.reset()
@@ -397,12 +431,10 @@ class LandingGuidance:
             state,
             LandingPhase.APPROACH,
             target,
-            f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)"
-            + ("" if self._reclimb_m is None else f", climbing back to {self._reclimb_m:.1f} m first")
-            + note,
+            f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)" + note,
             target.north_m,
             target.east_m,
-            max(state.altitude_m, c.land_altitude_m, self._reclimb_m or 0.0),
+            max(state.altitude_m, c.land_altitude_m),
         )
 
     def _choose(self, result: FrameResult, state: VehicleState) -> tuple[Target | None, str | None]:

@@ -24,6 +24,7 @@ import numpy as np
 
 from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
+from companion.guidance.landing import CLIMBING_BACK
 from sitl.config import SitlConfig
 from sitl.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
@@ -149,6 +150,8 @@ HOLD_CAUSES = {
     "time limit while searching": "the time limit, searching between zones (a zone chosen in the last 30 s)",
     "time limit while approaching": "the time limit on the way to a chosen zone",
     "time limit while descending": "the time limit during a descent",
+    "time limit while climbing back": "the time limit while climbing back after an aborted descent, before choosing "
+    "again",
     "perception silent": "no processed frame for the failsafe's time",
     "pilot took over": "the flight mode left offboard without the companion",
     "other": "anything else (the log's reason is in the result)",
@@ -185,6 +188,8 @@ def hold_cause(decisions: list[DecisionRecord], reason: str) -> str:
     if not flying:
         return "nothing free"
     end_s = flying[-1].t_s
+    if flying[-1].reason.startswith(CLIMBING_BACK):
+        return "time limit while climbing back"
     recent = [d for d in flying if d.t_s >= end_s - NOTHING_FREE_WINDOW_S]
     if not any(d.target is not None for d in recent):
         return "nothing free"
