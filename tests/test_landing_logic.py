@@ -311,13 +311,35 @@ def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
     assert not g.commanding
 
 
-@pytest.mark.parametrize(("climb_back_m", "climb_to_m"), [(None, 20.0), (4.0, 10.0)])
-def test_after_an_abort_low_down_nothing_is_chosen_until_the_vehicle_has_climbed_back(
-    climb_back_m: float | None, climb_to_m: float
-) -> None:
-    # None (the default): back to the altitude the search started from (20 m here), where the policy sees the whole
-    # search area; a number: that much higher. The refused point's exclusion is off: the climb alone is tested.
-    g = _guidance(commitment={"refused_radius_m": 0.0}, climb_back_m=climb_back_m)
+def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
+    g = _guidance(commitment={"refused_radius_m": 0.0})  # the climb alone, without the refused point's exclusion
+    state = _descending_over(g, 6.0)  # low, above the walker gate (at the gate a person is waited out)
+    zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
+    for k in range(g.config.unsafe_frames_to_abort):
+        d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
+    assert d.phase is LandingPhase.SEARCH
+    assert g.config.climb_back_m is not None
+    climb_to = 6.0 + g.config.climb_back_m
+    # Another free zone right under the vehicle: approached (climbing), not descended onto from 4 m.
+    other, other_target = _track(4, 0.3, 0.1, 3.0), Target(0.3, 0.1, 3.0, 4)
+    t = 1.0
+    while state.altitude_m < climb_to - g.config.land_tolerance_m:
+        t += 0.1
+        d = g.on_frame(_frame(t, [other], other_target, _map()), state)
+        assert d.phase is LandingPhase.APPROACH, f"at {state.altitude_m:.1f} m"
+        assert d.setpoint is not None
+        assert -d.setpoint.down_m > state.altitude_m  # climbing
+        state = _fly(state, min(-d.setpoint.down_m, state.altitude_m + 0.5), d.setpoint.north_m, d.setpoint.east_m, t)
+        assert t < 10.0
+    d = g.on_frame(_frame(t + 0.1, [other], other_target, _map()), state)
+    assert d.phase is LandingPhase.DESCENT  # back up: the new zone may be descended onto
+
+
+def test_with_no_climb_back_height_the_vehicle_climbs_to_the_search_altitude_and_chooses_only_there() -> None:
+    # climb_back_m None: back to the altitude the search started from (20 m here), where the policy sees the whole
+    # search area. The refused point's exclusion is off: the climb alone is tested.
+    climb_to_m = 20.0
+    g = _guidance(commitment={"refused_radius_m": 0.0}, climb_back_m=None)
     state = _descending_over(g, 6.0)  # low, above the walker gate (at the gate a person is waited out)
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(g.config.unsafe_frames_to_abort):

@@ -6,9 +6,9 @@ zone elsewhere becomes the biggest (measured: 15 to 666 re-selections in the mis
 the policy chooses once, and the choice stands:
 
 - **Choice.** With nothing committed, the policy (``biggest``, ``oldest``, ``nearest``) picks among the eligible
-  tracks of this frame: seen in it, larger than the minimum zone radius by ``choose_margin_m`` (kept down to the
-  minimum: a zone just above it flickers out of the map), the footprint around its centre inside the geofence, and
-  not near a point refused earlier. So "biggest" and "oldest" mean what they mean at the moment of choice.
+  tracks of this frame: seen in it, larger than the minimum zone radius by ``choose_margin_m`` (0 by default;
+  kept down to the minimum), the footprint around its centre inside the geofence, and not near a point refused
+  earlier. So "biggest" and "oldest" mean what they mean at the moment of choice.
 - **Follow.** The committed zone is the same zone on the ground, not only the same track: far zones flicker in and
   out of the map and each return starts a new track, so a zone seen now that overlaps its last circle continues
   it (``reacquire_iou``).
@@ -70,13 +70,14 @@ class CommitmentConfig(StrictModel):
         "model's false positives flicker for 1-2 frames; a person stays).",
     )
     choose_margin_m: float = Field(
-        default=0.3,
+        default=0.0,
         ge=0.0,
         le=10.0,
         description="A zone is chosen only when its radius exceeds the smallest zone radius by this much; once chosen "
         "it is kept down to that radius. A zone just above the footprint flickers in and out of the map and is "
         "given up again within a second or two (issue 33: 150 of the 172 zones of 1.0-1.2 m chosen in the ROI "
-        "table's holds).",
+        "table's holds), but in a crowd it may be all there is: 0.3 m rescued holds and made others (nothing "
+        "chosen for 300 s), so it is not the default.",
     )
     refused_radius_m: float = Field(
         default=3.0,

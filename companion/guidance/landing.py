@@ -20,11 +20,10 @@
   refined by the target's track while it is seen near it) and the vehicle descends towards ``approach_height_m``
   above ground (the paper: 2 m above the zone). When for ``unsafe_frames_to_abort`` frames in a row a person is seen
   inside the footprint around the landing point, or the tracked zone is narrower than ``min_zone_radius_m``, the
-  vehicle climbs back over the refused point to the altitude it searched from (or by ``climb_back_m``) and chooses
-  again only once it is up there, where the policy sees the whole search area again; zones near the refused point
-  are not chosen for a while (``commitment.refused_memory_s``). Choosing on the way up chose among the refused
-  point's neighbours in a view a few metres wide (issue 33: in the ROI table's holds, the zones chosen after an
-  abort were chosen at 10 m, median, with a radius of 1.1 m, and 4 in 5 of them were given up again).
+  vehicle climbs back by ``climb_back_m`` and searches again (a zone chosen on the way up is approached climbing); a
+  new descent starts only once it is back up there. With ``climb_back_m`` None it climbs over the refused point all
+  the way to the altitude the search started from and chooses only there. Zones near the refused point are not
+  chosen for a while (``commitment.refused_memory_s``). After ``max_reselections`` aborted descents it holds.
   Below ``blind_altitude_m`` the head plane is too close to the camera to see the whole zone, and below
   ``perception_min_altitude_m`` (4.5 m, the same) the maps are not trusted at all (the whole view then lies within the
   footprint and its margin): the descent continues on the last map that saw the whole footprint free. So it first
@@ -98,11 +97,12 @@ class GuidanceConfig(StrictModel):
         default=1.0, gt=0.0, le=10.0, description="1 / the autopilot's vertical position gain (PX4 MPC_Z_P = 1/s)."
     )
     climb_back_m: float | None = Field(
-        default=None,
+        default=4.0,
         ge=0.0,
         le=120.0,
-        description="Climb after an aborted descent before choosing again (metres). None: back to the altitude the "
-        "search started from, where the policy sees the whole search area.",
+        description="Climb after an aborted descent before choosing again (metres, at most back to the altitude the "
+        "search started from). None: all the way back there, where the policy sees the whole search area (issue "
+        "33: it rescued holds but lost landings that a choice from low down had made; not the default).",
     )
     blind_altitude_m: float = Field(
         default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
@@ -331,10 +331,10 @@ class LandingGuidance:
         if climb_back_m is None:
             climb_to = self._start_altitude_m
         else:
-            climb_to = min(state.altitude_m + climb_back_m, self._start_altitude_m)
+            climb_to = min(state.altitude_m + climb_back_m, self.config.search_altitude_m)
         self._search_altitude_m = max(climb_to, state.altitude_m)
-        # The next choice is made from there, not from here: low down the camera sees a few metres around the
-        # footprint, and a zone next to the one just refused would be chosen (and descended onto) at once.
+        # The next descent starts from there, not from here: low down the camera sees a few metres around the
+        # footprint, and a zone next to the one just refused would be captured at once, again and again.
         self._reclimb_m = climb_to if climb_to > state.altitude_m else None
         self._reclimb_ne_m = (state.north_m, state.east_m)
         return self._setpoint(
@@ -386,7 +386,7 @@ class LandingGuidance:
             self._enter(self._resume_phase, state.t_s)
         if self.phase is LandingPhase.DESCENT:
             return self._descent(result, state)
-        if self._reclimb_m is not None:
+        if self._reclimb_m is not None and c.climb_back_m is None:  # all the way back up, and choose only there
             if state.altitude_m < self._reclimb_m - c.land_tolerance_m:
                 self._last_target_s = state.t_s  # no search pattern while climbing back
                 north_m, east_m = self._reclimb_ne_m or (state.north_m, state.east_m)
@@ -420,8 +420,14 @@ class LandingGuidance:
             )
         self._last_target_s = state.t_s
         self._search_origin = None
+        if self._reclimb_m is not None and state.altitude_m >= self._reclimb_m - c.land_tolerance_m:
+            self._reclimb_m = None  # climbed back (within the slack position control leaves)
         offset = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
-        if offset <= c.capture_radius_m and (target.radius_m >= self.min_zone_radius_m or c.blind_landing):
+        if (
+            offset <= c.capture_radius_m
+            and (target.radius_m >= self.min_zone_radius_m or c.blind_landing)
+            and self._reclimb_m is None
+        ):
             self._locked = target
             self._unsafe_frames = 0
             self.walkers.reset()
@@ -431,10 +437,12 @@ class LandingGuidance:
             state,
             LandingPhase.APPROACH,
             target,
-            f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)" + note,
+            f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)"
+            + ("" if self._reclimb_m is None else f", climbing back to {self._reclimb_m:.1f} m first")
+            + note,
             target.north_m,
             target.east_m,
-            max(state.altitude_m, c.land_altitude_m),
+            max(state.altitude_m, c.land_altitude_m, self._reclimb_m or 0.0),
         )
 
     def _choose(self, result: FrameResult, state: VehicleState) -> tuple[Target | None, str | None]:
