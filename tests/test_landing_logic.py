@@ -311,13 +311,19 @@ def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
     assert not g.commanding
 
 
-def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
-    g = _guidance(commitment={"refused_radius_m": 0.0})  # the climb alone, without the refused point's exclusion
-    state = _descending_over(g, 6.0)  # low, above the walker gate (at the gate a person is waited out)
+def _aborted_low_down(g: LandingGuidance) -> VehicleState:
+    """A descent at 6 m (above the walker gate, where a person is waited out) aborted for a person in the footprint."""
+    state = _descending_over(g, 6.0)
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(g.config.unsafe_frames_to_abort):
         d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
     assert d.phase is LandingPhase.SEARCH
+    return state
+
+
+def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climbed_back() -> None:
+    g = _guidance(commitment={"refused_radius_m": 0.0})  # the climb alone, without the refused point's exclusion
+    state = _aborted_low_down(g)
     assert g.config.climb_back_m is not None
     climb_to = 6.0 + g.config.climb_back_m
     # Another free zone right under the vehicle: approached (climbing), not descended onto from 4 m.
@@ -340,11 +346,7 @@ def test_with_no_climb_back_height_the_vehicle_climbs_to_the_search_altitude_and
     # search area. The refused point's exclusion is off: the climb alone is tested.
     climb_to_m = 20.0
     g = _guidance(commitment={"refused_radius_m": 0.0}, climb_back_m=None)
-    state = _descending_over(g, 6.0)  # low, above the walker gate (at the gate a person is waited out)
-    zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
-    for k in range(g.config.unsafe_frames_to_abort):
-        d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
-    assert d.phase is LandingPhase.SEARCH
+    state = _aborted_low_down(g)
     refused_at = (state.north_m, state.east_m)
     # Another free zone right under the vehicle: not chosen on the way up, where the view is a few metres wide.
     other, other_target = _track(4, 0.3, 0.1, 3.0), Target(0.3, 0.1, 3.0, 4)

@@ -389,7 +389,8 @@ class LandingGuidance:
         if self._reclimb_m is not None and c.climb_back_m is None:  # all the way back up, and choose only there
             if state.altitude_m < self._reclimb_m - c.land_tolerance_m:
                 self._last_target_s = state.t_s  # no search pattern while climbing back
-                north_m, east_m = self._reclimb_ne_m or (state.north_m, state.east_m)
+                assert self._reclimb_ne_m is not None  # set with _reclimb_m by every abort
+                north_m, east_m = self._reclimb_ne_m
                 return self._setpoint(
                     state,
                     LandingPhase.SEARCH,
