@@ -133,8 +133,11 @@ def test_a_bad_campaign_spec_names_the_field(tmp_path: Path) -> None:
         load_campaign_spec(bad)
 
 
-def _write_mission(run_dir: Path, walker_ne: list[tuple[float, float]]) -> None:
-    """A hand-made mission: descent from t = 1 s at (0, 0), touchdown at t = 3 s; one person walking."""
+def _write_mission(
+    run_dir: Path, walker_ne: list[tuple[float, float]], gate_waits_s: tuple[float, ...] = (), released_s: float = 0.0
+) -> None:
+    """A hand-made mission: descent from t = 1 s at (0, 0), touchdown at t = 3 s; one person walking. With
+    ``gate_waits_s``, the vehicle waits at the walker gate at those times and goes on at ``released_s``."""
     (run_dir / "flight").mkdir(parents=True)
     (run_dir / "sitl.yaml").write_text("sitl: {seed: 1}\n")
     config = {"perception": {"zones": {"vehicle_radius_m": 0.5}}}
@@ -155,6 +158,17 @@ def _write_mission(run_dir: Path, walker_ne: list[tuple[float, float]]) -> None:
             "state": None,
             "decision": {"phase": "descent", "kind": "setpoint", "target": target, "reason": "descend"},
         },
+        *[
+            {
+                "t_s": t,
+                "kind": "decision",
+                "source": "frame",
+                "state": None,
+                "decision": {"phase": "descent", "kind": "setpoint", "target": target, "reason": reason},
+            }
+            for t, reason in [(t, "wait at 4.8 m over zone 4: watching") for t in gate_waits_s]
+            + ([(released_s, "descend over zone 4 (offset 0.00 m)")] if gate_waits_s else [])
+        ],
         {
             "t_s": 2.5,
             "kind": "decision",
@@ -232,6 +246,30 @@ def test_a_person_under_the_descending_vehicle_is_not_a_success(tmp_path: Path) 
     assert m.obstacle_distance_m == pytest.approx(distance_m)
     assert m.obstacle_kind == kind
     assert m.touched_obstacle == (distance_m < 0.5)
+
+
+def test_a_walker_under_the_vehicle_waiting_at_the_gate_is_reported_not_counted(tmp_path: Path) -> None:
+    # The vehicle waits at the walker gate from t = 1.2 s to 2.1 s while the walker passes under it (t = 1.5 s), and
+    # goes on once they are 2.5 m away: the landing descent (from 2.1 s) is clear, so a success, with the overflight
+    # reported; the final descent's nearest person still sees the walker.
+    walker = [(9.0, 9.0), (4.0, 0.0), (0.3, 0.0), (2.5, 0.0), (4.0, 0.0), (6.0, 0.0)]
+    _write_mission(tmp_path / "waited", walker, gate_waits_s=(1.2, 1.5, 1.8), released_s=2.1)
+    m = mission_metrics(tmp_path / "waited", "c/s/0000", "c", "s", 0, 1)
+    assert m.success
+    assert m.overflown_above_gate
+    assert m.nearest_person_min_m == pytest.approx(0.05)
+    # Released before the walker came (t = 1.3 s): the walker passed under the descending vehicle, not a success.
+    _write_mission(tmp_path / "early", walker, gate_waits_s=(1.1, 1.2), released_s=1.3)
+    m = mission_metrics(tmp_path / "early", "c/s/0000", "c", "s", 0, 1)
+    assert not m.success
+    assert not m.overflown_above_gate
+    # A result of version 5 that landed and is not a success may be one now: flown again; its successes are not.
+    v5 = {"mission_id": "c/s/0000", "landed": True, "success": False, "metrics_version": 5}
+    assert stale(v5)
+    assert not stale(v5 | {"success": True})
+    assert not stale(v5 | {"landed": False})
+    assert not stale(v5 | {"metrics_version": METRICS_VERSION})
+    assert not stale(v5, "random")  # the blind baseline lands without the walker gate
 
 
 def test_a_touchdown_under_a_tree_crown_is_on_an_obstacle_though_nobody_is_near() -> None:
@@ -346,7 +384,7 @@ def test_a_result_of_an_earlier_metrics_definition_is_flown_again_on_resume() ->
         }
     )
     first, second = spec.missions()
-    landed_v1 = {"mission_id": first.mission_id, "landed": True}  # version 1, touched down: unchanged by version 2
+    landed_v1 = {"mission_id": first.mission_id, "landed": True, "success": True}  # touched down: unchanged since
     held_v1 = {"mission_id": second.mission_id, "landed": False}  # version 1, no touchdown: stale
     assert not stale(landed_v1)
     assert stale(held_v1)
@@ -385,7 +423,7 @@ def test_random_baseline_results_drawn_around_the_vehicle_are_flown_again() -> N
         }
     )
     blind, oldest = spec.missions()
-    v3 = {"landed": True, "metrics_version": 3}
+    v3 = {"landed": True, "success": True, "metrics_version": 3}
     assert stale(v3, "random")  # version 4 draws the point around the search area's centre
     assert not stale(v3, "oldest")
     assert not stale(v3 | {"metrics_version": 4}, "random")

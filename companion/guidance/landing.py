@@ -62,6 +62,10 @@ from companion.vehicle.link import Setpoint
 CLIMBING_BACK = "climbing back to"
 """How the reason of a frame spent climbing back after an aborted descent begins (campaign hold causes read it)."""
 
+WAITING_AT_GATE = "wait at"
+"""How the reason of a frame spent at the walker gate begins: hovering there, watching or waiting out a person in the
+footprint (campaign metrics read it: the landing descent starts when the gate lets the vehicle go)."""
+
 GATE_SLACK_M = 0.5
 """The walker gate's maps are those taken within this of its altitude (the vehicle settles onto it from above)."""
 
@@ -538,7 +542,7 @@ class LandingGuidance:
             gate_m, watch_says = gate
             goal_alt = max(goal_alt, gate_m)
             if watch_says:
-                reason = f"wait at {gate_m:.1f} m over zone {locked.track_id}: {watch_says}"
+                reason = f"{WAITING_AT_GATE} {gate_m:.1f} m over zone {locked.track_id}: {watch_says}"
         return self._setpoint(state, LandingPhase.DESCENT, locked, reason, locked.north_m, locked.east_m, goal_alt)
 
     def _gate_m(self) -> float:

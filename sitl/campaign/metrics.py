@@ -2,7 +2,9 @@
 
 Distances are horizontal, metres, to the edge of a person's body (centre distance minus body radius). The *final
 descent* runs from the companion's last entry into the descent phase before its landing command (or, without one,
-from its last command) to the touchdown, or, without a touchdown, to the companion's last record (vehicle time).
+from its last command) to the touchdown, or, without a touchdown, to the companion's last record (vehicle time). Its
+*landing descent* runs from the moment the walker gate let the vehicle go (the first decision after the final
+descent's last wait at the gate) to the same end; without a wait at the gate it is the whole final descent.
 
 What lies under the touchdown comes from the park the SITL rendered, rebuilt from the mission's seed (the SITL has
 no collision: a vehicle that descends into a tree crown lands under it).
@@ -24,12 +26,12 @@ import numpy as np
 
 from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
-from companion.guidance.landing import CLIMBING_BACK
+from companion.guidance.landing import CLIMBING_BACK, WAITING_AT_GATE
 from sitl.config import SitlConfig
 from sitl.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
-METRICS_VERSION = 5
+METRICS_VERSION = 6
 """Incremented when a definition changes what stored results hold; :func:`stale` says which of them it changes.
 
 1. The first campaigns.
@@ -45,6 +47,13 @@ METRICS_VERSION = 5
 5. Adds why a mission without a touchdown held (``hold_cause``, from the flight log: :func:`hold_cause`) and how many
    times the landing zone was chosen (``zones_chosen``: commitments and switches, issue 33). Nothing else changes;
    earlier results are not stale (they lack the two fields).
+6. ``success`` looks for a body under the vehicle over the *landing descent*, from the walker gate's release to the
+   touchdown, no longer over the vehicle's wait at the gate (4.8 m, 3 m above the heads) where the companion hovers
+   *because* it sees someone walking towards the landing point and lets them pass. A body that passed under the
+   vehicle before the gate let it go is reported in its own field, ``overflown_above_gate``. The landing descent is
+   part of the final descent, so a success stays a success: only results that landed and are not a success are stale
+   (flown again on resume), but not the random policy's (the blind baseline never waits at the gate); an earlier
+   success has ``overflown_above_gate`` False.
 """
 
 
@@ -53,12 +62,18 @@ def stale(result: dict[str, Any], policy: str | None = None) -> bool:
 
     Version 1 results of missions that touched down are unchanged by version 2; those without a touchdown are stale.
     Results of the random policy (``policy``, the mission's selection policy, as its plan names it) before version 4
-    are stale.
+    are stale. Results before version 6 that touched down and are not a success are stale (version 6 may find them
+    one), except the random policy's (the blind baseline lands without the walker gate).
     """
     if "error" in result:
         return False
     version = int(result.get("metrics_version", 1))
-    return (version < 2 and not result.get("landed", False)) or (version < 4 and policy == "random")
+    landed = bool(result.get("landed", False))
+    return (
+        (version < 2 and not landed)
+        or (version < 4 and policy == "random")
+        or (version < 6 and landed and not result.get("success", False) and policy != "random")
+    )
 
 
 @dataclass
@@ -107,6 +122,11 @@ class MissionMetrics:
     """How many times the companion chose a landing zone: its first commitment, each commitment after a release, and
     each switch to a rival (``reselections`` counts changes of the target's track id, which a zone that the tracker
     lost and found again also makes)."""
+    overflown_above_gate: bool = False
+    """A landing (False without a touchdown) where a person's body came within the vehicle's footprint under it
+    during the final descent but before the walker gate let it go: the vehicle hovering at the gate, 3 m above the
+    heads, while someone walked under it, or descending towards it. Not part of ``success``, which looks at the
+    landing descent (:data:`METRICS_VERSION` 6); ``nearest_person_min_m`` still covers the whole final descent."""
     metrics_version: int = METRICS_VERSION
     """The definitions these were computed with (:data:`METRICS_VERSION`)."""
 
@@ -121,9 +141,12 @@ class MissionMetrics:
         return out
 
 
-def _final_descent(flight: FlightLog) -> tuple[float | None, dict[str, Any] | None]:
-    """Start time of the final descent and the target at that moment."""
+def _final_descent(flight: FlightLog) -> tuple[float | None, float | None, dict[str, Any] | None]:
+    """Start times of the final descent and of its landing descent (the first decision after the last wait at the
+    walker gate; the final descent's start without one), and the target when the final descent began."""
     start: float | None = None
+    release: float | None = None
+    waiting = False
     target: dict[str, Any] | None = None
     previous = ""
     last_command_t: float | None = None
@@ -133,11 +156,17 @@ def _final_descent(flight: FlightLog) -> tuple[float | None, dict[str, Any] | No
             continue
         decision = DecisionRecord.from_record(record)
         if decision.phase == "descent" and previous != "descent":
-            start, target = decision.t_s, decision.target
+            start = release = decision.t_s
+            target = decision.target
+            waiting = False
         previous = decision.phase
+        at_gate = decision.phase == "descent" and decision.reason.startswith(WAITING_AT_GATE)
+        if waiting and not at_gate:
+            release = decision.t_s
+        waiting = at_gate
         if decision.kind == "land":
-            return start, target
-    return last_command_t, None
+            return start, release, target
+    return last_command_t, last_command_t, None
 
 
 HOLD_CAUSES = {
@@ -223,9 +252,11 @@ def mission_metrics(
     t_end = down.t_s if down is not None else (max(stamped) if stamped else math.nan)
     truth = [r for r in truth if r.t_s <= t_end + 1e-9] if down is None else truth
 
-    descent_t, target = _final_descent(flight)
+    descent_t, release_t, target = _final_descent(flight)
     window = [r for r in truth if descent_t is not None and descent_t - 1e-9 <= r.t_s <= t_end + 1e-9]
     nearest = np.array([float(body_edges_m(header, r, r.position_ned_m[0], r.position_ned_m[1]).min()) for r in window])
+    # The landing descent: from the walker gate's release (the whole final descent without a wait at the gate).
+    landing = np.array([release_t is not None and r.t_s >= release_t - 1e-9 for r in window], dtype=bool)
     nan = math.nan
     within_1 = within_15 = 0
     touchdown_nearest = nan
@@ -233,7 +264,8 @@ def mission_metrics(
         edges = body_edges_m(header, down, down.position_ned_m[0], down.position_ned_m[1])
         touchdown_nearest = float(edges.min())
         within_1, within_15 = int((edges < 1.0).sum()), int((edges < 1.5).sum())
-    intrusion = bool(len(nearest)) and float(nearest.min()) < vehicle_radius_m
+    under = nearest < vehicle_radius_m
+    intrusion = bool(under[landing].any())
     success = (
         down is not None
         and not intrusion
@@ -292,6 +324,7 @@ def mission_metrics(
         people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else None)),
         hold_cause=None if down is not None else hold_cause(decisions, str(end.get("reason", ""))),
         zones_chosen=zones_chosen(decisions),
+        overflown_above_gate=down is not None and bool(under[~landing].any()),
     )
 
 

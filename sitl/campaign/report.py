@@ -84,6 +84,7 @@ def cell_summary(rows: list[dict[str, Any]], errors: int, seed: int) -> dict[str
         out[key] = asdict(bootstrap_mean(_values(rows, key), seed + k))
     out["holds"] = dict(sorted(collections.Counter(hold_kind(r) for r in rows if not r["landed"]).items()))
     out["landed_unsafe"] = sum(1 for r in rows if r["landed"] and not r["success"])
+    out["overflown_above_gate"] = sum(1 for r in rows if r.get("overflown_above_gate"))
     return out
 
 
@@ -379,20 +380,28 @@ def _holds_markdown(cells: dict[str, Any]) -> list[str]:
         "",
         "## Missions without a touchdown, by cause",
         "",
-        "| condition / strategy | missions | held | causes | landed with a person in the footprint |",
-        "| --- | --- | --- | --- | --- |",
+        "| condition / strategy | missions | held | causes | landed with a person in the footprint "
+        "| landed, a person under the vehicle above the gate |",
+        "| --- | --- | --- | --- | --- | --- |",
     ]
     for name, cell in cells.items():
         holds = cell.get("holds", {})
         causes = ", ".join(f"{kind}: {n}" for kind, n in holds.items()) or "none"
         lines.append(
-            f"| {name} | {cell['missions']} | {sum(holds.values())} | {causes} | {cell.get('landed_unsafe', 0)} |"
+            f"| {name} | {cell['missions']} | {sum(holds.values())} | {causes} | {cell.get('landed_unsafe', 0)} "
+            f"| {cell.get('overflown_above_gate', 0)} |"
         )
     lines += [
         "",
         "Causes (metrics version 5, from each flight log): "
         + "; ".join(f"*{kind}*: {text}" for kind, text in HOLD_CAUSES.items())
         + ". Results of earlier versions show their final reason.",
+        "",
+        "*Landed with a person in the footprint*: a body came within the vehicle's footprint under it during the "
+        "landing descent (from the walker gate's release) or at touchdown: not a success. *A person under the vehicle "
+        "above the gate*: a landing where a body passed under the vehicle earlier in its final descent, while it "
+        "hovered at the walker gate (3 m above the heads) or higher, before the gate let it go (metrics version 6; "
+        "earlier versions counted these as not a success).",
     ]
     return lines
 
