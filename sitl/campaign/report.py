@@ -393,7 +393,7 @@ def _holds_markdown(cells: dict[str, Any]) -> list[str]:
         )
     lines += [
         "",
-        "Causes (metrics version 5, from each flight log): "
+        "Causes (metrics version 5 and later, from each flight log): "
         + "; ".join(f"*{kind}*: {text}" for kind, text in HOLD_CAUSES.items())
         + ". Results of earlier versions show their final reason.",
         "",
