@@ -80,3 +80,25 @@ def test_the_vehicle_clock_takes_the_least_delayed_stamp_and_follows_a_reboot() 
     assert clock.now_s(1.0) == pytest.approx(101.0, abs=0.0025)
     clock.observe(0.5, wall_s=10.0)  # rebooted autopilot: clock back to 0.5 s
     assert clock.now_s(11.0) == pytest.approx(1.5)
+
+
+def test_the_delay_spread_ignores_one_held_up_stamp_but_not_an_uneven_link() -> None:
+    from companion.vehicle.clock import VehicleClock
+
+    clock = VehicleClock(window=100)
+    assert clock.delay_spread_s() is None
+    # 100 stamps 2-12 ms late, one of them held up 130 ms (a loaded machine's scheduling hiccup).
+    for k in range(100):
+        delay = 0.13 if k == 50 else 0.002 + 0.01 * (k % 5) / 4
+        clock.observe(100.0 + 0.02 * k, wall_s=0.02 * k + delay)
+    assert clock.offset_spread_s == pytest.approx(0.128)
+    assert clock.delay_spread_s(0.95) == pytest.approx(0.01)
+    assert clock.delay_spread_s(1.0) == pytest.approx(clock.offset_spread_s)
+    # A link that holds up one stamp in ten by 130 ms: 95 % of them no longer arrive within 100 ms of the fastest.
+    for k in range(100, 200):
+        delay = 0.13 if k % 10 == 0 else 0.002
+        clock.observe(100.0 + 0.02 * k, wall_s=0.02 * k + delay)
+    spread = clock.delay_spread_s(0.95)
+    assert spread == pytest.approx(0.128)
+    with pytest.raises(ValueError, match="fraction"):
+        clock.delay_spread_s(0.0)

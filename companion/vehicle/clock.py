@@ -49,6 +49,26 @@ class VehicleClock:
         that delays telemetry unevenly."""
         return max(self._offsets) - min(self._offsets) if self._offsets else None
 
+    def delay_spread_s(self, fraction: float = 0.95) -> float | None:
+        """How much later than the least delayed stamp ``fraction`` of the window's stamps arrived (seconds; None
+        before any stamp): the spread of the transport delay (plus the drift over the window) that most telemetry
+        sees. Unlike :attr:`offset_spread_s`, one stamp held up by a scheduling hiccup of a loaded machine does not
+        decide it; a link that delays telemetry unevenly still does.
+
+        Parameters
+        ----------
+        fraction : float
+            In (0, 1]: 1 gives :attr:`offset_spread_s`.
+        """
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+        if not self._offsets:
+            return None
+        ordered = sorted(self._offsets)
+        # The offset that (1 - fraction) of the stamps fall below: the delay that ``fraction`` of them stay within.
+        k = min(len(ordered) - 1, math.floor((1.0 - fraction) * len(ordered)))
+        return ordered[-1] - ordered[k]
+
     @property
     def latest_stamp_s(self) -> float | None:
         """The newest vehicle time received."""
