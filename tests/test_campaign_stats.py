@@ -21,6 +21,7 @@ from sitl.campaign.metrics import (
     nearest_obstacle,
     park_layout,
     stale,
+    with_gate_overflight,
     with_obstacles,
 )
 from sitl.campaign.report import PAPER_TABLE1, build_report, completed, paper_comparison, people_density
@@ -270,6 +271,10 @@ def test_a_walker_under_the_vehicle_waiting_at_the_gate_is_reported_not_counted(
     assert not stale(v5 | {"landed": False})
     assert not stale(v5 | {"metrics_version": METRICS_VERSION})
     assert not stale(v5, "random")  # the blind baseline lands without the walker gate
+    # Completed without a flight where the field follows: a success had nobody under it in its whole final descent.
+    assert with_gate_overflight(v5 | {"success": True})["overflown_above_gate"] is False
+    assert with_gate_overflight(v5 | {"landed": False})["overflown_above_gate"] is False
+    assert "overflown_above_gate" not in with_gate_overflight(v5)  # stale: flown again
 
 
 def test_a_touchdown_under_a_tree_crown_is_on_an_obstacle_though_nobody_is_near() -> None:
