@@ -36,13 +36,14 @@ import numpy.typing as npt
 
 from companion.app.flight_log import DecisionRecord, FlightLog
 from companion.geometry import inside_polygon
+from companion.guidance.landing import WAITING_AT_GATE
 from sitl.truth import TruthHeader, TruthRecord, body_edges_m, clearance_m, people_at, read_truth
 
 RELEASE = re.compile(r"released: ([^;]+)")
 ABORT_MARKERS = (": climb back and re-select", " re-selections used up")
 FREE_SAMPLE_S = 5.0
 """How often (vehicle seconds) the truth's largest free disc is measured over a flight."""
-GATE_BLOCKED = re.compile(r"wait at [0-9.]+ m over zone \d+: a person seen inside the footprint")
+GATE_BLOCKED = re.compile(re.escape(WAITING_AT_GATE) + r" [0-9.]+ m over zone \d+: a person seen inside the footprint")
 
 
 def release_kind(text: str) -> str:
