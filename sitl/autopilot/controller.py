@@ -8,6 +8,7 @@ yaw gets what is left before any rotor saturates. Default gains are PX4's for an
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,22 +88,27 @@ class CascadedController:
 
     def reset(self) -> None:
         """Clear integrators and memories (on arming, or when landed)."""
-        self._vel_integral = np.zeros(3)
+        self._vel_integral: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._rate_integral: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._last_rate_error: tuple[float, ...] = (0.0, 0.0, 0.0)
-        self._thrust_vector = np.array([0.0, 0.0, -self.airframe.hover_thrust])
+        self._thrust_vector: tuple[float, ...] = (0.0, 0.0, -self.airframe.hover_thrust)
         self._yaw_sp = math.nan
         self.collective = 0.0
 
     # -- outer loops ------------------------------------------------------------------------------------
     def update_position(self, state: VehicleState, setpoint: Setpoint, dt_s: float, integrate: bool = True) -> None:
-        """Position and velocity loops: produce the thrust vector and yaw setpoint for the inner loops."""
+        """Position and velocity loops: produce the thrust vector and yaw setpoint for the inner loops.
+
+        On Python floats, axis by axis: the same operations in the same order as the numpy form (elementwise IEEE
+        arithmetic either way), so the same bits at a third of its cost (issue 34).
+        """
         g, lim = self.gains, self.limits
-        pos, vel = state.position_ned_m, state.velocity_ned_mps
-        vel_sp = np.zeros(3)
-        ff = np.nan_to_num(setpoint.velocity_ned_mps)
-        for axis in range(3):
-            p_sp = setpoint.position_ned_m[axis]
+        pos = state.position_ned_m.tolist()
+        vel = state.velocity_ned_mps.tolist()
+        acc = state.acceleration_ned_mps2.tolist()
+        ff = [_finite(v) for v in setpoint.velocity_ned_mps.tolist()]  # as np.nan_to_num
+        vel_sp = [0.0, 0.0, 0.0]
+        for axis, p_sp in enumerate(setpoint.position_ned_m.tolist()):
             if math.isnan(p_sp):
                 vel_sp[axis] = ff[axis]
             else:
@@ -110,17 +116,19 @@ class CascadedController:
                 vel_sp[axis] = gain * (p_sp - pos[axis]) + ff[axis]
         horizontal = math.hypot(vel_sp[0], vel_sp[1])
         if horizontal > lim.xy_vel_max_mps:
-            vel_sp[:2] *= lim.xy_vel_max_mps / horizontal
+            factor = lim.xy_vel_max_mps / horizontal
+            vel_sp[0], vel_sp[1] = vel_sp[0] * factor, vel_sp[1] * factor
         vel_sp[2] = min(max(vel_sp[2], -lim.z_vel_max_up_mps), lim.z_vel_max_down_mps)
 
-        err = vel_sp - vel
-        kp = np.array([g.vel_p_xy, g.vel_p_xy, g.vel_p_z])
-        ki = np.array([g.vel_i_xy, g.vel_i_xy, g.vel_i_z])
-        acc_sp = (
-            kp * err + ki * self._vel_integral - np.array([g.vel_d_xy, g.vel_d_xy, 0.0]) * state.acceleration_ned_mps2
-        )
+        err = [vel_sp[0] - vel[0], vel_sp[1] - vel[1], vel_sp[2] - vel[2]]
+        kp = (g.vel_p_xy, g.vel_p_xy, g.vel_p_z)
+        ki = (g.vel_i_xy, g.vel_i_xy, g.vel_i_z)
+        kd = (g.vel_d_xy, g.vel_d_xy, 0.0)
+        integral = self._vel_integral
         # Thrust vector in normalized units: hover thrust counters gravity.
-        thrust = (acc_sp - np.array([0.0, 0.0, GRAVITY_MPS2])) * (self.airframe.hover_thrust / GRAVITY_MPS2)
+        to_thrust = self.airframe.hover_thrust / GRAVITY_MPS2
+        gravity = (0.0, 0.0, GRAVITY_MPS2)
+        thrust = [((kp[i] * err[i] + ki[i] * integral[i] - kd[i] * acc[i]) - gravity[i]) * to_thrust for i in range(3)]
         thrust[2] = min(thrust[2], -lim.thrust_min)  # always some upward thrust in flight
         vertical = -thrust[2]
         if vertical > lim.thrust_max:
@@ -132,15 +140,13 @@ class CascadedController:
         h = math.hypot(thrust[0], thrust[1])
         saturated_xy = h > max_horizontal
         if saturated_xy:
-            thrust[:2] *= max_horizontal / h
+            factor = max_horizontal / h
+            thrust[0], thrust[1] = thrust[0] * factor, thrust[1] * factor
         if integrate:
             # Anti-windup: do not integrate an axis pushing further into saturation.
-            grow = err.copy()
-            if saturated_xy:
-                grow[:2] = 0.0
-            self._vel_integral += grow * dt_s
-            self._vel_integral = np.clip(self._vel_integral, -3.0, 3.0)
-        self._thrust_vector = thrust
+            grow = [0.0, 0.0, err[2]] if saturated_xy else err
+            self._vel_integral = tuple(min(max(integral[i] + grow[i] * dt_s, -3.0), 3.0) for i in range(3))
+        self._thrust_vector = (thrust[0], thrust[1], thrust[2])
         yaw = setpoint.yaw_rad
         if math.isnan(yaw):
             if math.isnan(self._yaw_sp):
@@ -153,44 +159,65 @@ class CascadedController:
     # Scalar arithmetic: they run at every physics step (400 Hz), where numpy's per-call overhead on 3-vectors and
     # 3x3 matrices was most of their cost (issue 34).
     def update_attitude(self, state: VehicleState, dt_s: float, integrate: bool = True) -> F64Array:
-        """Attitude and rate loops plus the mixer; returns ESC commands (4,) in [0, 1]."""
-        g, lim = self.gains, self.limits
-        qw, qx, qy, qz = (float(v) for v in state.quaternion_wxyz)
-        # R (body -> world) by columns: c0 = body x, c1 = body y, c2 = body z, in the world frame.
-        c0 = (1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy + qw * qz), 2 * (qx * qz - qw * qy))
-        c1 = (2 * (qx * qy - qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz + qw * qx))
-        c2 = (2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy))
-        tx, ty, tz = (float(v) for v in self._thrust_vector)
-        norm = math.sqrt(tx * tx + ty * ty + tz * tz)
-        z_b = (-tx / norm, -ty / norm, -tz / norm) if norm > 1e-6 else (0.0, 0.0, 1.0)
-        yaw = self._yaw_sp if not math.isnan(self._yaw_sp) else math.atan2(c0[1], c0[0])
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        y_b = (-z_b[2] * sy, z_b[2] * cy, z_b[0] * sy - z_b[1] * cy)  # z_b x (cos yaw, sin yaw, 0)
-        y_norm = math.sqrt(y_b[0] * y_b[0] + y_b[1] * y_b[1] + y_b[2] * y_b[2])
-        y_b = (y_b[0] / y_norm, y_b[1] / y_norm, y_b[2] / y_norm) if y_norm > 1e-6 else c1
-        x_b = _cross(y_b, z_b)
-        # Geometric attitude error (Lee et al.) in the body frame: e_R = vee(R_sp^T R - R^T R_sp) / 2.
-        e_x = 0.5 * (_dot(z_b, c1) - _dot(c2, y_b))
-        e_y = 0.5 * (_dot(x_b, c2) - _dot(c0, z_b))
-        e_z = 0.5 * (_dot(y_b, c0) - _dot(c1, x_b))
-        rp_max, y_max = math.radians(lim.rate_max_roll_pitch_dps), math.radians(lim.rate_max_yaw_dps)
-        (kx, ky, kz) = g.att_p
-        rate_sp = (
-            min(max(-kx * e_x, -rp_max), rp_max),
-            min(max(-ky * e_y, -rp_max), rp_max),
-            min(max(-kz * e_z, -y_max), y_max),
-        )
-        rates = state.rates_frd_radps
-        err = tuple(rate_sp[i] - float(rates[i]) for i in range(3))
-        last = self._last_rate_error
-        d_err = tuple((err[i] - last[i]) / dt_s for i in range(3)) if dt_s > 0 else (0.0, 0.0, 0.0)
-        self._last_rate_error = err
-        integral = self._rate_integral
-        torque = tuple(g.rate_p[i] * err[i] + g.rate_i[i] * integral[i] + g.rate_d[i] * d_err[i] for i in range(3))
-        if integrate:
-            self._rate_integral = tuple(min(max(integral[i] + err[i] * dt_s, -0.3), 0.3) for i in range(3))
+        """Attitude and rate loops plus the mixer; returns ESC commands (4,) in [0, 1].
 
-        collective = max(0.0, -(tx * c2[0] + ty * c2[1] + tz * c2[2]))  # thrust along the current body axis
+        Written out axis by axis on Python floats (no tuples built per axis, no numpy scalars): the same operations in
+        the same order as the loop form, so the same bits, at less than half its cost (issue 34).
+        """
+        g, lim = self.gains, self.limits
+        qw, qx, qy, qz = state.quaternion_wxyz.tolist()
+        # R (body -> world) by columns: c0 = body x, c1 = body y, c2 = body z, in the world frame.
+        c00, c01, c02 = 1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy + qw * qz), 2 * (qx * qz - qw * qy)
+        c10, c11, c12 = 2 * (qx * qy - qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz + qw * qx)
+        c20, c21, c22 = 2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy)
+        tx, ty, tz = self._thrust_vector
+        norm = math.sqrt(tx * tx + ty * ty + tz * tz)
+        if norm > 1e-6:
+            zb0, zb1, zb2 = -tx / norm, -ty / norm, -tz / norm
+        else:
+            zb0, zb1, zb2 = 0.0, 0.0, 1.0
+        yaw = self._yaw_sp if not math.isnan(self._yaw_sp) else math.atan2(c01, c00)
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        yb0, yb1, yb2 = -zb2 * sy, zb2 * cy, zb0 * sy - zb1 * cy  # z_b x (cos yaw, sin yaw, 0)
+        y_norm = math.sqrt(yb0 * yb0 + yb1 * yb1 + yb2 * yb2)
+        if y_norm > 1e-6:
+            yb0, yb1, yb2 = yb0 / y_norm, yb1 / y_norm, yb2 / y_norm
+        else:
+            yb0, yb1, yb2 = c10, c11, c12
+        # x_b = y_b x z_b
+        xb0, xb1, xb2 = yb1 * zb2 - yb2 * zb1, yb2 * zb0 - yb0 * zb2, yb0 * zb1 - yb1 * zb0
+        # Geometric attitude error (Lee et al.) in the body frame: e_R = vee(R_sp^T R - R^T R_sp) / 2.
+        e_x = 0.5 * ((zb0 * c10 + zb1 * c11 + zb2 * c12) - (c20 * yb0 + c21 * yb1 + c22 * yb2))
+        e_y = 0.5 * ((xb0 * c20 + xb1 * c21 + xb2 * c22) - (c00 * zb0 + c01 * zb1 + c02 * zb2))
+        e_z = 0.5 * ((yb0 * c00 + yb1 * c01 + yb2 * c02) - (c10 * xb0 + c11 * xb1 + c12 * xb2))
+        rp_max, y_max = math.radians(lim.rate_max_roll_pitch_dps), math.radians(lim.rate_max_yaw_dps)
+        kx, ky, kz = g.att_p
+        sp_x = min(max(-kx * e_x, -rp_max), rp_max)
+        sp_y = min(max(-ky * e_y, -rp_max), rp_max)
+        sp_z = min(max(-kz * e_z, -y_max), y_max)
+        r_x, r_y, r_z = state.rates_frd_radps.tolist()
+        err_x, err_y, err_z = sp_x - r_x, sp_y - r_y, sp_z - r_z
+        last_x, last_y, last_z = self._last_rate_error
+        if dt_s > 0:
+            d_x, d_y, d_z = (err_x - last_x) / dt_s, (err_y - last_y) / dt_s, (err_z - last_z) / dt_s
+        else:
+            d_x, d_y, d_z = 0.0, 0.0, 0.0
+        self._last_rate_error = (err_x, err_y, err_z)
+        i_x, i_y, i_z = self._rate_integral
+        (p_x, p_y, p_z), (ki_x, ki_y, ki_z), (kd_x, kd_y, kd_z) = g.rate_p, g.rate_i, g.rate_d
+        torque = (
+            p_x * err_x + ki_x * i_x + kd_x * d_x,
+            p_y * err_y + ki_y * i_y + kd_y * d_y,
+            p_z * err_z + ki_z * i_z + kd_z * d_z,
+        )
+        if integrate:
+            self._rate_integral = (
+                min(max(i_x + err_x * dt_s, -0.3), 0.3),
+                min(max(i_y + err_y * dt_s, -0.3), 0.3),
+                min(max(i_z + err_z * dt_s, -0.3), 0.3),
+            )
+
+        collective = max(0.0, -(tx * c20 + ty * c21 + tz * c22))  # thrust along the current body axis
         self.collective = collective
         return self._mix(collective, torque)
 
@@ -222,9 +249,10 @@ class CascadedController:
         return np.array([(-(1.0 - f) + math.sqrt((1.0 - f) ** 2 + 4.0 * f * t)) / (2.0 * f) for t in thrust])
 
 
-def _dot(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+def _finite(value: float) -> float:
+    """``value`` with NaN as 0 and infinities as the largest finite floats, as ``np.nan_to_num``."""
+    if math.isnan(value):
+        return 0.0
+    if math.isinf(value):
+        return sys.float_info.max if value > 0 else -sys.float_info.max
+    return value
