@@ -8,7 +8,6 @@ yaw gets what is left before any rotor saturates. Default gains are PX4's for an
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,7 +105,7 @@ class CascadedController:
         pos = state.position_ned_m.tolist()
         vel = state.velocity_ned_mps.tolist()
         acc = state.acceleration_ned_mps2.tolist()
-        ff = [_finite(v) for v in setpoint.velocity_ned_mps.tolist()]  # as np.nan_to_num
+        ff = np.nan_to_num(setpoint.velocity_ned_mps).tolist()
         vel_sp = [0.0, 0.0, 0.0]
         for axis, p_sp in enumerate(setpoint.position_ned_m.tolist()):
             if math.isnan(p_sp):
@@ -247,12 +246,3 @@ class CascadedController:
         if f <= 1e-6:
             return np.array(thrust)
         return np.array([(-(1.0 - f) + math.sqrt((1.0 - f) ** 2 + 4.0 * f * t)) / (2.0 * f) for t in thrust])
-
-
-def _finite(value: float) -> float:
-    """``value`` with NaN as 0 and infinities as the largest finite floats, as ``np.nan_to_num``."""
-    if math.isnan(value):
-        return 0.0
-    if math.isinf(value):
-        return sys.float_info.max if value > 0 else -sys.float_info.max
-    return value
