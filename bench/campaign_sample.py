@@ -38,11 +38,12 @@ REFERENCES = (REPO_ROOT / "docs" / "results" / "paper_table1_roi" / "results.jso
 NOT_METRICS = {"wall_s", "segment", "finished_utc", "node", "commit", "metrics_version"}
 
 
-def differences(flown: dict[str, Any], committed: dict[str, Any]) -> list[str]:
+def differences(flown: dict[str, Any], committed: dict[str, Any], policy: str | None = None) -> list[str]:
     """The fields of ``flown`` whose value differs from the committed result's (absent fields included). A result of
     an earlier metrics version is first completed with the fields a later version added where no flight is needed
-    (:func:`sitl.campaign.metrics.with_gate_overflight`); a stale one keeps its difference."""
-    flown, committed = with_gate_overflight(flown), with_gate_overflight(committed)
+    (:func:`sitl.campaign.metrics.with_gate_overflight`, for the mission's selection ``policy``); a stale one keeps
+    its difference."""
+    flown, committed = with_gate_overflight(flown, policy), with_gate_overflight(committed, policy)
     keys = (set(flown) | set(committed)) - NOT_METRICS
     return sorted(k for k in keys if flown.get(k) != committed.get(k))
 
@@ -57,6 +58,7 @@ def main() -> int:
     parser.add_argument("--compare", type=Path, help="another campaign folder of this sample: compare every mission")
     args = parser.parse_args()
     spec = load_campaign_spec(SPEC)
+    policies = {plan.mission_id: plan.strategy.policy.value for plan in spec.missions()}
     out = args.out or Path(tempfile.mkdtemp(prefix="campaign-sample-"))
     started, cpu_before = time.monotonic(), os.times()
     results = run_campaign(
@@ -74,12 +76,14 @@ def main() -> int:
             if mission_id in compared or mission_id not in committed:
                 continue
             compared[mission_id] = str(reference.parent.relative_to(REPO_ROOT))
-            if diff := differences(r, committed[mission_id]):
+            if diff := differences(r, committed[mission_id], policies.get(mission_id)):
                 differing[mission_id] = diff
     against: dict[str, list[str]] = {}
     if args.compare is not None:
         other = {r["mission_id"]: r for r in read_results(args.compare / "results.jsonl")}
-        against = {r["mission_id"]: differences(r, other.get(r["mission_id"], {})) for r in results}
+        against = {
+            r["mission_id"]: differences(r, other.get(r["mission_id"], {}), policies.get(r["mission_id"])) for r in results
+        }
     cores = args.workers if args.backend == Backend.LOCAL.value else os.cpu_count() or 1
     report = {
         "machine": machine_context(),

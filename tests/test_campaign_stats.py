@@ -275,6 +275,7 @@ def test_a_walker_under_the_vehicle_waiting_at_the_gate_is_reported_not_counted(
     assert with_gate_overflight(v5 | {"success": True})["overflown_above_gate"] is False
     assert with_gate_overflight(v5 | {"landed": False})["overflown_above_gate"] is False
     assert "overflown_above_gate" not in with_gate_overflight(v5)  # stale: flown again
+    assert with_gate_overflight(v5, "random")["overflown_above_gate"] is False  # no gate: nothing above it
 
 
 def test_a_touchdown_under_a_tree_crown_is_on_an_obstacle_though_nobody_is_near() -> None:

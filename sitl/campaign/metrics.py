@@ -372,13 +372,12 @@ def with_obstacles(result: dict[str, Any], objects: list[ParkObject], vehicle_ra
     }
 
 
-def with_gate_overflight(result: dict[str, Any]) -> dict[str, Any]:
+def with_gate_overflight(result: dict[str, Any], policy: str | None = None) -> dict[str, Any]:
     """A stored result of an earlier version completed with ``overflown_above_gate`` where that needs no flight (see
-    :data:`METRICS_VERSION` 6): False after a success (no body came under the vehicle in its whole final descent) or
-    without a touchdown. A landing that is not a success is stale and returned as it is, as are results that have the
-    field and error lines."""
-    if "error" in result or "overflown_above_gate" in result:
-        return result
-    if result.get("landed") and not result.get("success"):
+    :data:`METRICS_VERSION` 6): False after a success (no body came under the vehicle in its whole final descent),
+    without a touchdown, or for the random policy (``policy``, as in :func:`stale`: it lands blind, without the gate,
+    so its landing descent is its whole final descent). A stale result (:func:`stale`: a landing of another policy that
+    is not a success) is returned as it is, as are results that have the field and error lines."""
+    if "error" in result or "overflown_above_gate" in result or stale(result, policy):
         return result
     return {**result, "overflown_above_gate": False}
