@@ -89,7 +89,8 @@ class TruthRecord:
             "on_ground": self.on_ground,
         }
         if self.people_ne_m is not None:
-            record["positions_ne_m"] = [[round(float(n), 4), round(float(e), 4)] for n, e in self.people_ne_m]
+            rows = np.asarray(self.people_ne_m, dtype=np.float64).tolist()  # Python floats: the same values
+            record["positions_ne_m"] = [[round(n, 4), round(e, 4)] for n, e in rows]
         return record
 
     @classmethod

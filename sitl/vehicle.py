@@ -315,8 +315,12 @@ class SitlVehicle:
         frame with a pose stamped at its capture time (the scheduled streams need not fall on tick instants)."""
         api = self.links[0]
         state = self.dynamics.state()
-        for name in ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION"):
-            api.send(self.telemetry.build(name, api.mav, self.clock.now_s, state, self.commander, self.battery))
+        api.send_all(
+            [
+                self.telemetry.build(name, api.mav, self.clock.now_s, state, self.commander, self.battery)
+                for name in ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION")
+            ]
+        )
 
     def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
         """The client's MAVLink messages sent before its ack have all been received (no overtaking).
@@ -426,9 +430,11 @@ class SitlVehicle:
                 link.send(self.telemetry.heartbeat(link.mav, self.commander))
 
     def _send_telemetry(self, t_s: float, state: Any) -> None:
+        """The streams due at ``t_s``, each link's in as few datagrams as fit (:meth:`MavlinkLink.send_all`)."""
         for link in self.links:
-            for name in self.schedules[id(link)].due(t_s):
-                link.send(self.telemetry.build(name, link.mav, t_s, state, self.commander, self.battery))
+            due = self.schedules[id(link)].due(t_s)
+            if due:
+                link.send_all([self.telemetry.build(n, link.mav, t_s, state, self.commander, self.battery) for n in due])
 
     def _write_log_row(self, force: bool = False) -> None:
         if self._log is None:
@@ -448,7 +454,13 @@ class SitlVehicle:
 
     # -- inputs --------------------------------------------------------------------------------------------------
     def _poll(self) -> None:
+        """Handle what came in on the links and the control channel. One select() asks which sockets have something,
+        so an idle socket costs no receive call (a poll runs at every outer step, 100 times a simulated second)."""
+        assert self.control is not None
+        readable = select.select([*self.links, self.control], [], [], 0)[0]
         for link in self.links:
+            if link not in readable:
+                continue
             for msg, from_peer in link.receive():
                 try:
                     self.mavlink.handle(link, msg, from_peer)
@@ -456,7 +468,8 @@ class SitlVehicle:
                     self._handler_failed(f"MAVLink {msg.get_type()} on {link.name}", exc)
         self.mavlink.missions.tick()
         self.mavlink.pump()
-        assert self.control is not None
+        if self.control not in readable:
+            return
         for request, addr in self.control.receive():
             try:
                 self.requests.handle(request, addr)

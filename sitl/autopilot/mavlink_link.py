@@ -29,6 +29,7 @@ import logging
 import socket
 import time
 from dataclasses import dataclass, field
+from collections.abc import Sequence
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -36,6 +37,7 @@ from pymavlink.dialects.v20 import common as mavlink
 logger = logging.getLogger(__name__)
 
 MAX_DATAGRAMS_PER_RECEIVE = 256
+MAX_DATAGRAM_BYTES = 1200  # a telemetry pass fills datagrams up to this size (PX4's UDP buffer is 1,500 bytes, the MTU)
 PARTNER_SILENCE_S = 10.0  # wall seconds without a valid frame from the partner before another sender may take over
 MAX_LISTENERS = 4  # ground stations beside the partner that get everything the link sends
 MAX_SOURCES_TRACKED = 1024  # distinct (system, component) pairs counted per link; the rest share one counter
@@ -161,6 +163,29 @@ class MavlinkLink:
             return
         self._send_buffer(buf, msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT)
 
+    def send_all(self, msgs: Sequence[Any]) -> None:
+        """Pack and send ``msgs`` in order, as few datagrams as fit :data:`MAX_DATAGRAM_BYTES` (PX4 fills one UDP
+        packet per pass the same way): the same frames, sequence numbers and order as one :meth:`send` each, in a
+        fraction of the system calls. A receiver parses each datagram's frames one after the other, as MAVSDK,
+        pymavlink and :meth:`receive` do. Heartbeats go through :meth:`send` (their extra destination)."""
+        datagrams: list[tuple[bytes, int]] = []
+        pending: list[bytes] = []
+        size = 0
+        for msg in msgs:
+            buf = msg.pack(self._mav)
+            self._mav.seq = (self._mav.seq + 1) % 256
+            if pending and size + len(buf) > MAX_DATAGRAM_BYTES:
+                datagrams.append((b"".join(pending), len(pending)))
+                pending, size = [], 0
+            pending.append(buf)
+            size += len(buf)
+        if pending:
+            datagrams.append((b"".join(pending), len(pending)))
+        if self.cut:
+            return
+        for datagram, frames in datagrams:
+            self._send_buffer(datagram, heartbeat=False, frames=frames)
+
     def forward(self, msg: Any) -> bool:
         """Send a message received on another link as it came (its sender's ids and sequence), as PX4 forwards;
         not on a signed link, whose frames must carry this link's signature. Returns whether it went out."""
@@ -169,7 +194,8 @@ class MavlinkLink:
         self._send_buffer(bytes(msg.get_msgbuf()), heartbeat=False)
         return True
 
-    def _send_buffer(self, buf: bytes, heartbeat: bool) -> None:
+    def _send_buffer(self, buf: bytes, heartbeat: bool, frames: int = 1) -> None:
+        """``buf`` (``frames`` MAVLink frames) to the partner and every listener; ``stats.sent`` counts frames."""
         destinations = [self.remote]
         if self.remote != self._configured_remote and heartbeat:
             destinations.append(self._configured_remote)
@@ -183,7 +209,7 @@ class MavlinkLink:
         for destination in destinations:
             try:
                 self._sock.sendto(buf, destination)
-                self.stats.sent += 1
+                self.stats.sent += frames
             except OSError as exc:
                 if exc.errno not in (errno.ECONNREFUSED, errno.EAGAIN, errno.ENOBUFS):
                     logger.warning("%s: send failed: %s", self.name, exc)
