@@ -83,16 +83,22 @@ def test_the_demo_lands_a_static_crowd_mission_clear_of_people(demo: Demo) -> No
     assert phases[-2:] == ["land", "done"]
 
 
-def test_the_simulator_draws_no_frame_before_the_flight_starts(demo: Demo) -> None:
+def test_the_simulator_draws_frames_only_from_the_start_until_the_landing_is_the_autopilots(demo: Demo) -> None:
     records = _records(demo.run_dir)
     outcome = next(r for r in records if r["kind"] == "end")["outcome"]
     assert outcome["lockstep"]
     assert outcome["frames_before_start"] == 0  # the takeoff and transit came without frames
     assert outcome["frames_missing"] == 0
     assert outcome["frames_processed"] >= 50
-    search_t_s = _phases(demo.run_dir)[0][0]
+    phases = _phases(demo.run_dir)
+    search_t_s = phases[0][0]
     first_frame_t_s = min(float(r["t_s"]) for r in records if r["kind"] == "frame_result")
     assert search_t_s < first_frame_t_s <= search_t_s + 0.2  # from the tick after the start on
+    # The LAND command is decided on a frame; the tick that carries it asks for no more (the autopilot lands alone).
+    land_t_s = next(t for t, phase in phases if phase == "land")
+    last_frame_t_s = max(float(r["t_s"]) for r in records if r["kind"] in ("frame", "frame_result", "frame_error"))
+    assert last_frame_t_s == pytest.approx(land_t_s, abs=1e-6)
+    assert outcome["touchdown_t_s"] > land_t_s + 1.0  # the landing itself took ticks that came without frames
 
 
 def test_the_demo_writes_a_top_view_and_an_annotated_video(demo: Demo) -> None:

@@ -40,8 +40,9 @@ class FlightLoop(Protocol):
 
     @property
     def wants_frames(self) -> bool:
-        """Frames are looked at now (before its start a flight drops them: a simulator in lockstep need not draw
-        them)."""
+        """Frames are looked at now: from the flight's start until the landing is the autopilot's (before the start
+        a flight drops them, in LAND and after it no decision reads one), so a simulator in lockstep need not draw
+        them. A camera that runs free sends them all the same, and the flight processes and logs them."""
         ...
 
     def frames(self) -> AsyncIterator[Frame]:

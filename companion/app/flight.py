@@ -57,6 +57,9 @@ from companion.vehicle.sim_control import SetpointNedYaw
 logger = logging.getLogger(__name__)
 
 TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAILSAFE})
+# Phases in which no decision reads a frame: the flight is over, or the landing is the autopilot's (the guidance
+# ignores frames in LAND, which leads only to DONE or YIELDED). A simulator in lockstep is not asked to draw them.
+FRAMES_UNREAD = TERMINAL | {LandingPhase.LAND}
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
 _OURS = (FlightMode.OFFBOARD, FlightMode.UNKNOWN)  # modes in which offboard setpoints are still the companion's
@@ -385,7 +388,7 @@ class FlightApp:
 
     @property
     def wants_frames(self) -> bool:
-        return self.start_sequence.started
+        return self.start_sequence.started and self.guidance.phase not in FRAMES_UNREAD
 
     def frames(self) -> AsyncIterator[Frame]:
         return self.source.frames()

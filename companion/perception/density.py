@@ -202,6 +202,7 @@ class InputEncoder:
             (values - np.float32(m)) / np.float32(s) if normalize else values
             for m, s in zip(contract.mean, contract.std, strict=True)
         ]
+        self._luts = [table.reshape(1, 256) for table in self._tables]  # cv2.LUT's shape
         # Input channel k of the tensor reads this channel of the BGR frame.
         self._source_channel = (2, 1, 0) if contract.channel_order is ChannelOrder.RGB else (0, 1, 2)
         # One tensor per thread, written anew by each call: a fresh 3.7 MB array per frame costs more in page faults
@@ -226,8 +227,10 @@ class InputEncoder:
             tensor = np.empty(shape, np.float32)
             self._buffer.tensor = tensor
         for k, table in enumerate(self._tables):
-            target = tensor[0, k] if nchw else tensor[0, :, :, k]
-            np.take(table, frame_bgr[:, :, self._source_channel[k]], out=target)
+            if nchw:  # a contiguous plane: OpenCV's lookup writes it (the same values, a third of np.take's time)
+                cv2.LUT(cv2.extractChannel(frame_bgr, self._source_channel[k]), self._luts[k], dst=tensor[0, k])
+            else:
+                np.take(table, frame_bgr[:, :, self._source_channel[k]], out=tensor[0, :, :, k])
         return tensor
 
 
