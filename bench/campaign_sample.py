@@ -82,7 +82,8 @@ def main() -> int:
     if args.compare is not None:
         other = {r["mission_id"]: r for r in read_results(args.compare / "results.jsonl")}
         against = {
-            r["mission_id"]: differences(r, other.get(r["mission_id"], {}), policies.get(r["mission_id"])) for r in results
+            r["mission_id"]: differences(r, other.get(r["mission_id"], {}), policies.get(r["mission_id"]))
+            for r in results
         }
     cores = args.workers if args.backend == Backend.LOCAL.value else os.cpu_count() or 1
     report = {

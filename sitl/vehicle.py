@@ -434,7 +434,9 @@ class SitlVehicle:
         for link in self.links:
             due = self.schedules[id(link)].due(t_s)
             if due:
-                link.send_all([self.telemetry.build(n, link.mav, t_s, state, self.commander, self.battery) for n in due])
+                link.send_all(
+                    [self.telemetry.build(n, link.mav, t_s, state, self.commander, self.battery) for n in due]
+                )
 
     def _write_log_row(self, force: bool = False) -> None:
         if self._log is None:
@@ -457,7 +459,8 @@ class SitlVehicle:
         """Handle what came in on the links and the control channel. One select() asks which sockets have something,
         so an idle socket costs no receive call (a poll runs at every outer step, 100 times a simulated second)."""
         assert self.control is not None
-        readable = select.select([*self.links, self.control], [], [], 0)[0]
+        sockets: list[MavlinkLink | ControlChannel] = [*self.links, self.control]
+        readable = select.select(sockets, [], [], 0)[0]
         for link in self.links:
             if link not in readable:
                 continue
