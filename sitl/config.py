@@ -120,6 +120,14 @@ class SitlConfig(StrictModel):
         "every person's position; for metrics, never seen by the companion.",
     )
     duration_s: float | None = Field(default=None, gt=0.0, description="Stop after this much simulated time.")
+    end_after_touchdown_s: float | None = Field(
+        default=None,
+        gt=0.0,
+        le=600.0,
+        description="Once a lockstep client has let go: end the run this much simulated time after the vehicle is "
+        "first seen on the ground, or at once when it is disarmed (a campaign's mission is over, and its ground truth "
+        "holds the touchdown). None: run on.",
+    )
     camera: SitlCameraConfig = Field(default_factory=SitlCameraConfig)
     faults: list[FaultConfig] = Field(default_factory=list, description="Injected at their simulated times.")
     scenario: ScenarioConfig = Field(default_factory=ScenarioConfig)

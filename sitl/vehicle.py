@@ -131,6 +131,7 @@ class SitlVehicle:
         self._setpoint: Setpoint | None = None
         self._running = True
         self._exit_code = 0
+        self._grounded_after_release_s: float | None = None  # end_after_touchdown_s counts from here
         self._last_heartbeat_wall = -math.inf
         self._statustext_id = 0
         self.handler_errors = 0  # messages and requests whose handling raised (dropped, logged, counted)
@@ -206,6 +207,8 @@ class SitlVehicle:
                 if self.config.duration_s is not None and self.clock.now_s >= self.config.duration_s - 1e-9:
                     logger.info("duration reached at %.3f s simulated", self.clock.now_s)
                     break
+                if self._settled():
+                    break
                 free_running = self.lockstep.free_running
                 if self.camera is not None and free_running:
                     if self.clock.now_s >= self._next_frame_s - 1e-9:  # free-running: frames go out, or are dropped
@@ -276,6 +279,31 @@ class SitlVehicle:
             self._stop_with(3)
             return False
         select.select(sockets, [], [], 0.02)
+        return False
+
+    def _settled(self) -> bool:
+        """Whether the run ends here by ``end_after_touchdown_s``: a lockstep client has let go and the vehicle is
+        disarmed, or has been on the ground (first seen there after the release) that long. Checked at the outer
+        rate; in simulated time, so the ground truth ends at the same instant at any speed."""
+        end_s = self.config.end_after_touchdown_s
+        if end_s is None or not self.lockstep.released or self.clock.steps % self._outer_every != 0:
+            return False
+        if not self.commander.armed:
+            logger.info(
+                "disarmed after the lockstep client let go, at %.3f s simulated: the run ends", self.clock.now_s
+            )
+            return True
+        if self._grounded_after_release_s is None:
+            if self.dynamics.state().on_ground:
+                self._grounded_after_release_s = self.clock.now_s
+            return False
+        if self.clock.now_s >= self._grounded_after_release_s + end_s - 1e-9:
+            logger.info(
+                "on the ground since %.3f s simulated, %.1f s after the lockstep client let go: the run ends",
+                self._grounded_after_release_s,
+                end_s,
+            )
+            return True
         return False
 
     def _stop_with(self, exit_code: int) -> None:

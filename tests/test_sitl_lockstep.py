@@ -200,3 +200,51 @@ def test_an_ack_can_name_the_setpoint_and_commands_it_waits_for(tmp_path: Path, 
     finally:
         client.close()
         sitl.stop()
+
+
+@pytest.mark.parametrize("end_after_touchdown_s", [1.0, None])
+def test_a_released_vehicle_on_the_ground_ends_the_run_in_simulated_time(
+    tmp_path: Path, instance: int, end_after_touchdown_s: float | None
+) -> None:
+    """A campaign's SITL ends itself once its client has let go and the vehicle has been on the ground for
+    ``end_after_touchdown_s`` (simulated), so it does not run on at full speed until someone stops it; without the
+    setting it runs on (a SITL a person flies must not end under them)."""
+    config = tmp_path / "sitl.yaml"
+    setting = "" if end_after_touchdown_s is None else f"  end_after_touchdown_s: {end_after_touchdown_s}\n"
+    config.write_text("sitl:\n  seed: 7\n" + setting)
+    log = tmp_path / "trajectory.csv"
+    sitl = SitlProcess(["--config", str(config), "--lockstep", "--speed", "0", "--log", str(log)], instance, tmp_path)
+    sitl.start()
+    client = LockstepClient(instance)
+    try:
+        client.subscribe()
+        sysid = client.peer.vehicle_sysid
+        arm = client.peer.mav.command_long_encode(
+            sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0
+        )
+        while True:
+            tick = client.next_tick()
+            if tick["seq"] == 1:
+                client.peer.send(arm)  # armed on the ground: landed, as after a touchdown
+            client.peer.poll()
+            client.ack(tick["seq"])
+            if tick["t_s"] >= 1.0 - 1e-9:
+                released_at_s = tick["t_s"]
+                break
+        assert wait_until(lambda: sitl.state()["armed"], 5.0, "armed")
+        client.control.release()
+        if end_after_touchdown_s is None:
+            # Runs free: simulated time goes far past the release (at full speed, seconds of it within a wall second).
+            wait_until(lambda: sitl.state()["t_s"] > released_at_s + 10.0, 20.0, "free-running time")
+            assert sitl.running
+            return
+        assert sitl.wait(timeout_s=20.0) == 0  # ended by itself
+    finally:
+        client.close()
+        sitl.stop()
+    rows = log.read_text().splitlines()[1:]
+    last_t_s = float(rows[-1].split(",")[0])
+    armed = rows[-1].split(",")[11]
+    assert armed == "1"  # it ended on the ground timer, not on a disarm
+    # First seen on the ground at the first outer step after the release, then end_after_touchdown_s on.
+    assert released_at_s + end_after_touchdown_s <= last_t_s <= released_at_s + end_after_touchdown_s + 0.2

@@ -40,6 +40,10 @@ class LockstepControl:
         """Acknowledge tick ``seq`` after sending ``mavlink_sent`` MAVLink messages in all."""
         self._sock.sendto(ack_counting(seq, mavlink_sent, self.system_id, self.component_id), self.address)
 
+    def release(self) -> None:
+        """Leave the lockstep: the SITL runs free from here."""
+        self._sock.sendto(encode(Command.LOCKSTEP_RELEASE), self.address)
+
     def close(self) -> None:
         """Close the socket."""
         self._sock.close()

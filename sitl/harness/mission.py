@@ -169,6 +169,7 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
             "speed_factor": 0.0,
             "camera": {"enabled": True},
             "truth_path": str(spec.run_dir / "truth.jsonl"),
+            "end_after_touchdown_s": TRUTH_AFTER_TOUCHDOWN_S,  # the SITL ends itself: no full-speed run past it
             "log_path": str(spec.run_dir / "trajectory.csv"),
         },
         spec.sitl_overrides,
