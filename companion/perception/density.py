@@ -198,11 +198,10 @@ class InputEncoder:
         self.contract = contract
         values = np.arange(256, dtype=np.uint8).astype(np.float32) * np.float32(contract.scale)
         normalize = contract.mean != (0.0, 0.0, 0.0) or contract.std != (1.0, 1.0, 1.0)
-        self._tables = [
-            (values - np.float32(m)) / np.float32(s) if normalize else values
+        self._tables = [  # shape (1, 256): cv2.LUT's; np.take reads it flattened
+            ((values - np.float32(m)) / np.float32(s) if normalize else values).reshape(1, 256)
             for m, s in zip(contract.mean, contract.std, strict=True)
         ]
-        self._luts = [table.reshape(1, 256) for table in self._tables]  # cv2.LUT's shape
         # Input channel k of the tensor reads this channel of the BGR frame.
         self._source_channel = (2, 1, 0) if contract.channel_order is ChannelOrder.RGB else (0, 1, 2)
         # One tensor per thread, written anew by each call: a fresh 3.7 MB array per frame costs more in page faults
@@ -228,7 +227,7 @@ class InputEncoder:
             self._buffer.tensor = tensor
         for k, table in enumerate(self._tables):
             if nchw:  # a contiguous plane: OpenCV's lookup writes it (the same values, a third of np.take's time)
-                cv2.LUT(cv2.extractChannel(frame_bgr, self._source_channel[k]), self._luts[k], dst=tensor[0, k])
+                cv2.LUT(cv2.extractChannel(frame_bgr, self._source_channel[k]), table, dst=tensor[0, k])
             else:
                 np.take(table, frame_bgr[:, :, self._source_channel[k]], out=tensor[0, :, :, k])
         return tensor

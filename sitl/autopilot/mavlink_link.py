@@ -157,8 +157,7 @@ class MavlinkLink:
         A heartbeat also goes to the configured remote while the partner is elsewhere, so a client listening there
         (MAVSDK's ``udpin``, which speaks only once it has heard the vehicle) can always find it and take the link.
         """
-        buf = msg.pack(self._mav)
-        self._mav.seq = (self._mav.seq + 1) % 256
+        buf = self._pack(msg)
         if self.cut:
             return
         self._send_buffer(buf, msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT)
@@ -172,8 +171,7 @@ class MavlinkLink:
         pending: list[bytes] = []
         size = 0
         for msg in msgs:
-            buf = msg.pack(self._mav)
-            self._mav.seq = (self._mav.seq + 1) % 256
+            buf = self._pack(msg)
             if pending and size + len(buf) > MAX_DATAGRAM_BYTES:
                 datagrams.append((b"".join(pending), len(pending)))
                 pending, size = [], 0
@@ -185,6 +183,12 @@ class MavlinkLink:
             return
         for datagram, frames in datagrams:
             self._send_buffer(datagram, heartbeat=False, frames=frames)
+
+    def _pack(self, msg: Any) -> bytes:
+        """``msg`` as this link's next frame (its sequence number taken, sent or not: a cut link numbers on)."""
+        buf: bytes = msg.pack(self._mav)
+        self._mav.seq = (self._mav.seq + 1) % 256
+        return buf
 
     def forward(self, msg: Any) -> bool:
         """Send a message received on another link as it came (its sender's ids and sequence), as PX4 forwards;

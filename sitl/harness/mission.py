@@ -341,24 +341,12 @@ def fly(spec: MissionSpec, processes: MissionProcesses | None = None) -> Mission
         sitl.start(ready_timeout_s=SITL_READY_WALL_S)
         companion.start()
         exit_code = companion.wait(spec.timeout_s + 30.0)
-        # The companion has let go of the lockstep: an autopilot landing it asked for finishes at full speed.
-        deadline = time.monotonic() + (SETTLE_WALL_S if _autopilot_lands(spec) else 0.0)
-        grounded_at_s: float | None = None
-        while time.monotonic() < deadline and sitl.running:
-            try:
-                state = sitl.state()
-            except TimeoutError:
-                break  # it stopped (a lockstep timeout when the companion died without letting go)
-            if not state["armed"]:
-                break
-            if state["on_ground"]:
-                # Run on for a second of simulated time, so the ground truth (sampled at frame instants) holds
-                # the touchdown.
-                grounded_at_s = state["t_s"] if grounded_at_s is None else grounded_at_s
-                if state["t_s"] >= grounded_at_s + TRUTH_AFTER_TOUCHDOWN_S:
-                    break
+        # The companion has let go of the lockstep: an autopilot landing it asked for finishes at full speed, and the
+        # SITL ends itself TRUTH_AFTER_TOUCHDOWN_S (simulated) after the touchdown or at a disarm
+        # (end_after_touchdown_s, set above), so the ground truth holds the touchdown.
+        if _autopilot_lands(spec):
             with contextlib.suppress(subprocess.TimeoutExpired):
-                sitl.wait(0.1)  # paces the loop; returns early if the SITL exits
+                sitl.wait(SETTLE_WALL_S)
     finally:
         companion.stop()
         sitl.stop()
