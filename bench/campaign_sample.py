@@ -58,7 +58,7 @@ def main() -> int:
     parser.add_argument("--compare", type=Path, help="another campaign folder of this sample: compare every mission")
     args = parser.parse_args()
     spec = load_campaign_spec(SPEC)
-    policies = {plan.mission_id: plan.strategy.policy.value for plan in spec.missions()}
+    policies = spec.policies()
     out = args.out or Path(tempfile.mkdtemp(prefix="campaign-sample-"))
     started, cpu_before = time.monotonic(), os.times()
     results = run_campaign(

@@ -116,6 +116,10 @@ def test_every_strategy_of_a_condition_flies_the_same_scenes_from_the_same_start
         pose = (plan.seed, mission["start"]["start_north_m"], mission["start"]["takeoff_altitude_m"])
         assert by_run.setdefault(key, pose) == pose
     assert len({seed for seed, _, _ in by_run.values()}) == len(by_run)  # and every scene differs
+    policies = spec.policies()  # each mission's selection policy, by id, for checking its result
+    assert len(policies) == 900
+    assert {policies[p.mission_id] for p in plans if p.strategy.name == "random"} == {"random"}
+    assert {policies[p.mission_id] for p in plans if p.strategy.name == "oldest"} == {"oldest"}
 
 
 def test_a_bad_campaign_spec_names_the_field(tmp_path: Path) -> None:

@@ -165,7 +165,7 @@ def build_report(
     """
     results = completed(spec, results)
     good = [r for r in results if "error" not in r]
-    policies = {plan.mission_id: plan.strategy.policy.value for plan in spec.missions()}
+    policies = spec.policies()
     cells: dict[str, Any] = {}
     for k, (condition, strategy) in enumerate(spec.cell_names()):
         rows = [r for r in good if r["condition"] == condition and r["strategy"] == strategy]

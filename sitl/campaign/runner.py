@@ -276,7 +276,7 @@ def run_campaign(
         raise CampaignError("--instance-base is for the local backend: on Ray every mission leases a free instance")
     worker_ids = worker_instances(instance_base, workers) if instance_base is not None else None
 
-    policies = {p.mission_id: p.strategy.policy.value for p in plans}
+    policies = spec.policies()
 
     def flown() -> int:  # an error or a stale result is not a mission done: it is flown again
         return sum("error" not in r and not stale(r, policies.get(k)) for k, r in done.items())

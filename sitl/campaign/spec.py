@@ -94,6 +94,11 @@ class CampaignSpec(StrictModel):
                 )
         return plans
 
+    def policies(self) -> dict[str, str]:
+        """The selection policy (its value) of every mission, by mission id: what a result is checked against
+        (:func:`sitl.campaign.metrics.stale`, :func:`sitl.campaign.metrics.with_gate_overflight`)."""
+        return {plan.mission_id: plan.strategy.policy.value for plan in self.missions()}
+
 
 def mission_seed(master_seed: int, condition_index: int, run: int) -> int:
     """The scene seed of one run of one condition (the same for every strategy)."""
