@@ -14,7 +14,7 @@ LOCKED ?= 1
 LATEST_VENV := .venv-latest
 
 .PHONY: setup demo test test-latest test-slow lock lock-upgrade lockcheck lint typecheck pytest bench paper-table \
-	paper-table-roi eval-real training models clean
+	paper-table-roi eval-real eval-tradeoff training models clean
 
 setup: $(STAMP)
 
@@ -104,6 +104,12 @@ EVAL_REAL_MODELS ?= --model slz-lite=models/density/slz_lite.onnx --model slz-li
 	--model slz-ccnn=models/density/slz_ccnn.onnx --model slz-lite-wide-real=models/density/slz_lite_wide_real.onnx
 eval-real: $(STAMP)
 	$(BIN)/python -m models.eval.real $(EVAL_REAL_MODELS) --out models/eval/results/real
+
+# A diagnostic, never a way to choose a threshold (SDD is a test set): each model's person recall against its
+# false-occupied ground over a grid of thresholds on the real sets with annotated people, and the false-occupied
+# share at the highest threshold that still finds 97 % of them. Writes models/eval/results/tradeoff.{json,md}.
+eval-tradeoff: $(STAMP)
+	$(BIN)/python -m models.eval.tradeoff $(EVAL_REAL_MODELS) --out models/eval/results/tradeoff
 
 # Optional: PyTorch for training (CPU build, pinned), then the whole density-model build (data, training, export,
 # quantization, evaluation, ablations; about two hours on 2 cores). The drone needs neither.

@@ -67,7 +67,15 @@ REAL=(--real-ground sitl/world/ground/caliterra --real-negatives 0.3 --composite
     --steps 6000 --batch 8 --crop 192 --workers 1 --validate-every 500 "${REAL[@]}"
 "$PY" -m models.density.train --arch lite-wide --loss mse-margin --no-distractors --data "$DATA" \
     --out "$RUNS/wide_real_margin" --steps 6000 --batch 8 --crop 192 --workers 1 --validate-every 500 "${REAL[@]}"
-for run in wide_real wide_real_margin; do
+# The same wider network with its real samples over the synthetic crops' whole GSD range (0.018-0.175 m/px, made at
+# the stored 0.045 m/px and enlarged below it), with and without the real photographs' fine texture on the pasted
+# people (model card, "Real ground": the GSD range and the texture as ablations).
+"$PY" -m models.density.train --arch lite-wide --loss mse --no-distractors --data "$DATA" --out "$RUNS/wide_real_fine" \
+    --steps 6000 --batch 8 --crop 192 --workers 1 --validate-every 500 "${REAL[@]}" --real-gsd 0.018 0.175
+"$PY" -m models.density.train --arch lite-wide --loss mse --no-distractors --data "$DATA" \
+    --out "$RUNS/wide_real_fine_detail" --steps 6000 --batch 8 --crop 192 --workers 1 --validate-every 500 "${REAL[@]}" \
+    --real-gsd 0.018 0.175 --real-detail 0.7
+for run in wide_real wide_real_margin wide_real_fine wide_real_fine_detail; do
     "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" --name "$run-raw" \
         --version 0 --check-frames "$DATA/train"
     "$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
@@ -92,11 +100,14 @@ MODELS=(--model slz-lite="$OUT/slz_lite.onnx" --model slz-lite-int8="$OUT/slz_li
     --model slz-ccnn="$OUT/slz_ccnn.onnx" --model blob-placeholder=models/blob_detector/blob_detector.onnx
     --model lite-2-40m="$RUNS/lite_low_mse.onnx" --model lite-2-40m-margin="$RUNS/lite_low_margin.onnx"
     --model lite-2-40m-foliage="$RUNS/lite_low_mse_foliage.onnx" --model wide-real="$RUNS/wide_real.onnx"
-    --model wide-real-margin="$RUNS/wide_real_margin.onnx")
+    --model wide-real-margin="$RUNS/wide_real_margin.onnx" --model wide-real-fine="$RUNS/wide_real_fine.onnx"
+    --model wide-real-fine-detail="$RUNS/wide_real_fine_detail.onnx")
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out models/eval/results/heldout "${MODELS[@]}"
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out models/eval/results/heldout_unshrunk --min-gsd 0 \
     "${MODELS[@]}"
 "$PY" -m models.eval.evaluate --data "$REALGROUND/heldout" --out models/eval/results/heldout_realground "${MODELS[@]}"
 # Real frames: every set under ../shared/datasets (if any) and the Caliterra frames held out from training.
 "$PY" -m models.eval.real --out models/eval/results/real "${MODELS[@]}"
+# What each one trades: recall against false-occupied ground over a grid of thresholds (a diagnostic, never a choice).
+"$PY" -m models.eval.tradeoff --out models/eval/results/tradeoff_all "${MODELS[@]}"
 "$PY" bench/density.py --model wide-real="$RUNS/wide_real.onnx"

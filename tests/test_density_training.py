@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -16,6 +17,8 @@ torch = pytest.importorskip("torch")
 
 from companion.perception.density import OnnxDensityModel  # noqa: E402
 from models.data.generate import Split, generate  # noqa: E402
+from models.data.real_ground import composite  # noqa: E402
+from models.density import dataset as dataset_module  # noqa: E402
 from models.density.architectures import Architecture, build, parameter_count  # noqa: E402
 from models.density.dataset import CrowdCrops, load_frames, turn_and_flip  # noqa: E402
 from models.density.export import Calibrated, calibrate, export, load_checkpoint, parity  # noqa: E402
@@ -23,6 +26,7 @@ from models.density.losses import LossKind, bayesian_loss, mse_loss, point_densi
 from models.density.onnx_files import CONTRACT_KEY, read_metadata  # noqa: E402
 from models.density.quantize import calibration_frames, quantize, to_float16  # noqa: E402
 from models.density.train import train  # noqa: E402
+from sitl.world.ground import RealGround  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -101,6 +105,53 @@ def test_crops_are_deterministic_and_keep_heads_inside(tiny_set: Path) -> None:
         assert bool(((pa >= 0) & (pa <= 128)).all())
         total += len(pa)
     assert total > 0
+
+
+def test_composites_finer_than_the_real_ground_are_made_at_its_gsd_and_enlarged_whole(
+    tiny_set: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    frames = load_frames(tiny_set / "train")
+    rng = np.random.default_rng(0)
+    ground = [RealGround("flat", rng.integers(90, 110, size=(400, 400, 3), dtype=np.uint8), 0.045)]
+    made_px: list[int] = []
+    real_composite = composite
+
+    def spy(
+        people: np.ndarray, mask: np.ndarray, background: np.ndarray, g: np.random.Generator, gsd: float, **kw: Any
+    ) -> Any:
+        made_px.append(people.shape[0])
+        assert gsd >= 0.045 - 1e-9  # never finer than the stored ground: no softer ground than people
+        return real_composite(people, mask, background, g, gsd, **kw)
+
+    monkeypatch.setattr(dataset_module, "composite", spy)
+
+    def crops() -> CrowdCrops:
+        return CrowdCrops(
+            frames,
+            128,
+            12,
+            seed=5,
+            distractors=False,
+            real_ground=ground,
+            composite_fraction=1.0,
+            real_gsd_m_per_px=(0.015, 0.03),
+        )
+
+    fine, again = crops(), crops()
+    total = 0
+    for i in range(12):
+        (x, heads), (x2, heads2) = fine[i], again[i]
+        assert x.shape == (3, 128, 128)
+        assert torch.equal(x, x2)
+        assert torch.equal(heads, heads2)
+        assert bool(((heads >= 0) & (heads <= 128)).all())
+        total += len(heads)
+    assert total > 0
+    # Made on 128 * (0.015 .. 0.03) / 0.045 = 43 .. 85 px at the stored GSD, then enlarged to 128.
+    assert made_px
+    assert all(40 <= px <= 88 for px in made_px), made_px
+    with pytest.raises(ValueError, match="real_gsd_m_per_px"):
+        CrowdCrops(frames, 128, 4, seed=0, real_ground=ground, composite_fraction=1.0, real_gsd_m_per_px=(0.1, 0.05))
 
 
 def test_train_export_and_onnxruntime_parity(tiny_set: Path, tmp_path: Path) -> None:

@@ -85,6 +85,25 @@ def test_a_composite_keeps_the_people_and_casts_a_shadow_on_the_real_ground() ->
     assert np.array_equal(composite(people, np.zeros_like(mask), background, rng, 0.05), background)
 
 
+def test_real_detail_gives_the_people_the_photographs_grain_and_leaves_the_ground_alone() -> None:
+    size = 64
+    grain = np.random.default_rng(0).normal(0, 12, size=(size, size, 1))
+    background = np.clip(120 + grain, 0, 255).repeat(3, axis=2).astype(np.uint8)  # real ground: grainy
+    people = np.full((size, size, 3), 30, np.uint8)
+    people[24:40, 24:40] = (40, 60, 200)  # a smooth rendered person
+    mask = np.zeros((size, size), np.bool_)
+    mask[24:40, 24:40] = True
+    smooth = composite(people, mask, background, np.random.default_rng(7), 0.05)
+    detailed = composite(people, mask, background, np.random.default_rng(7), 0.05, real_detail=True)
+    inner = (slice(26, 38), slice(26, 38))
+    # Inside the person: grain of the photograph's kind (its spread), where the smooth paste has next to none.
+    assert float(smooth[inner].astype(float).std(axis=(0, 1)).max()) < 3.0
+    assert float(detailed[inner].astype(float).std(axis=(0, 1)).min()) > 3.0
+    # Its colour stays the person's (the grain averages out), and far from it the real ground is untouched.
+    assert np.abs(detailed[inner].mean(axis=(0, 1)) - smooth[inner].mean(axis=(0, 1))).max() < 4.0
+    assert np.array_equal(detailed[:4, :4], smooth[:4, :4])
+
+
 def test_the_sitl_paints_real_ground_from_the_held_out_frames_with_the_same_objects() -> None:
     real = Park(11, ground=GroundKind.REAL)
     painted = Park(11)

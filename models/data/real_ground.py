@@ -146,12 +146,18 @@ def composite(
     background_bgr: U8Image,
     rng: np.random.Generator,
     gsd_m_per_px: float,
+    real_detail: bool = False,
 ) -> U8Image:
     """Synthetic people (the pixels of ``person_mask`` in ``people_bgr``) pasted onto a real ``background_bgr`` of the
     same size and GSD, with what makes them belong there: a soft edge, a shadow cast on the real ground (one sun per
     crop: 0-1.2 m long, darkening 15-45 %), the people's brightness pulled halfway to the ground's, half the time
     duller and darker people (grey clothes, shade), and a blur of up to 0.8 px. Noise, colour and JPEG come later,
-    on the whole crop (``models.density.dataset``)."""
+    on the whole crop (``models.density.dataset``).
+
+    With ``real_detail`` the people also carry the real photograph's fine texture: the high-pass part (detail finer
+    than about 1.5 px) of the same real crop at another place, 40-100 % of it, added to their pixels. Rendered people
+    are smooth where real ones (and the real ground) carry the camera's grain and the fabric's folds; without it a
+    network can learn "photographic texture is nobody", which real people on real ground also have."""
     if people_bgr.shape != background_bgr.shape or people_bgr.shape[:2] != person_mask.shape:
         raise ValueError(f"shapes differ: {people_bgr.shape}, {background_bgr.shape}, {person_mask.shape}")
     if not person_mask.any():
@@ -181,6 +187,11 @@ def composite(
         grey = people.mean(axis=2, keepdims=True)
         people = grey + (people - grey) * float(rng.uniform(0.2, 1.0))
         people *= float(rng.uniform(0.55, 1.1))
+    if real_detail:
+        ground = background_bgr.astype(np.float32)
+        detail = ground - np.asarray(cv2.GaussianBlur(ground, (0, 0), 1.5), np.float32)
+        offset_px = (int(rng.integers(h // 4, h - h // 4 + 1)), int(rng.integers(w // 4, w - w // 4 + 1)))
+        people += np.roll(detail, offset_px, axis=(0, 1)) * float(rng.uniform(0.4, 1.0))
     sigma = float(rng.uniform(0.0, 0.8))
     if sigma > 0.2:
         people = np.asarray(cv2.GaussianBlur(people, (0, 0), sigma), np.float32)

@@ -7,9 +7,13 @@ procedural hard negatives
 
 With real ground (``models/data/real_ground.py``, the training frames only), a share of the samples is real:
 
-- **real negatives**: a crop of real ground at a GSD drawn in the companion's working range, nobody in it;
+- **real negatives**: a crop of real ground at a GSD drawn in a range (by default the companion's working range),
+  nobody in it;
 - **composites**: the synthetic crop rescaled to such a GSD and its people (mask, soft edge, a shadow) pasted onto a
-  real crop of the same size and GSD, the heads kept.
+  real crop of the same size and GSD, the heads kept. Below the real frames' stored GSD the composite is made at the
+  stored GSD and then enlarged as a whole, so that people and ground share one softness (the network cannot tell a
+  person by being sharper than the ground around it). A share of the composites' people carry the real crop's fine
+  texture (``real_detail_fraction``).
 
 Both then go through the same colour, blur, noise and JPEG augmentation as every sample.
 """
@@ -102,6 +106,11 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         Real frames with nobody in them (never the held-out ones); empty: synthetic samples only.
     real_negative_fraction, composite_fraction : float
         Shares of the samples that are real negatives and composites (module docstring); the rest are synthetic.
+    real_gsd_m_per_px : (float, float)
+        GSD range (m/px, drawn log-uniformly) of the real negatives and composites.
+    real_detail_fraction : float
+        Share of the composites whose people carry the real crop's fine texture
+        (:func:`models.data.real_ground.composite`, ``real_detail``).
     """
 
     def __init__(
@@ -116,7 +125,13 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         real_ground: Sequence[RealGround] = (),
         real_negative_fraction: float = 0.0,
         composite_fraction: float = 0.0,
+        real_gsd_m_per_px: tuple[float, float] = WORKING_GSD_M_PER_PX,
+        real_detail_fraction: float = 0.0,
     ) -> None:
+        if not 0.0 <= real_detail_fraction <= 1.0:
+            raise ValueError(f"real_detail_fraction must be in [0, 1], got {real_detail_fraction}")
+        if not 0.005 <= real_gsd_m_per_px[0] <= real_gsd_m_per_px[1] <= 1.0:
+            raise ValueError(f"real_gsd_m_per_px must satisfy 0.005 <= low <= high <= 1 m/px, got {real_gsd_m_per_px}")
         if not 0.1 <= scale_range[0] <= scale_range[1] <= 10.0:
             raise ValueError(f"scale_range must satisfy 0.1 <= low <= high <= 10, got {scale_range}")
         if not (
@@ -132,6 +147,10 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         self.real_ground = list(real_ground)
         self.real_negative_fraction = real_negative_fraction
         self.composite_fraction = composite_fraction
+        self.real_gsd_m_per_px = real_gsd_m_per_px
+        self.real_detail_fraction = real_detail_fraction
+        # The coarsest stored GSD of the real frames: no real crop is enlarged at or above it.
+        self.stored_gsd_m_per_px = max((g.gsd_m_per_px for g in self.real_ground), default=0.0)
         self.scale_range = scale_range
         if crop_px % OUTPUT_STRIDE:
             raise ValueError(f"crop_px must be a multiple of {OUTPUT_STRIDE}, got {crop_px}")
@@ -164,13 +183,16 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
                 kind = "composite"
         if kind == "negative":
             ground = self.real_ground[int(rng.integers(len(self.real_ground)))]
-            real = ground_crop(ground, rng, c, _log_uniform(rng, WORKING_GSD_M_PER_PX))
+            real = ground_crop(ground, rng, c, _log_uniform(rng, self.real_gsd_m_per_px))
             none = np.zeros((0, 2), np.float32)
             real, none = _augment(real, np.zeros((c, c), np.bool_), none, rng, False)
             return torch.from_numpy(to_input(real)), torch.from_numpy(none)
         if self.augment:
-            if kind == "composite":  # the people at a GSD of the working range (upsampled by at most 1.4)
-                scale = min(1.4, frame.gsd_m_per_px / _log_uniform(rng, WORKING_GSD_M_PER_PX))
+            if kind == "composite":  # the people at a GSD of the range (upsampled by at most 1.4)
+                target = _log_uniform(rng, self.real_gsd_m_per_px)
+                scale = min(1.4, frame.gsd_m_per_px / max(target, self.stored_gsd_m_per_px))
+                # Finer than the stored ground: made at the stored GSD on a smaller crop, then enlarged as a whole.
+                c = min(c, max(OUTPUT_STRIDE, round(c * target / self.stored_gsd_m_per_px)))
             else:
                 scale = _log_uniform(rng, self.scale_range)
             h, w = image.shape[:2]
@@ -196,7 +218,18 @@ class CrowdCrops(Dataset[tuple[torch.Tensor, torch.Tensor]]):
         if kind == "composite":
             gsd = frame.gsd_m_per_px / scale
             ground = self.real_ground[int(rng.integers(len(self.real_ground)))]
-            image = composite(image, mask, ground_crop(ground, rng, c, gsd), rng, gsd)
+            background = ground_crop(ground, rng, c, gsd)
+            detail = self.real_detail_fraction > 0 and rng.random() < self.real_detail_fraction
+            image = composite(image, mask, background, rng, gsd, real_detail=detail)
+            if c < self.crop_px:  # enlarged as a whole to the crop size
+                grow = self.crop_px / c
+                image = np.asarray(
+                    cv2.resize(image, (self.crop_px, self.crop_px), interpolation=cv2.INTER_LINEAR), np.uint8
+                )
+                mask = (
+                    cv2.resize(mask.astype(np.uint8), (self.crop_px, self.crop_px), interpolation=cv2.INTER_NEAREST) > 0
+                )
+                heads = heads * np.float32(grow)
         if self.augment:
             image, heads = _augment(image, mask, heads, rng, self.distractors and kind == "synthetic")
         return torch.from_numpy(to_input(image)), torch.from_numpy(np.ascontiguousarray(heads, np.float32))

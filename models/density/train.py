@@ -33,7 +33,7 @@ from torch.utils.data import DataLoader
 from models.data.real_ground import TRAIN, RealGround, load_ground, split_validation
 from models.density.architectures import Architecture, build, parameter_count
 from models.density.calibration import fit_floor_and_scale
-from models.density.dataset import CrowdCrops, LabelledFrame, collate, load_frames
+from models.density.dataset import WORKING_GSD_M_PER_PX, CrowdCrops, LabelledFrame, collate, load_frames
 from models.density.losses import OCCUPANCY_THRESHOLD, LossKind, density_loss
 from models.density.preprocess import OUTPUT_STRIDE, to_input
 
@@ -137,6 +137,8 @@ def train(
     real_ground_dir: Path | None = None,
     real_negative_fraction: float = 0.0,
     composite_fraction: float = 0.0,
+    real_gsd_m_per_px: tuple[float, float] = WORKING_GSD_M_PER_PX,
+    real_detail_fraction: float = 0.0,
 ) -> dict[str, Any]:
     """Train and save; returns the training log (also written to ``out_dir/training.json``).
 
@@ -164,6 +166,8 @@ def train(
         real_ground=ground,
         real_negative_fraction=real_negative_fraction,
         composite_fraction=composite_fraction,
+        real_gsd_m_per_px=real_gsd_m_per_px,
+        real_detail_fraction=real_detail_fraction,
     )
     loader = DataLoader(
         dataset,
@@ -195,6 +199,8 @@ def train(
         "real_ground_validation_frames": [g.name for g in real_val],
         "real_negative_fraction": real_negative_fraction,
         "composite_fraction": composite_fraction,
+        "real_gsd_m_per_px": list(real_gsd_m_per_px),
+        "real_detail_fraction": real_detail_fraction,
         "seed": seed,
         "train_frames": len(train_frames),
         "val_frames": len(val_set),
@@ -277,6 +283,20 @@ def main() -> int:
     parser.add_argument("--real-ground", type=Path, default=None, help="a real-ground folder (its training frames)")
     parser.add_argument("--real-negatives", type=float, default=0.0, help="share of samples that are real ground")
     parser.add_argument("--composites", type=float, default=0.0, help="share of synthetic people on real ground")
+    parser.add_argument(
+        "--real-gsd",
+        type=float,
+        nargs=2,
+        default=WORKING_GSD_M_PER_PX,
+        metavar=("LOW", "HIGH"),
+        help="GSD range (m/px) of the real negatives and composites (default: the companion's working range)",
+    )
+    parser.add_argument(
+        "--real-detail",
+        type=float,
+        default=0.0,
+        help="share of the composites whose people carry the real crop's fine texture",
+    )
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
@@ -300,6 +320,8 @@ def main() -> int:
         real_ground_dir=args.real_ground,
         real_negative_fraction=args.real_negatives,
         composite_fraction=args.composites,
+        real_gsd_m_per_px=tuple(args.real_gsd),
+        real_detail_fraction=args.real_detail,
     )
     sys.stdout.write(
         f"{args.arch}: {log['parameters']} parameters, {args.steps} steps in {log['wall_s']:.0f} s on {log['device']}, "
