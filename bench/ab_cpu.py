@@ -1,12 +1,17 @@
 """Before and after at the same time: ``bench/mission_cpu.py`` in two checkouts at once, on the same machine moment.
 
-Run: ``.venv/bin/python bench/ab_cpu.py BEFORE_DIR AFTER_DIR [--rounds 2]``. On a shared virtual machine whose speed
+Run: ``.venv/bin/python bench/ab_cpu.py BEFORE_DIR AFTER_DIR [--rounds 2] [--sample]``. On a shared virtual machine whose speed
 drifts by 10 % over minutes, two runs taken one after the other compare the machine's moments as much as the code (on
 this project's 2-core machine, the same commit measured 14.5 and 12.7 s of warm CPU per mission ten minutes apart).
 Here both checkouts (``git worktree add``) fly ``bench/mission_cpu.py`` together: each flies one mission at a time,
 so the two keep both cores busy and meet the same slowdowns. Prints, per round and mission, the warm CPU seconds of
 each side and their ratio, and saves ``bench/results/ab_cpu.json`` with the machine's context and both commits.
 Each checkout's own ``bench/results/mission_cpu.json`` is put back as it was.
+
+``--sample`` flies the whole 63-mission sample instead (``bench/campaign_sample.py --workers 1`` in both checkouts at
+once, each one core's worth, into two new folders): missions per hour and CPU seconds per mission of each side, and
+whether each mission's metrics are the same on both sides (the sample's own references are still compared by each
+side). Saves ``bench/results/ab_sample.json``; each checkout's ``campaign_sample_warm.json`` is put back.
 """
 
 from __future__ import annotations
@@ -16,15 +21,20 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO_ROOT))
 
+from bench.campaign_sample import SPEC, differences  # noqa: E402
 from bench.machine import machine_context, save_report  # noqa: E402
+from sitl.campaign.runner import read_results  # noqa: E402
+from sitl.campaign.spec import load_campaign_spec  # noqa: E402
 
 RECORD = Path("bench") / "results" / "mission_cpu.json"
+SAMPLE_RECORD = Path("bench") / "results" / "campaign_sample_warm.json"
 ROUND_TIMEOUT_S = 3600.0
 
 
@@ -34,24 +44,29 @@ def commit_of(checkout: Path) -> str:
     return done.stdout.strip()
 
 
-def fly_together(checkouts: list[Path]) -> list[dict[str, Any]]:
-    """``bench/mission_cpu.py`` in every checkout at once (its own code on ``PYTHONPATH``); their reports."""
-    kept = [(c / RECORD).read_bytes() if (c / RECORD).is_file() else None for c in checkouts]
+def fly_together(
+    checkouts: list[Path], commands: list[list[str]] | None = None, record: Path = RECORD
+) -> list[dict[str, Any]]:
+    """In every checkout at once (its own code on ``PYTHONPATH``), its command (by default ``bench/mission_cpu.py``);
+    the report each wrote to ``record`` (then put back as it was)."""
+    commands = commands or [["bench/mission_cpu.py"] for _ in checkouts]
+    kept = [(c / record).read_bytes() if (c / record).is_file() else None for c in checkouts]
     procs = []
     try:
-        for checkout in checkouts:
+        for checkout, command in zip(checkouts, commands, strict=True):
             env = {**os.environ, "PYTHONPATH": str(checkout)}
-            command = [sys.executable, "bench/mission_cpu.py"]
             procs.append(
-                subprocess.Popen(command, cwd=checkout, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+                subprocess.Popen(
+                    [sys.executable, *command], cwd=checkout, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+                )
             )
         reports = []
-        for checkout, proc in zip(checkouts, procs, strict=True):
+        for checkout, command, proc in zip(checkouts, commands, procs, strict=True):
             output, _ = proc.communicate(timeout=ROUND_TIMEOUT_S)
             if proc.returncode != 0:
                 tail = output.decode(errors="replace")[-3000:]
-                raise RuntimeError(f"{checkout}: bench/mission_cpu.py exited {proc.returncode}:\n{tail}")
-            reports.append(json.loads((checkout / RECORD).read_text()))
+                raise RuntimeError(f"{checkout}: {command[0]} exited {proc.returncode}:\n{tail}")
+            reports.append(json.loads((checkout / record).read_text()))
         return reports
     finally:
         for proc in procs:
@@ -60,7 +75,39 @@ def fly_together(checkouts: list[Path]) -> list[dict[str, Any]]:
                 proc.wait()
         for checkout, original in zip(checkouts, kept, strict=True):
             if original is not None:
-                (checkout / RECORD).write_bytes(original)
+                (checkout / record).write_bytes(original)
+
+
+def sample_together(checkouts: list[Path], out: Path) -> int:
+    """The 63-mission sample in both checkouts at once, one worker each; both sides' throughput and whether every
+    mission flew the same (``--sample``)."""
+    folders = [Path(tempfile.mkdtemp(prefix=f"ab-sample-{side}-")) for side in ("before", "after")]
+    commands = [["bench/campaign_sample.py", "--workers", "1", "--out", str(f)] for f in folders]
+    before, after = fly_together(checkouts, commands, SAMPLE_RECORD)
+    policies = load_campaign_spec(SPEC).policies()
+    flown = [{r["mission_id"]: r for r in read_results(f / "results.jsonl")} for f in folders]
+    differing = {
+        mission_id: diff
+        for mission_id, b in flown[0].items()
+        if (diff := differences(flown[1].get(mission_id, {}), b, policies.get(mission_id)))
+    }
+    side_keys = ("missions", "errors", "wall_s", "missions_per_hour", "cpu_s_per_mission", "identical", "differing")
+    report = {
+        "machine": machine_context(),
+        "before": {"checkout": str(checkouts[0]), "commit": commit_of(checkouts[0])}
+        | {k: before[k] for k in side_keys}
+        | {"out": str(folders[0])},
+        "after": {"checkout": str(checkouts[1]), "commit": commit_of(checkouts[1])}
+        | {k: after[k] for k in side_keys}
+        | {"out": str(folders[1])},
+        "missions_per_hour_ratio": round(after["missions_per_hour"] / before["missions_per_hour"], 3),
+        "cpu_s_per_mission_ratio": round(after["cpu_s_per_mission"] / before["cpu_s_per_mission"], 3),
+        "same_in_both": len(flown[0]) - len(differing),
+        "differing_between": differing,
+    }
+    print(report)
+    save_report(report, out)
+    return 0
 
 
 def main() -> int:
@@ -68,9 +115,14 @@ def main() -> int:
     parser.add_argument("before", type=Path, help="checkout of the before (a git worktree)")
     parser.add_argument("after", type=Path, help="checkout of the after")
     parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "ab_cpu.json")
+    parser.add_argument("--sample", action="store_true", help="fly the 63-mission sample in both (one worker each)")
+    parser.add_argument("--out", type=Path, help="report (default bench/results/ab_cpu.json, ab_sample.json)")
     args = parser.parse_args()
     checkouts = [args.before.resolve(), args.after.resolve()]
+    results = REPO_ROOT / "bench" / "results"
+    if args.sample:
+        return sample_together(checkouts, args.out or results / "ab_sample.json")
+    args.out = args.out or results / "ab_cpu.json"
     rounds = []
     for number in range(1, args.rounds + 1):
         before, after = fly_together(checkouts)
