@@ -1,12 +1,12 @@
 """Before and after at the same time: ``bench/mission_cpu.py`` in two checkouts at once, on the same machine moment.
 
-Run: ``.venv/bin/python bench/ab_cpu.py BEFORE_DIR AFTER_DIR [--rounds 2] [--sample]``. On a shared virtual machine whose speed
-drifts by 10 % over minutes, two runs taken one after the other compare the machine's moments as much as the code (on
-this project's 2-core machine, the same commit measured 14.5 and 12.7 s of warm CPU per mission ten minutes apart).
-Here both checkouts (``git worktree add``) fly ``bench/mission_cpu.py`` together: each flies one mission at a time,
-so the two keep both cores busy and meet the same slowdowns. Prints, per round and mission, the warm CPU seconds of
-each side and their ratio, and saves ``bench/results/ab_cpu.json`` with the machine's context and both commits.
-Each checkout's own ``bench/results/mission_cpu.json`` is put back as it was.
+Run: ``.venv/bin/python bench/ab_cpu.py BEFORE_DIR AFTER_DIR [--rounds 2] [--sample]``. On a shared virtual machine
+whose speed drifts by 10 % over minutes, two runs taken one after the other compare the machine's moments as much as
+the code (on this project's 2-core machine, the same commit measured 14.5 and 12.7 s of warm CPU per mission ten
+minutes apart). Here both checkouts (``git worktree add``) fly ``bench/mission_cpu.py`` together: each flies one
+mission at a time, so the two keep both cores busy and meet the same slowdowns. Prints, per round and mission, the
+warm CPU seconds of each side and their ratio, and saves ``bench/results/ab_cpu.json`` with the machine's context and
+both commits. Each checkout's own ``bench/results/mission_cpu.json`` is put back as it was.
 
 ``--sample`` flies the whole 63-mission sample instead (``bench/campaign_sample.py --workers 1`` in both checkouts at
 once, each one core's worth, into two new folders): missions per hour and CPU seconds per mission of each side, and
