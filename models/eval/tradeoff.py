@@ -157,15 +157,16 @@ def main() -> int:
                 points = curve(densities(model, frames, scale), occupancy)
                 curves.append(Tradeoff(name, dataset, scale, points))
     table = tradeoff_table(curves)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
+    base = args.out.with_suffix("") if args.out.suffix in (".json", ".md") else args.out  # "tradeoff_0.5" keeps its dot
+    base.parent.mkdir(parents=True, exist_ok=True)
     payload = {
         "config": str(args.config),
         "target_recall": TARGET_RECALL,
         "curves": [asdict(c) | {"at_target_recall": c.at_target_recall and asdict(c.at_target_recall)} for c in curves],
     }
     text = json.dumps(payload, indent=2, allow_nan=True).replace("NaN", "null")
-    args.out.with_suffix(".json").write_text(text + "\n", encoding="utf-8")
-    args.out.with_suffix(".md").write_text(table, encoding="utf-8")
+    (base.parent / f"{base.name}.json").write_text(text + "\n", encoding="utf-8")
+    (base.parent / f"{base.name}.md").write_text(table, encoding="utf-8")
     sys.stdout.write(table)
     return 0
 
