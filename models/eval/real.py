@@ -350,6 +350,17 @@ def default_sets(root: Path) -> dict[str, list[BoxedImage]]:
     return found
 
 
+def write_report(out: Path, payload: dict[str, object], table: str) -> None:
+    """``OUT.json`` (NaN as null) and ``OUT.md`` beside each other (``OUT`` may end in ``.json``/``.md``, and keeps any
+    other dot: ``real_0.5``), and the table on standard output."""
+    base = out.with_suffix("") if out.suffix in (".json", ".md") else out
+    base.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(payload, indent=2, allow_nan=True).replace("NaN", "null")
+    (base.parent / f"{base.name}.json").write_text(text + "\n", encoding="utf-8")
+    (base.parent / f"{base.name}.md").write_text(table, encoding="utf-8")
+    sys.stdout.write(table)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description="Density models on real aerial frames with annotated people.")
     parser.add_argument("--model", action="append", required=True, help="NAME=PATH.onnx (repeatable)")
@@ -410,13 +421,7 @@ def main() -> int:
         models = payload["models"]
         assert isinstance(models, dict)
         models[name] = {"path": path, "sets": per_set}
-    table = summary_table(summaries)
-    base = args.out.with_suffix("") if args.out.suffix in (".json", ".md") else args.out  # "real_0.5" keeps its dot
-    base.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(payload, indent=2, allow_nan=True).replace("NaN", "null")
-    (base.parent / f"{base.name}.json").write_text(text + "\n", encoding="utf-8")
-    (base.parent / f"{base.name}.md").write_text(table, encoding="utf-8")
-    sys.stdout.write(table)
+    write_report(args.out, payload, summary_table(summaries))
     return 0
 
 

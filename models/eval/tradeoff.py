@@ -23,7 +23,6 @@ boxes (frames with nobody have no recall to trade), or ``--data``.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from dataclasses import asdict, dataclass
@@ -44,6 +43,7 @@ from models.eval.real import (
     score_real_frame,
     summarise_real,
     tiled_density,
+    write_report,
 )
 
 THRESHOLDS = (0.002, 0.003, 0.004, 0.005, 0.006, 0.008, 0.01, 0.012, 0.015, 0.02, 0.03)
@@ -156,18 +156,12 @@ def main() -> int:
             for scale in args.scales:
                 points = curve(densities(model, frames, scale), occupancy)
                 curves.append(Tradeoff(name, dataset, scale, points))
-    table = tradeoff_table(curves)
-    base = args.out.with_suffix("") if args.out.suffix in (".json", ".md") else args.out  # "tradeoff_0.5" keeps its dot
-    base.parent.mkdir(parents=True, exist_ok=True)
-    payload = {
+    payload: dict[str, object] = {
         "config": str(args.config),
         "target_recall": TARGET_RECALL,
         "curves": [asdict(c) | {"at_target_recall": c.at_target_recall and asdict(c.at_target_recall)} for c in curves],
     }
-    text = json.dumps(payload, indent=2, allow_nan=True).replace("NaN", "null")
-    (base.parent / f"{base.name}.json").write_text(text + "\n", encoding="utf-8")
-    (base.parent / f"{base.name}.md").write_text(table, encoding="utf-8")
-    sys.stdout.write(table)
+    write_report(args.out, payload, tradeoff_table(curves))
     return 0
 
 
