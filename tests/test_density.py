@@ -21,6 +21,7 @@ from companion.perception.density import (
     OnnxDensityModel,
     TensorLayout,
     downscaled_size,
+    input_extent_px,
     input_scale,
     predict_downscaled,
 )
@@ -277,3 +278,76 @@ def test_input_scale_follows_the_ground_sampling_distance() -> None:
 def test_a_scale_outside_0_1_is_refused(blob_model: OnnxDensityModel, scale: float) -> None:
     with pytest.raises(PerceptionError, match="scale must be in"):
         predict_downscaled(blob_model, np.zeros((480, 640, 3), np.uint8), scale)
+
+
+def conv_model(path: Path, spatial_addend: bool = False) -> Path:
+    """A small fully convolutional graph: 3x3 stride 2, ReLU, 3x3 dilated 2, 1x1 (stride 2 overall); with
+    ``spatial_addend`` an addend of the contract's spatial size after the first convolution (which only that size
+    can take)."""
+    rng = np.random.default_rng(5)
+    inits = [
+        onnx.numpy_helper.from_array(rng.normal(size=(4, 3, 3, 3)).astype(np.float32), "w1"),
+        onnx.numpy_helper.from_array(rng.normal(size=(4, 4, 3, 3)).astype(np.float32), "w2"),
+        onnx.numpy_helper.from_array(rng.normal(size=(1, 4, 1, 1)).astype(np.float32), "w3"),
+    ]
+    nodes = [helper.make_node("Conv", ["frame", "w1"], ["c1"], kernel_shape=[3, 3], strides=[2, 2], pads=[1] * 4)]
+    if spatial_addend:
+        inits.append(onnx.numpy_helper.from_array(np.ones((1, 1, 24, 32), np.float32), "plane"))
+        nodes.append(helper.make_node("Add", ["c1", "plane"], ["c1p"]))
+    nodes += [
+        helper.make_node("Relu", ["c1p" if spatial_addend else "c1"], ["r1"]),
+        helper.make_node("Conv", ["r1", "w2"], ["c2"], kernel_shape=[3, 3], dilations=[2, 2], pads=[2] * 4),
+        helper.make_node("Conv", ["c2", "w3"], ["c3"]),
+        helper.make_node("Abs", ["c3"], ["density"]),
+    ]
+    graph = helper.make_graph(
+        nodes,
+        "conv",
+        [helper.make_tensor_value_info("frame", TensorProto.FLOAT, [1, 3, 48, 64])],
+        [helper.make_tensor_value_info("density", TensorProto.FLOAT, [1, 1, 24, 32])],
+        initializer=inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    contract = {"input_width_px": 64, "input_height_px": 48, "output_stride": 2}
+    helper.set_model_props(model, {CONTRACT_METADATA_KEY: json.dumps(contract)})
+    onnx.save(model, str(path))
+    return path
+
+
+def test_the_context_a_cell_reads_is_followed_through_the_graph(tmp_path: Path) -> None:
+    # Output cell i reads inputs 2i - 1 ... 2i + 1 through the first convolution, then its 3x3 dilated-2 window over
+    # that (stride 2) adds 2 * 2 on each side: 2i + 5 at the right. 5 - 2 + 1 = 4 px past the last kept cell: 16.
+    path = conv_model(tmp_path / "conv.onnx")
+    assert input_extent_px(onnx.load(str(path)).graph) == (2, 5)
+    model = OnnxDensityModel(path)
+    assert model.context_px == 16
+    padded = OnnxDensityModel(path, crop_shrunk_frames=False)
+    frame = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    assert model.predict_any_size(frame[:32, :48]).shape == (16, 24)  # any multiple of the stride, as it is
+    for scale in (0.3, 0.5, 0.75):
+        np.testing.assert_array_equal(
+            predict_downscaled(model, frame, scale).values, predict_downscaled(padded, frame, scale).values
+        )
+
+
+def test_graphs_whose_context_is_unbounded_here_run_on_the_contract_size(
+    tmp_path: Path, blob_model: OnnxDensityModel
+) -> None:
+    assert blob_model.context_px is None  # edge padding and a resize on the image's path
+    pooled = OnnxDensityModel(pool_model(tmp_path / "pool.onnx", [1, 3, 48, 64], [1, 1, 6, 8], 8, CONTRACT))
+    assert pooled.context_px is None  # a mean over the channels (ReduceMean) is not followed
+    with pytest.raises(PerceptionError, match=r"density.predict_any_size: .* runs on 64x48 only"):
+        pooled.predict_any_size(np.zeros((16, 16, 3), np.uint8))
+    # An addend of the contract's size: the graph reads as convolutional, but only that size runs; the check at
+    # load finds it and the model pads shrunk frames as before.
+    addend = OnnxDensityModel(conv_model(tmp_path / "addend.onnx", spatial_addend=True))
+    assert addend.context_px is None
+    small_w, small_h = downscaled_size(64, 48, 0.5)
+    assert predict_downscaled(addend, np.zeros((48, 64, 3), np.uint8), 0.5).values.shape == (small_h // 2, small_w // 2)
+
+
+def test_a_frame_run_as_it_is_must_be_whole_cells(tmp_path: Path) -> None:
+    model = OnnxDensityModel(conv_model(tmp_path / "conv.onnx"))
+    with pytest.raises(PerceptionError, match="not a multiple of the output stride 2"):
+        model.predict_any_size(np.zeros((17, 32, 3), np.uint8))

@@ -14,7 +14,7 @@ import pytest
 
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import OccupancyConfig, load_perception_config
-from companion.perception.density import OnnxDensityModel
+from companion.perception.density import OnnxDensityModel, predict_downscaled
 from models.data.generate import Split, generate
 from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, read_metadata
 from models.eval.evaluate import evaluate_model
@@ -99,3 +99,37 @@ def test_no_people_are_seen_on_an_empty_park(name: str) -> None:
         assert occupied < 0.04, f"{name} at {altitude_m} m: {100 * occupied:.1f} % of an empty park occupied"
         heads = len(detect_heads(density))
         assert heads <= 4, f"{name} at {altitude_m} m detects {heads} heads on an empty park"
+
+
+def _park_frame_with_people(seed: int, altitude_m: float) -> np.ndarray:
+    scenario = ScenarioConfig(people_min=100, people_max=100)
+    renderer = WorldRenderer(
+        Park(seed),
+        Crowd(scenario, seed),
+        PinholeCamera.from_hfov(640, 480, 90.0),
+        T_body_camera_from_mount(),
+        Light.from_angles(40.0, 200.0, 0.45),
+    )
+    try:
+        pose = Pose.from_ned_euler(1.0, 2.0, -altitude_m, 0.05, -0.03, 0.3)
+        return renderer.render(pose, 0.0, with_mask=False, with_depth=False).image_bgr
+    finally:
+        renderer.close()
+
+
+@pytest.mark.parametrize("name", [*SHIPPED, "slz_lite_wide_real"])
+def test_a_shrunk_frame_run_with_its_context_is_the_padded_frames_map_to_the_bit(name: str) -> None:
+    """The campaign machine's CPU path (``crop_shrunk_frames``): a frame shrunk for min_gsd_m_per_px runs as itself
+    plus the context its cells read, and every kept cell equals the whole padded frame's, bit for bit, at every
+    scale a descent passes through."""
+    path = REPO_ROOT / "models/density" / f"{name}.onnx"
+    cropped, padded = OnnxDensityModel(path), OnnxDensityModel(path, crop_shrunk_frames=False)
+    assert cropped.context_px is not None
+    assert cropped.context_px % 16 == 0
+    assert padded.context_px is None
+    for frame in (_park_frame_with_people(21, 12.0), _park_frame_with_people(22, 5.0)):
+        for scale in np.linspace(0.12, 1.0, 12):
+            a = predict_downscaled(cropped, frame, float(scale)).values
+            b = predict_downscaled(padded, frame, float(scale)).values
+            assert a.shape == b.shape
+            assert np.array_equal(a, b), f"{name} at scale {scale:.2f}: max difference {np.abs(a - b).max()}"

@@ -60,6 +60,13 @@ class ModelConfig(StrictModel):
     fp16: bool = Field(
         default=True, description="TensorRT: allow FP16 kernels (Jetson GPUs run them at about twice the FP32 rate)."
     )
+    crop_shrunk_frames: bool = Field(
+        default=True,
+        description="A frame shrunk for min_gsd_m_per_px runs through the model as itself plus the edge pixels its "
+        "cells read, not padded to the model's full size: the same density map for a fraction of the work. Only on "
+        "the CPU provider alone (a TensorRT engine is built per input shape) and for graphs whose receptive field "
+        "can be read (fully convolutional); otherwise, or when false, frames are padded as before.",
+    )
 
 
 class OccupancyConfig(StrictModel):

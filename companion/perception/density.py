@@ -233,6 +233,123 @@ class InputEncoder:
         return tensor
 
 
+# Operators that map each spatial position of their input(s) to the same position of their output: they pass an
+# output cell's dependence on the input through unchanged (:func:`input_extent_px`).
+_POINTWISE_OPS = frozenset(
+    {
+        "Abs", "Add", "BatchNormalization", "Cast", "Clip", "DequantizeLinear", "Div", "Elu", "Exp", "Identity",
+        "LeakyRelu", "Max", "Min", "Mul", "PRelu", "QuantizeLinear", "Relu", "Sigmoid", "Softplus", "Sub", "Sum",
+        "Tanh",
+    }
+)  # fmt: skip
+# Windowed operators: (index of the spatial input, index of the weight whose last two dims are the kernel, or None).
+_WINDOW_OPS = {
+    "Conv": (0, 1),
+    "ConvInteger": (0, 1),
+    "QLinearConv": (0, 3),
+    "MaxPool": (0, None),
+    "AveragePool": (0, None),
+}
+
+
+def input_extent_px(graph: Any) -> tuple[int, int] | None:
+    """How far an output cell of a convolutional ONNX graph reads its input: (stride, extent).
+
+    Output cell ``i`` (along either image axis) depends on input pixels ``stride * i + lo`` to ``stride * i + hi``
+    only; ``extent`` is the larger of ``hi`` over both axes, so the pixels right of (or below) a cell's own that it
+    reads. Followed through every path of the graph from its first input to its first output, over windowed
+    operators (Conv, QLinearConv, ConvInteger, pooling: kernel, dilation, stride, explicit pads), pointwise ones
+    and concatenation along the channels.
+
+    Parameters
+    ----------
+    graph : onnx.GraphProto
+        The graph.
+
+    Returns
+    -------
+    tuple of int, or None
+        None when the graph holds any other operator on the image's path (a resize, a transpose, a flatten...),
+        automatic padding, or paths of different strides: then no cell's context can be bounded this way.
+    """
+    initializers = {t.name: list(t.dims) for t in graph.initializer}
+    # Per tensor on the image's path: (stride, hi_y, hi_x).
+    extent: dict[str, tuple[int, int, int]] = {graph.input[0].name: (1, 0, 0)}
+    for node in graph.node:
+        tracked = [extent[name] for name in node.input if name in extent]
+        if not tracked:
+            continue
+        attrs = {a.name: a for a in node.attribute}
+        if node.op_type in _POINTWISE_OPS or (node.op_type == "Concat" and attrs["axis"].i == 1):  # channels
+            if len({t[0] for t in tracked}) != 1:
+                return None
+            out = (tracked[0][0], max(t[1] for t in tracked), max(t[2] for t in tracked))
+        elif node.op_type in _WINDOW_OPS:
+            x_index, w_index = _WINDOW_OPS[node.op_type]
+            if len(tracked) != 1 or node.input[x_index] not in extent:
+                return None
+            if "auto_pad" in attrs and attrs["auto_pad"].s not in (b"", b"NOTSET"):
+                return None
+            if "ceil_mode" in attrs and attrs["ceil_mode"].i:
+                return None
+            if "kernel_shape" in attrs:
+                kernel = list(attrs["kernel_shape"].ints)
+            elif w_index is not None and node.input[w_index] in initializers:
+                kernel = initializers[node.input[w_index]][-2:]
+            else:
+                return None
+            if len(kernel) != 2:
+                return None
+            dilations = list(attrs["dilations"].ints) if "dilations" in attrs else [1, 1]
+            strides = list(attrs["strides"].ints) if "strides" in attrs else [1, 1]
+            pads = list(attrs["pads"].ints) if "pads" in attrs else [0, 0, 0, 0]
+            if strides[0] != strides[1]:
+                return None
+            stride, hi_y, hi_x = tracked[0]
+            # Output j reads inputs s*j - pad_begin ... s*j - pad_begin + (k - 1) * d of this operator's input.
+            hi_y += (dilations[0] * (kernel[0] - 1) - pads[0]) * stride
+            hi_x += (dilations[1] * (kernel[1] - 1) - pads[1]) * stride
+            out = (stride * strides[0], hi_y, hi_x)
+        else:
+            return None
+        for name in node.output:
+            extent[name] = out
+    result = extent.get(graph.output[0].name)
+    return None if result is None else (result[0], max(result[1], result[2]))
+
+
+def _any_size_graph(path: Path) -> tuple[bytes, int] | None:
+    """The model with its image sides free (symbolic), and the context (pixels) a cell reads past its own, rounded
+    up to whole multiples of 16 px; None where that cannot be bounded (:func:`input_extent_px`) or the ``onnx``
+    package is not installed (the model then runs on its contract's size, as before)."""
+    try:
+        import onnx
+    except ImportError:
+        logger.info("the onnx package is not installed: shrunk frames are padded to the model's size")
+        return None
+    try:
+        model = onnx.load(str(path))
+    except Exception:  # a bad file: onnxruntime's load says what is wrong with it
+        return None
+    found = input_extent_px(model.graph)
+    if found is None:
+        logger.info("%s: no bounded receptive field; shrunk frames are padded to the model's size", path)
+        return None
+    stride, hi = found
+    context_px = 16 * math.ceil(max(0, hi - stride + 1) / 16)  # past the last cell's own pixels
+    for value, names in ((model.graph.input[0], ("height", "width")), (model.graph.output[0], ("rows", "cols"))):
+        dims = value.type.tensor_type.shape.dim
+        if len(dims) < 3:
+            return None
+        # The image's (1, 3, H, W) and the map's (1, 1, h, w) or (1, h, w): ONNX convolutions are channels-first, so
+        # a channels-last input reaches them through a transpose, which input_extent_px refuses.
+        for dim, name in zip(dims[-2:], names, strict=True):
+            dim.ClearField("dim_value")
+            dim.dim_param = name
+    del model.graph.value_info[:]  # the intermediate shapes of the contract's size
+    return model.SerializeToString(), context_px
+
+
 class OnnxDensityModel:
     """Runs an ONNX density model with onnxruntime.
 
@@ -249,6 +366,9 @@ class OnnxDensityModel:
         TensorRT engine and timing cache (see :func:`execution_provider_options`).
     fp16 : bool
         TensorRT: allow FP16.
+    crop_shrunk_frames : bool
+        On the CPU provider alone, run a fully convolutional graph on any input size, so that a shrunk frame costs
+        its own pixels (:func:`predict_downscaled`); needs the ``onnx`` package to read the graph.
 
     Raises
     ------
@@ -264,6 +384,7 @@ class OnnxDensityModel:
         intra_op_threads: int = 1,
         engine_cache_dir: Path | None = None,
         fp16: bool = True,
+        crop_shrunk_frames: bool = True,
     ) -> None:
         import onnxruntime as ort
 
@@ -293,9 +414,18 @@ class OnnxDensityModel:
         options.inter_op_num_threads = 1
         options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         options.log_severity_level = 3
+        # Any input size (see predict_downscaled): on the CPU only, where a shape costs nothing to change; a TensorRT
+        # engine, or CUDA's tuned kernels, would be built again for every new shape.
+        any_size = _any_size_graph(self.path) if crop_shrunk_frames and chosen == ["CPUExecutionProvider"] else None
+        self.context_px: int | None = any_size[1] if any_size is not None else None
+        """Input pixels past a density cell's own (right and bottom) that the network reads: a shrunk frame runs as
+        itself plus this much context (:func:`predict_downscaled`). None: the model runs on its contract's size."""
         try:
             self._session = ort.InferenceSession(
-                str(self.path), sess_options=options, providers=chosen, provider_options=provider_options
+                any_size[0] if any_size is not None else str(self.path),
+                sess_options=options,
+                providers=chosen,
+                provider_options=provider_options,
             )
         except Exception as exc:  # onnxruntime raises several unrelated types for a bad file
             raise PerceptionError("density.load", f"cannot load ONNX model {self.path}: {exc}") from None
@@ -311,11 +441,42 @@ class OnnxDensityModel:
         self.contract = _read_contract(self.path, metadata)
         self._encoder = InputEncoder(self.contract)
         self._check_graph()
+        if self.context_px is not None and not self._any_size_agrees():
+            logger.warning("%s: a shrunk frame run as itself differs from the padded one; padding as before", path)
+            self.context_px = None
 
     @classmethod
     def from_config(cls, config: ModelConfig) -> OnnxDensityModel:
         """The model as ``perception.model`` configures it (``slz fly``, ``slz doctor``)."""
-        return cls(config.path, config.providers, config.intra_op_threads, config.engine_cache_dir, config.fp16)
+        return cls(
+            config.path,
+            config.providers,
+            config.intra_op_threads,
+            config.engine_cache_dir,
+            config.fp16,
+            config.crop_shrunk_frames,
+        )
+
+    def _any_size_agrees(self) -> bool:
+        """Whether this model, on this machine, maps a shrunk frame run with its context exactly as the whole padded
+        frame (:func:`predict_downscaled`'s two paths, on a fixed pattern at two scales). Checked once at load."""
+        c = self.contract
+        rows, cols = np.mgrid[0 : c.input_height_px, 0 : c.input_width_px]
+        pattern = np.stack([(rows * 7 + cols * 3) % 256, (rows * cols) % 251, (rows * 5 + cols * 11) % 241], axis=2)
+        frame = np.ascontiguousarray(pattern, dtype=np.uint8)
+        try:
+            for scale in (0.3, 0.7):
+                cropped = predict_downscaled(self, frame, scale)
+                context, self.context_px = self.context_px, None
+                try:
+                    padded = predict_downscaled(self, frame, scale)
+                finally:
+                    self.context_px = context
+                if not np.array_equal(cropped.values, padded.values, equal_nan=True):
+                    return False
+        except PerceptionError:
+            return False
+        return True
 
     def _check_graph(self) -> None:
         c = self.contract
@@ -348,20 +509,52 @@ class OnnxDensityModel:
         except PerceptionError as exc:
             raise PerceptionError("density.load", f"dry run failed: {exc.what}") from None
 
-    def _run(self, frame_bgr: U8Image) -> F32Array:
+    def _run(self, frame_bgr: U8Image, any_size: bool = False) -> F32Array:
+        """The map of a frame at the contract's size (resized to it), or, with ``any_size``, of a frame whose sides
+        are multiples of the output stride, as it is (only where :attr:`context_px` is set)."""
         c = self.contract
-        if frame_bgr.shape[1] != c.input_width_px or frame_bgr.shape[0] != c.input_height_px:
-            frame_bgr = np.asarray(
-                cv2.resize(frame_bgr, (c.input_width_px, c.input_height_px), interpolation=cv2.INTER_AREA), np.uint8
-            )
+        if any_size:
+            h, w = frame_bgr.shape[0] // c.output_stride, frame_bgr.shape[1] // c.output_stride
+            expected = (h, w)
+        else:
+            expected = c.output_shape_hw
+            if frame_bgr.shape[1] != c.input_width_px or frame_bgr.shape[0] != c.input_height_px:
+                frame_bgr = np.asarray(
+                    cv2.resize(frame_bgr, (c.input_width_px, c.input_height_px), interpolation=cv2.INTER_AREA),
+                    np.uint8,
+                )
         tensor = self._encoder.encode(frame_bgr)
-        out = np.asarray(self._session.run(None, {self._input_name: tensor})[0], np.float32)
-        if out.ndim < 2 or out.shape[-2:] != c.output_shape_hw or out.size != out.shape[-2] * out.shape[-1]:
+        try:
+            out = np.asarray(self._session.run(None, {self._input_name: tensor})[0], np.float32)
+        except Exception as exc:  # onnxruntime's own error types
+            raise PerceptionError("density.predict", f"onnxruntime failed on a {tensor.shape} input: {exc}") from None
+        if out.ndim < 2 or out.shape[-2:] != expected or out.size != out.shape[-2] * out.shape[-1]:
             raise PerceptionError(
                 "density.predict",
-                f"model output has shape {list(out.shape)}, expected a {c.output_shape_hw} density map",
+                f"model output has shape {list(out.shape)}, expected a {expected} density map",
             )
-        return out.reshape(c.output_shape_hw)
+        return out.reshape(expected)
+
+    def predict_any_size(self, frame_bgr: U8Image) -> F32Array:
+        """People per cell of a frame of any size whose sides are multiples of the output stride, run as it is (no
+        resize to the contract's size): shape (H / stride, W / stride). Only where :attr:`context_px` is set.
+
+        Raises
+        ------
+        PerceptionError
+            The model runs on its contract's size only, or a side is not a multiple of the stride.
+        """
+        c = self.contract
+        if self.context_px is None:
+            raise PerceptionError(
+                "density.predict_any_size", f"{self.path} runs on {c.input_width_px}x{c.input_height_px} only"
+            )
+        h, w = frame_bgr.shape[:2]
+        if h % c.output_stride or w % c.output_stride:
+            raise PerceptionError(
+                "density.predict_any_size", f"frame {w}x{h} is not a multiple of the output stride {c.output_stride}"
+            )
+        return self._run(frame_bgr, any_size=True)
 
     def predict(self, frame_bgr: U8Image) -> DensityMap:
         """Density map of one frame.
@@ -399,6 +592,11 @@ def predict_downscaled(model: DensityModel, frame_bgr: U8Image, scale: float) ->
     off: the map keeps the frame's size with coarser cells (``stride`` divided by ``scale``), each still holding
     people per cell, so the occupancy threshold means what it meant at the trained scale.
 
+    A model that runs on any size (:attr:`OnnxDensityModel.context_px`, a fully convolutional graph on the CPU) gets
+    the shrunk frame padded only by the edge pixels its kept cells read: the same values as with the whole padded
+    frame (every kept cell reads the same pixels; ``tests/test_density.py`` compares them to the bit) for the shrunk
+    frame's share of the work (at 8 m, about a sixth).
+
     Parameters
     ----------
     model : DensityModel
@@ -422,12 +620,34 @@ def predict_downscaled(model: DensityModel, frame_bgr: U8Image, scale: float) ->
     h, w = frame_bgr.shape[:2]
     small_w, small_h = downscaled_size(w, h, scale)
     small = cv2.resize(frame_bgr, (small_w, small_h), interpolation=cv2.INTER_AREA)
-    padded = np.asarray(cv2.copyMakeBorder(small, 0, h - small_h, 0, w - small_w, cv2.BORDER_REPLICATE), np.uint8)
-    full = model.predict(padded)
+    context = _context_px(model, w, h)
+    if context is not None:
+        # Only the shrunk frame and the edge pixels its cells read: the same map, a fraction of the work.
+        pad_w, pad_h = min(w, small_w + context), min(h, small_h + context)
+        padded = np.asarray(
+            cv2.copyMakeBorder(small, 0, pad_h - small_h, 0, pad_w - small_w, cv2.BORDER_REPLICATE), np.uint8
+        )
+        assert isinstance(model, OnnxDensityModel)
+        full = DensityMap(model.predict_any_size(padded), frame_width_px=pad_w, frame_height_px=pad_h)
+    else:
+        padded = np.asarray(cv2.copyMakeBorder(small, 0, h - small_h, 0, w - small_w, cv2.BORDER_REPLICATE), np.uint8)
+        full = model.predict(padded)
     rows = min(full.values.shape[0], math.ceil(small_h / full.stride_y))
     cols = min(full.values.shape[1], math.ceil(small_w / full.stride_x))
     values = np.ascontiguousarray(full.values[:rows, :cols])
     return DensityMap(values, frame_width_px=w, frame_height_px=h)
+
+
+def _context_px(model: DensityModel, width_px: int, height_px: int) -> int | None:
+    """The context a shrunk frame of this size runs with (:attr:`OnnxDensityModel.context_px`), or None where the
+    model runs on the whole padded frame: any other model, or a frame of another size than its contract's (its
+    ``predict`` resizes the frame, which the shrinking then includes)."""
+    if not isinstance(model, OnnxDensityModel) or model.context_px is None:
+        return None
+    c = model.contract
+    if (width_px, height_px) != (c.input_width_px, c.input_height_px):
+        return None
+    return model.context_px
 
 
 def input_scale(gsd_m_per_px: float, min_gsd_m_per_px: float) -> float:
