@@ -49,6 +49,9 @@ logger = logging.getLogger(__name__)
 
 OUTER_RATE_HZ = 100.0
 HEARTBEAT_PERIOD_S = 1.0
+WAITING_HEARTBEAT_PERIOD_S = 0.1
+"""Heartbeats while a lockstep SITL waits for its first client (simulated time stands still at 0): a client finds
+the autopilot by its heartbeat, so at PX4's 1 Hz a campaign mission's companion waited up to a wall second for one."""
 IDLE_COMMAND = 0.1  # armed on the ground: props spin at idle
 
 
@@ -234,6 +237,10 @@ class SitlVehicle:
         """At a tick: send its frame, pose and event once, then True when it is acknowledged (time may pass it)."""
         gate = self.lockstep
         if gate.client is None:
+            if self.camera is not None:
+                # A companion connects its camera before it subscribes: accepted now, its connection would keep the
+                # listening socket readable and this wait would spin (about a wall second of CPU per mission).
+                self.camera.server.poll()
             select.select(sockets, [], [], 0.05)  # nobody to step with yet
             self.clock.resync()
             return False
@@ -452,7 +459,8 @@ class SitlVehicle:
 
     def _heartbeat_if_due(self) -> None:
         now = time.monotonic()
-        if now - self._last_heartbeat_wall >= HEARTBEAT_PERIOD_S:
+        waiting = self.lockstep.enabled and self.lockstep.client is None
+        if now - self._last_heartbeat_wall >= (WAITING_HEARTBEAT_PERIOD_S if waiting else HEARTBEAT_PERIOD_S):
             self._last_heartbeat_wall = now
             for link in self.links:
                 link.send(self.telemetry.heartbeat(link.mav, self.commander))

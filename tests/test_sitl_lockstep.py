@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl.config import SitlConfig
 from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import LockstepClient, position_setpoint, wait_until
 
@@ -144,6 +146,41 @@ def test_time_waits_for_the_acknowledgement(tmp_path: Path, instance: int) -> No
         assert sitl.wait(timeout_s=10) == 3
         assert "no acknowledgement of tick 1" in sitl.log_tail()
     finally:
+        client.close()
+        sitl.stop()
+
+
+def test_a_sitl_waiting_for_its_first_client_is_found_at_once_and_takes_its_camera(
+    tmp_path: Path, instance: int
+) -> None:
+    """Before a client subscribes, simulated time stands still at 0: heartbeats go out ten times a wall second (a
+    companion finds the autopilot by one), back to PX4's 1 Hz once a client steps; and a camera that connects first
+    is taken at once (its pending connection kept the SITL's wait from waiting: a wall second of CPU a mission)."""
+    config = tmp_path / "sitl.yaml"
+    config.write_text("sitl:\n  camera: {enabled: true}\n")
+    sitl = SitlProcess(["--config", str(config), "--lockstep", "--speed", "0"], instance, tmp_path).start()
+    client = LockstepClient(instance)
+    camera = socket.create_connection(("127.0.0.1", SitlConfig(instance=instance).frame_port), timeout=5.0)
+    try:
+        wait_until(lambda: (sitl.state()["frames"] or {}).get("clients") == 1 or None, 5.0, "the camera taken")
+        wait_until(lambda: client.peer.poll() is not None and len(client.peer.heartbeat_wall_times) >= 4, 5.0, "beats")
+        waiting = np.diff(client.peer.heartbeat_wall_times[:4])
+        assert float(np.median(waiting)) < 0.5, f"heartbeats {waiting} s apart while waiting for a client"
+        assert sitl.state()["t_s"] == 0.0
+        client.subscribe()
+        beats = len(client.peer.heartbeat_wall_times)
+        client.peer.poll()
+        tick = client.next_tick()
+        assert tick["seq"] == 0
+        # Not acknowledged: time stands at the tick with a client stepping, and heartbeats are PX4's again.
+        wait_until(
+            lambda: client.peer.poll() is not None and len(client.peer.heartbeat_wall_times) >= beats + 3, 6.0, "beats"
+        )
+        stepping = np.diff(client.peer.heartbeat_wall_times[beats:])
+        assert float(np.min(stepping[1:])) > 0.5, f"heartbeats {stepping} s apart with a client"
+        assert sitl.state()["frames"]["clients"] == 1
+    finally:
+        camera.close()
         client.close()
         sitl.stop()
 
