@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
-from sitl.render.camera import LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES, Light, WorldRenderer
+from sitl.render.camera import LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES, SHADOW_MESHES, Light, WorldRenderer
+from sitl.render.meshes import _box, _cylinder
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import ScenarioConfig
@@ -16,7 +18,7 @@ from sitl.world.scenario import ScenarioConfig
 CAMERA = PinholeCamera.from_hfov(320, 240, 90.0)
 NADIR = T_body_camera_from_mount()
 POSE = Pose.from_ned_euler(2.0, -1.0, -16.0, 0.03, -0.02, 0.4)
-CACHES = (LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES)
+CACHES = (LIT_GROUNDS, OBJECT_MESHES, PERSON_MESHES, SHADOW_MESHES)
 
 
 def renderer(seed: int, light: Light) -> WorldRenderer:
@@ -40,6 +42,7 @@ def test_a_scene_from_the_caches_draws_the_pixels_of_a_scene_built_anew() -> Non
         assert hits[0] == 1
         assert hits[1] == (1 if fresh.park.objects else 0)
         assert hits[2] == people
+        assert hits[3] == people + 1  # and the walkers' shadow template
         for t_s in (0.0, 2.5):  # the walkers have moved by the second frame
             a, b = fresh.render(POSE, t_s), cached.render(POSE, t_s)
             np.testing.assert_array_equal(a.image_bgr, b.image_bgr)
@@ -56,3 +59,25 @@ def test_a_scene_from_the_caches_draws_the_pixels_of_a_scene_built_anew() -> Non
     finally:
         fresh.close()
         cached.close()
+
+
+def test_people_are_built_from_unit_parts_to_the_bit() -> None:
+    """Cylinders and boxes scaled from trimesh's unit ones: the very vertices, faces and normals trimesh.creation
+    builds for each size, so a person's mesh (and its baked light) is what it was when every part was created."""
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        radius, height, z0 = (float(v) for v in rng.uniform(0.01, 1.5, 3))
+        ours = _cylinder(radius, height, z0, (10, 20, 30))
+        theirs = trimesh.creation.cylinder(radius=radius, height=height, sections=6)
+        theirs.apply_translation([0.0, 0.0, z0 + height / 2])
+        np.testing.assert_array_equal(ours.vertices, theirs.vertices)
+        np.testing.assert_array_equal(ours.faces, theirs.faces)
+        np.testing.assert_array_equal(ours.vertex_normals, theirs.vertex_normals)
+        extents = tuple(float(v) for v in rng.uniform(0.01, 1.5, 3))
+        box = _box(extents, (0.1, -0.2, 0.3), (10, 20, 30))  # type: ignore[arg-type]
+        reference = trimesh.creation.box(extents=extents)
+        reference.apply_translation((0.1, -0.2, 0.3))
+        np.testing.assert_array_equal(box.vertices, reference.vertices)
+        np.testing.assert_array_equal(box.faces, reference.faces)
+        np.testing.assert_array_equal(box.face_normals, reference.face_normals)
+        np.testing.assert_array_equal(box.vertex_normals, reference.vertex_normals)

@@ -103,13 +103,14 @@ DRAW_ORDER: weakref.WeakKeyDictionary[Any, dict[Any, int]] = weakref.WeakKeyDict
 """Per pyrender scene: its mesh nodes in the order they were added (see :func:`_patch_pyrender`)."""
 
 # What the last scenes' seeds determined, kept across the missions of this process: the park's lit ground texture and
-# its objects for two scenes, each person's lit mesh for a few hundred people. A campaign flies every scene once per
-# strategy and a warm worker flies a scene's strategies in a row, so the second and third missions find the scene
-# built. Each value is a pure function of its key, made of everything that feeds it (seed, scenario fields, light):
-# the same mission draws the same pixels, cached or not.
+# its objects for two scenes, each person's lit mesh and shadow for a few hundred people. A campaign flies every scene
+# once per strategy and a warm worker flies a scene's strategies in a row, so the second and third missions find the
+# scene built. Each value is a pure function of its key, made of everything that feeds it (seed, scenario fields,
+# light): the same mission draws the same pixels, cached or not.
 LIT_GROUNDS: KeyedCache[npt.NDArray[np.uint8]] = KeyedCache("lit grounds", capacity=2)
 OBJECT_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("park objects", capacity=2)
 PERSON_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("person meshes", capacity=512)
+SHADOW_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("shadow meshes", capacity=512)
 
 
 def _patch_pyrender(pyrender: Any, GL: Any) -> None:
@@ -277,9 +278,14 @@ class WorldRenderer:
         return PERSON_MESHES.get((a, index, self.light.key), build).copy()
 
     def _shadow(self, index: int, north_m: float, east_m: float) -> trimesh.Trimesh:
+        """Person ``index``'s shadow on the ground at (``north_m``, ``east_m``), lit (shared: never modified)."""
         a = self.crowd.appearances[index]
-        mesh = shadow_mesh(north_m, east_m, a.radius_m, self.light.sun_dir_enu, a.height_m)
-        return bake_lighting(mesh, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
+
+        def build() -> trimesh.Trimesh:
+            mesh = shadow_mesh(north_m, east_m, a.radius_m, self.light.sun_dir_enu, a.height_m)
+            return bake_lighting(mesh, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
+
+        return SHADOW_MESHES.get((a, index, north_m, east_m, self.light.key), build)
 
     def _build_people(self) -> None:
         pr = self._pyrender

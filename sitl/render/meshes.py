@@ -28,14 +28,30 @@ def _part(mesh: trimesh.Trimesh, colour: RGB) -> trimesh.Trimesh:
     return mesh
 
 
+# trimesh's unit cylinder (6 sections) and unit box: a part is one of them scaled, which gives the very vertices
+# (bit for bit) and faces trimesh.creation builds for that size without building them again (a scene has ~1,000
+# parts; a person's mesh 4.2 -> 2.2 ms).
+_UNIT_CYLINDER = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=6)
+_UNIT_BOX = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+
+
+def _scaled(unit: trimesh.Trimesh, scale: tuple[float, float, float]) -> trimesh.Trimesh:
+    # trimesh.creation.box states its (axis-aligned) face normals and the cylinder leaves them to be computed: the
+    # same here, so that every later step (concatenation, rotation, lighting) sees what it saw before.
+    normals = unit.face_normals.copy() if unit is _UNIT_BOX else None
+    return trimesh.Trimesh(
+        vertices=unit.vertices * np.array(scale), faces=unit.faces.copy(), face_normals=normals, process=False
+    )
+
+
 def _cylinder(radius: float, height: float, z0: float, colour: RGB, x: float = 0.0, y: float = 0.0) -> trimesh.Trimesh:
-    m = trimesh.creation.cylinder(radius=radius, height=height, sections=6)
+    m = _scaled(_UNIT_CYLINDER, (radius, radius, height))
     m.apply_translation([x, y, z0 + height / 2])
     return _part(m, colour)
 
 
 def _box(extents: tuple[float, float, float], centre: tuple[float, float, float], colour: RGB) -> trimesh.Trimesh:
-    m = trimesh.creation.box(extents=extents)
+    m = _scaled(_UNIT_BOX, extents)
     m.apply_translation(centre)
     return _part(m, colour)
 
