@@ -594,8 +594,8 @@ def predict_downscaled(model: DensityModel, frame_bgr: U8Image, scale: float) ->
 
     A model that runs on any size (:attr:`OnnxDensityModel.context_px`, a fully convolutional graph on the CPU) gets
     the shrunk frame padded only by the edge pixels its kept cells read: the same values as with the whole padded
-    frame (every kept cell reads the same pixels; ``tests/test_density.py`` compares them to the bit) for the shrunk
-    frame's share of the work (at 8 m, about a sixth).
+    frame (every kept cell reads the same pixels; ``tests/test_density.py`` and ``tests/test_density_model.py``
+    compare them to the bit) for the shrunk frame's share of the work (at 8 m, about a third of the time).
 
     Parameters
     ----------
