@@ -350,6 +350,28 @@ def default_sets(root: Path) -> dict[str, list[BoxedImage]]:
     return found
 
 
+def add_real_set_arguments(parser: argparse.ArgumentParser, out: Path, data_help: str) -> None:
+    """The arguments of every command that scores models on the real sets (this one, ``models.eval.tradeoff``): the
+    models, the sets, the perception config, the scales and the report's path (default ``out``)."""
+    parser.add_argument("--model", action="append", required=True, help="NAME=PATH.onnx (repeatable)")
+    parser.add_argument("--data", type=Path, action="append", help=data_help)
+    parser.add_argument("--datasets", type=Path, default=Path("../shared/datasets"), help="used without --data")
+    parser.add_argument("--config", type=Path, default=Path("mission_configs/perception.yaml"))
+    parser.add_argument("--scales", type=float, nargs="+", default=list(SCALES))
+    parser.add_argument("--out", type=Path, default=out)
+
+
+def named_models(parser: argparse.ArgumentParser, specs: list[str]) -> list[tuple[str, str]]:
+    """(name, path) of each ``--model NAME=PATH``; a spec without ``=PATH`` is the parser's error (exit 2)."""
+    named = []
+    for spec in specs:
+        name, _, path = spec.partition("=")
+        if not path:
+            parser.error(f"--model wants NAME=PATH, got {spec!r}")
+        named.append((name, path))
+    return named
+
+
 def write_report(out: Path, payload: dict[str, object], table: str) -> None:
     """``OUT.json`` (NaN as null) and ``OUT.md`` beside each other (``OUT`` may end in ``.json``/``.md``, and keeps any
     other dot: ``real_0.5``), and the table on standard output."""
@@ -363,12 +385,7 @@ def write_report(out: Path, payload: dict[str, object], table: str) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description="Density models on real aerial frames with annotated people.")
-    parser.add_argument("--model", action="append", required=True, help="NAME=PATH.onnx (repeatable)")
-    parser.add_argument("--data", type=Path, action="append", help="a real set's folder (repeatable)")
-    parser.add_argument("--datasets", type=Path, default=Path("../shared/datasets"), help="used without --data")
-    parser.add_argument("--config", type=Path, default=Path("mission_configs/perception.yaml"))
-    parser.add_argument("--scales", type=float, nargs="+", default=list(SCALES))
-    parser.add_argument("--out", type=Path, default=Path("models/eval/results/real"))
+    add_real_set_arguments(parser, Path("models/eval/results/real"), "a real set's folder (repeatable)")
     parser.add_argument("--overlays", type=Path, default=Path("runs/eval/real"))
     parser.add_argument(
         "--no-real-ground", action="store_true", help="without --data: leave out the held-out real ground"
@@ -399,10 +416,7 @@ def main() -> int:
         },
         "models": {},
     }
-    for spec in args.model:
-        name, _, path = spec.partition("=")
-        if not path:
-            parser.error(f"--model wants NAME=PATH, got {spec!r}")
+    for name, path in named_models(parser, args.model):
         model = OnnxDensityModel(path)
         per_set: dict[str, object] = {}
         for dataset, frames in loaded.items():

@@ -35,9 +35,10 @@ from companion.perception.density import DensityMap, OnnxDensityModel
 from models.data.images import read_bgr
 from models.data.loaders import BoxedImage, DatasetError, load_real_set
 from models.eval.real import (
-    SCALES,
     TARGET_RECALL,
+    add_real_set_arguments,
     default_sets,
+    named_models,
     occupied_cells,
     resize_frame,
     score_real_frame,
@@ -129,12 +130,7 @@ def tradeoff_table(curves: list[Tradeoff]) -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description="Recall against false-occupied ground on real frames (diagnostic).")
-    parser.add_argument("--model", action="append", required=True, help="NAME=PATH.onnx (repeatable)")
-    parser.add_argument("--data", type=Path, action="append", help="a real set's folder with boxes (repeatable)")
-    parser.add_argument("--datasets", type=Path, default=Path("../shared/datasets"), help="used without --data")
-    parser.add_argument("--config", type=Path, default=Path("mission_configs/perception.yaml"))
-    parser.add_argument("--scales", type=float, nargs="+", default=list(SCALES))
-    parser.add_argument("--out", type=Path, default=Path("models/eval/results/tradeoff"))
+    add_real_set_arguments(parser, Path("models/eval/results/tradeoff"), "a real set's folder with boxes (repeatable)")
     args = parser.parse_args()
     try:
         loaded = {folder.name: load_real_set(folder) for folder in args.data or []} or default_sets(args.datasets)
@@ -147,10 +143,7 @@ def main() -> int:
         return 2
     occupancy = load_perception_config(args.config).occupancy
     curves: list[Tradeoff] = []
-    for spec in args.model:
-        name, _, path = spec.partition("=")
-        if not path:
-            parser.error(f"--model wants NAME=PATH, got {spec!r}")
+    for name, path in named_models(parser, args.model):
         model = OnnxDensityModel(path)
         for dataset, frames in boxed.items():
             for scale in args.scales:
