@@ -34,6 +34,7 @@ sys.path.insert(0, str(REPO_ROOT))
 from bench.campaign_sample import SPEC  # noqa: E402
 from bench.machine import machine_context, save_report  # noqa: E402
 from bench.mission_cpu import WARM_UP, process_cpu_s  # noqa: E402
+from companion.app.flight_log import FlightLog  # noqa: E402
 from sitl.campaign.spec import load_campaign_spec  # noqa: E402
 from sitl.campaign.worker import fly_one  # noqa: E402
 from sitl.harness.instances import leased_instance  # noqa: E402
@@ -63,16 +64,6 @@ def newest_truth_t_s(path: Path) -> float | None:
     return None
 
 
-def phase_starts(flight_log: Path) -> list[tuple[float, str]]:
-    """(simulated time, phase) of every phase record of a flight log, in order."""
-    starts = []
-    for line in flight_log.read_text(encoding="utf-8").splitlines():
-        record = json.loads(line)
-        if record.get("kind") == "phase":
-            starts.append((float(record["t_s"]), str(record["phase"])))
-    return starts
-
-
 def fly_sampled(
     spec: dict[str, Any], mission_id: str, out: Path, instance: int, worker: WarmWorker
 ) -> dict[str, dict[str, float]]:
@@ -96,7 +87,7 @@ def fly_sampled(
         stop.set()
         sampler.join()
     samples.append((None, process_cpu_s(pids[0]), process_cpu_s(pids[1])))
-    starts = phase_starts(out / "missions" / mission_id / "flight" / "flight.jsonl")
+    starts = FlightLog.read(out / "missions" / mission_id / "flight").phases()
     cpu: dict[str, list[float]] = collections.defaultdict(lambda: [0.0, 0.0])
     last_phase = "setup"
     for t_s, sitl_s, companion_s in samples:
