@@ -75,8 +75,8 @@ def _cmd_fly(args: argparse.Namespace) -> int:
             source = open_frame_source(
                 config.camera.url, vehicle_time_s=link.clock.now_s, latency_s=config.camera.latency_s
             )
-            app = FlightApp(config, link, source, pipeline, recorder, lockstep)
-            outcome = await app.run(timeout_s=args.timeout)
+            app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=args.timeout)
+            outcome = await app.run()
         finally:
             await link.close()
         sys.stdout.write(f"{config.mode.value}: ended in {outcome.phase} ({outcome.reason}); log {recorder.path}\n")
@@ -190,7 +190,15 @@ def build_parser() -> argparse.ArgumentParser:
     fly.add_argument("--config", type=Path, required=True, help="mission config (mission_configs/*.yaml)")
     fly.add_argument("--dry-run", action="store_true", help="perceive and decide, never command the vehicle")
     fly.add_argument("--out", type=Path, help="flight log folder (default: recorder.directory/<UTC time>)")
-    fly.add_argument("--timeout", type=float, default=600.0, help="wall seconds before the mission gives up")
+    fly.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        help="wall seconds after which the mission gives up: a vehicle the companion flies then gets "
+        "guidance.last_resort (hold or return) and the program stays until it is on the ground or the pilot has it; "
+        "a dry run or a wait for the handover just ends (default: no wall limit; guidance.mission_time_limit_s, on "
+        "the vehicle clock, bounds the search)",
+    )
     fly.add_argument(
         "--never-arm",
         action="store_true",

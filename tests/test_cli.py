@@ -25,7 +25,7 @@ def slz(*args: str, cwd: Path = REPO_ROOT, timeout_s: float = 120.0) -> subproce
     )
 
 
-SHIPPED_MISSIONS = ["sitl.yaml", "px4_serial.yaml", "px4_udp.yaml", "perception.yaml"]
+SHIPPED_MISSIONS = ["sitl.yaml", "px4_serial.yaml", "px4_udp.yaml"]
 
 
 @pytest.mark.parametrize("name", SHIPPED_MISSIONS)
@@ -40,6 +40,50 @@ def test_check_config_and_fly_accept_every_shipped_config(name: str, tmp_path: P
     assert flown.returncode == 1, flown.stderr[-2000:]
     assert "invalid configuration" not in flown.stderr
     assert "camera" in flown.stderr or "cannot" in flown.stderr
+
+
+def test_a_config_without_a_geofence_is_refused_for_fly_naming_the_fields(tmp_path: Path) -> None:
+    # mission_configs/perception.yaml is the pipeline's parameters alone: no fence, so no flight on it.
+    for path in ("mission_configs/perception.yaml", str(_mission(tmp_path, geofence="{min_altitude_m: 0.0}"))):
+        checked = slz("check-config", path)
+        flown = slz("fly", "--dry-run", "--config", path, "--out", str(tmp_path / "flight"))
+        for result in (checked, flown):
+            assert result.returncode == 2, result.stderr
+            assert "geofence.polygon_ne_m: required for slz fly" in result.stderr
+            assert "geofence.max_altitude_m: required for slz fly" in result.stderr
+        assert not (tmp_path / "flight" / "flight.jsonl").exists()
+
+
+def test_a_fence_below_the_takeoff_and_search_altitudes_is_refused_naming_both_fields(tmp_path: Path) -> None:
+    # The field report: max_altitude_m 10 with takeoff and search at 20 m was "valid"; flown, it climbed to 19.8 m,
+    # then every setpoint was clamped to 10 m.
+    low = _mission(
+        tmp_path, geofence="{polygon_ne_m: [[-25, -25], [-25, 25], [25, 25], [25, -25]], max_altitude_m: 10}"
+    )
+    checked = slz("check-config", str(low))
+    assert checked.returncode == 2, checked.stderr
+    assert (
+        "start.takeoff_altitude_m (20 m) must lie within geofence.min_altitude_m (0 m) and "
+        "geofence.max_altitude_m (10 m)" in checked.stderr
+    )
+    assert "guidance.search_altitude_m (20 m) must lie within" in checked.stderr
+    outside = _mission(tmp_path, start="{arm_and_takeoff: true, start_north_m: 40.0, start_east_m: 0.0}")
+    checked = slz("check-config", str(outside))
+    assert checked.returncode == 2, checked.stderr
+    assert "start.start_north_m, start.start_east_m (40.0, 0.0) lie outside geofence.polygon_ne_m" in checked.stderr
+    floor = _mission(
+        tmp_path,
+        geofence="{polygon_ne_m: [[-25, -25], [-25, 25], [25, 25], [25, -25]], min_altitude_m: 5, max_altitude_m: 40}",
+    )
+    checked = slz("check-config", str(floor))
+    assert checked.returncode == 2, checked.stderr
+    assert "geofence.min_altitude_m (5 m) lies above guidance.land_altitude_m (2 m" in checked.stderr
+
+
+def test_the_last_resort_is_never_a_landing_in_place(tmp_path: Path) -> None:
+    checked = slz("check-config", str(_mission(tmp_path, guidance="{last_resort: land}")))
+    assert checked.returncode == 2, checked.stderr
+    assert "last_resort: must be hold or return (got land)" in checked.stderr
 
 
 def bad_configs(tmp_path: Path) -> dict[str, tuple[Path, list[str]]]:
@@ -66,7 +110,7 @@ def bad_configs(tmp_path: Path) -> dict[str, tuple[Path, list[str]]]:
     missing_model.write_text(shipped + f"\nperception:\n  model:\n    path: {tmp_path / 'none.onnx'}\n")
     out["missing_model"] = (missing_model, [])
     iou = tmp_path / "iou.yaml"
-    iou.write_text("perception:\n  tracking:\n    iou_threshold: 1.5\n")
+    iou.write_text(shipped + "\nperception:\n  tracking:\n    iou_threshold: 1.5\n")
     out["iou_out_of_range"] = (iou, [])
     out["arms_under_never_arm"] = (REPO_ROOT / "mission_configs" / "sitl.yaml", ["--never-arm"])
     assert len(out) == 10

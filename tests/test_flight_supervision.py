@@ -107,10 +107,12 @@ class NoFrames:
 
 
 def field_flight(tmp_path: Path, config: PerceptionConfig, link: FakeLink) -> FlightApp:
-    """A field flight (the pilot hands over in HOLD at 20 m) with the blob model, over ``link``."""
+    """A field flight (the pilot hands over in HOLD at 20 m) with the blob model, over ``link``; T2's failsafe is the
+    SITL's land (the default is hold)."""
     mission = MissionConfig.model_validate(
         {
             "start": {"arm_and_takeoff": False},
+            "guidance": {"failsafe_action": "land"},
             "perception": config.model_dump(mode="json"),
             "recorder": {"directory": str(tmp_path), "frame_every": 0},
         }
@@ -134,8 +136,10 @@ async def hand_over(app: FlightApp, link: FakeLink, t_s: float = 1.0) -> None:
     assert app.guidance.phase is LandingPhase.SEARCH
 
 
-async def tick(app: FlightApp, link: FakeLink, t_s: float) -> None:
-    link.at(t_s)
+async def tick(
+    app: FlightApp, link: FakeLink, t_s: float, north_m: float = 0.0, altitude_m: float = ALTITUDE_M
+) -> None:
+    link.at(t_s, north_m=north_m, altitude_m=altitude_m)
     state = app.vehicle_state()
     assert state is not None
     await app.on_tick(state)
@@ -266,3 +270,166 @@ def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and
     assert not app._offboard
     assert not app._commanding
     assert not app.watchdog.check()  # disengaged: once is enough
+
+
+class Clock:
+    """A wall clock the test moves (the wall limit's only input)."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def limited_flight(
+    tmp_path: Path, config: PerceptionConfig, link: FakeLink, clock: Clock, **guidance: object
+) -> FlightApp:
+    """A field flight as :func:`field_flight` with a wall limit of 300 s on ``clock``."""
+    mission = MissionConfig.model_validate(
+        {
+            "start": {"arm_and_takeoff": False},
+            "guidance": guidance,
+            "perception": config.model_dump(mode="json"),
+            "recorder": {"directory": str(tmp_path), "frame_every": 0},
+        }
+    )
+    pipeline = SlzPipeline.from_config(mission.perception)
+    return FlightApp(
+        mission, link, NoFrames(), pipeline, FlightRecorder(tmp_path), wall_limit_s=300.0, wall_clock=clock
+    )
+
+
+def supervision(tmp_path: Path) -> list[tuple[str, str]]:
+    return [(r["event"], r["reason"]) for r in read_log(tmp_path / "flight.jsonl") if r["kind"] == "supervision"]
+
+
+def test_a_wall_limit_in_flight_holds_and_the_program_stays_until_the_pilot_has_the_vehicle(
+    tmp_path: Path, config: PerceptionConfig
+) -> None:
+    link, clock = FakeLink(), Clock()
+    app = limited_flight(tmp_path, config, link, clock)
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        await tick(app, link, 1.1)
+        assert app.guidance.phase is LandingPhase.SEARCH
+        clock.now_s = 300.0  # the wall limit, mid-flight
+        await tick(app, link, 1.2)
+        assert link.commands[-1] == ("hold", None)  # the last resort, at once: never the offboard-loss failsafe
+        assert app.outcome.phase == LandingPhase.FAILSAFE.value
+        sent = len(link.commands)
+        for k in range(50):  # holding: the program stays, watches and sends nothing more
+            await tick(app, link, 1.3 + 0.1 * k)
+            assert not app.done.is_set()
+        assert len(link.commands) == sent
+        link.status.mode = FlightMode.POSCTL  # the pilot takes the vehicle
+        await tick(app, link, 7.0)
+        assert app.done.is_set()
+        assert len(link.commands) == sent
+
+    asyncio.run(flight())
+    assert app.outcome.phase == "failsafe"
+    assert "wall limit of 300 s reached (slz fly --timeout): hold" in app.outcome.reason
+    assert app.outcome.reason.endswith("the pilot has it (mode POSCTL)")
+    events = supervision(tmp_path)
+    assert [e for e, _ in events] == ["watching", "pilot_has_it"]
+    decisions = [r for r in read_log(tmp_path / "flight.jsonl") if r["kind"] == "decision"]
+    assert decisions[-1]["source"] == "limit"
+
+
+def test_a_wall_limit_with_return_as_last_resort_watches_the_return_down_to_the_ground(
+    tmp_path: Path, config: PerceptionConfig
+) -> None:
+    link, clock = FakeLink(), Clock()
+    app = limited_flight(tmp_path, config, link, clock, last_resort="return")
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        clock.now_s = 1000.0
+        await tick(app, link, 1.1)
+        assert link.commands[-1] == ("return", None)
+        link.status.mode = FlightMode.RETURN_TO_LAUNCH
+        for k in range(20):
+            await tick(app, link, 1.2 + 0.1 * k, north_m=-0.5 * k)
+        link.status.mode = FlightMode.LAND  # PX4's return ends in its own landing: still the failsafe's
+        await tick(app, link, 3.5, north_m=-10.0, altitude_m=3.0)
+        assert not app.done.is_set()
+        link.status.in_air = False
+        await tick(app, link, 9.0, north_m=-10.0, altitude_m=0.0)
+        assert app.done.is_set()
+
+    asyncio.run(flight())
+    assert app.outcome.touchdown_ne_m == pytest.approx((-10.0, 0.0))
+    assert app.outcome.reason.endswith("on the ground at north -10.0 m, east 0.0 m")
+    assert [e for e, _ in supervision(tmp_path)] == ["watching", "on_ground"]
+
+
+def test_a_wall_limit_before_the_handover_ends_the_run_and_commands_nothing(
+    tmp_path: Path, config: PerceptionConfig
+) -> None:
+    link, clock = FakeLink(), Clock()
+    link.status.mode = FlightMode.POSCTL  # the pilot flies and has not handed over
+    app = limited_flight(tmp_path, config, link, clock)
+
+    async def flight() -> None:
+        await tick(app, link, 1.0)
+        clock.now_s = 301.0
+        await tick(app, link, 1.1)
+
+    asyncio.run(flight())
+    assert app.done.is_set()
+    assert link.commands == []
+    assert app.outcome.reason == "wall limit of 300 s reached (slz fly --timeout): nothing commanded, the run ends"
+
+
+def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the_vehicle_is_down_and_disarmed(
+    tmp_path: Path, config: PerceptionConfig
+) -> None:
+    link = FakeLink()
+    link.status = VehicleStatus(mode=FlightMode.MANUAL, armed=False, in_air=False)
+    mission = MissionConfig.model_validate(
+        {
+            "mode": "dry_run",
+            "start": {"arm_and_takeoff": False},
+            "perception": config.model_dump(mode="json"),
+            "recorder": {"directory": str(tmp_path), "frame_every": 0},
+        }
+    )
+    app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
+    t2 = mission.guidance.failsafe_after_silence_s
+
+    async def flight() -> None:
+        for k in range(300):  # 30 s on the bench: no failsafe, no start
+            await tick(app, link, 0.1 * k, altitude_m=0.0)
+        assert app.guidance.phase is LandingPhase.IDLE
+        link.status.armed = link.status.in_air = True
+        await tick(app, link, 31.0, altitude_m=1.0)  # the head plane (1.7 m up) not yet below the camera
+        assert app.guidance.phase is LandingPhase.IDLE
+        t_s = 32.0
+        await tick(app, link, t_s)  # 20 m: deciding starts
+        assert app.outcome.phase == LandingPhase.SEARCH.value
+        while app.outcome.phase != LandingPhase.FAILSAFE.value:  # a silent camera: the failsafe it would take ...
+            assert t_s < 32.0 + t2 + 1.0
+            t_s = round(t_s + 0.1, 3)
+            await tick(app, link, t_s)
+        assert "perception silent" in " ".join(app.outcome.failsafes)
+        await tick(app, link, t_s + 0.1)  # ... is logged, and it decides again while the pilot flies on
+        await tick(app, link, t_s + 0.2)
+        assert app.outcome.phase == LandingPhase.SEARCH.value
+        assert not app.done.is_set()
+        link.status.in_air = False  # the pilot lands ...
+        await tick(app, link, t_s + 5.0, altitude_m=0.0)
+        assert not app.done.is_set()
+        link.status.armed = False  # ... and disarms: the flight is over
+        await tick(app, link, t_s + 7.0, altitude_m=0.0)
+        assert app.done.is_set()
+
+    asyncio.run(flight())
+    assert link.commands == []
+    records = read_log(tmp_path / "flight.jsonl")
+    waits = [r["waiting_for"] for r in records if r["kind"] == "waiting"]
+    assert waits[:2] == ["the vehicle armed and in the air", "the head plane in view (in the air at 1.0 m)"]
+    starts = [r for r in records if r["kind"] == "decision" and r["source"] == "start"]
+    assert len(starts) >= 2
+    assert app.outcome.reason.endswith("the flight is over: on the ground and disarmed")

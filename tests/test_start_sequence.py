@@ -110,10 +110,24 @@ def test_a_field_handover_with_a_start_pose_flies_there_first_and_records_the_ha
     assert second.handed_over is None
 
 
-def test_a_dry_run_starts_at_the_first_tick_whatever_is_configured() -> None:
+def test_a_dry_run_waits_on_the_bench_for_the_air_and_the_head_plane_then_starts_whatever_is_configured() -> None:
     config = StartConfig.model_validate({"arm_and_takeoff": True, "start_north_m": 50.0, "start_east_m": 5.0})
     seq = StartSequence(config, dry_run=True)
-    assert seq.step(at(3.0), on_ground()).action is StartAction.START
+    # On the bench, for as long as it takes (no start time limit, no takeoff asked): each new wait said once.
+    first = seq.step(at(3.0), on_ground(), head_plane_visible=False)
+    assert first.action is StartAction.WAIT
+    assert first.waiting_for == "the vehicle armed and in the air"
+    later = seq.step(at(3.0 + 10 * START_TIMEOUT_S), on_ground(), head_plane_visible=False)
+    assert later.action is StartAction.WAIT
+    assert later.waiting_for is None
+    flying = VehicleStatus(mode=FlightMode.POSCTL, armed=True, in_air=True)
+    low = seq.step(at(4000.0, altitude_m=1.0), flying, head_plane_visible=False)
+    assert low.action is StartAction.WAIT
+    assert low.waiting_for == "the head plane in view (in the air at 1.0 m)"
+    assert seq.step(at(4000.1, altitude_m=1.2), flying, head_plane_visible=False).waiting_for is None
+    # Airborne in any of the pilot's modes, the head plane in view: deciding starts at once (no takeoff, no transit).
+    assert seq.step(at(4001.0, altitude_m=8.0), flying, head_plane_visible=True).action is StartAction.START
+    assert seq.started
 
 
 def test_a_start_not_done_within_its_limit_fails_and_says_where_it_stopped() -> None:

@@ -33,7 +33,7 @@ import functools
 import logging
 import math
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,7 +43,7 @@ from companion.app.ground_report import GroundReport
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.recorder import FlightRecorder
 from companion.app.stall_watchdog import StallWatchdog
-from companion.app.start_sequence import StartAction, StartSequence, StartStep
+from companion.app.start_sequence import StartAction, StartSequence, StartStage, StartStep
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import GeometryError, Pose, polygon_centroid_ne_m
 from companion.guidance.geofence import Geofence
@@ -63,6 +63,12 @@ FRAMES_UNREAD = TERMINAL | {LandingPhase.LAND}
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
 _OURS = (FlightMode.OFFBOARD, FlightMode.UNKNOWN)  # modes in which offboard setpoints are still the companion's
+# The modes a failsafe command leads to (PX4: a return ends in the autopilot's own landing, then its hold).
+_FAILSAFE_MODES = {
+    CommandKind.HOLD: frozenset({FlightMode.HOLD}),
+    CommandKind.RETURN: frozenset({FlightMode.RETURN_TO_LAUNCH, FlightMode.LAND, FlightMode.HOLD}),
+    CommandKind.LAND: frozenset({FlightMode.LAND}),
+}
 
 
 @dataclass
@@ -122,6 +128,12 @@ class FlightApp:
         Where every record goes.
     lockstep : LockstepClient or None
         The simulator's lockstep channel; when it agrees to step, the flight is driven by its ticks.
+    wall_limit_s : float or None
+        Wall seconds from now after which the mission gives up (``slz fly --timeout``; None: no limit). It never ends
+        a flight by itself: a vehicle the companion flies then gets ``guidance.last_resort`` (hold or return) and the
+        run stays until the vehicle is on the ground or the pilot has it; a run that commands nothing ends.
+    wall_clock : callable
+        Monotonic wall seconds, for that limit alone (every decision runs on the vehicle's clock).
     """
 
     def __init__(
@@ -132,6 +144,8 @@ class FlightApp:
         pipeline: SlzPipeline,
         recorder: FlightRecorder,
         lockstep: LockstepClient | None = None,
+        wall_limit_s: float | None = None,
+        wall_clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.config = config
         self.link = link
@@ -141,10 +155,7 @@ class FlightApp:
         self.lockstep = lockstep
         self.dry_run = config.mode is OperatingMode.DRY_RUN
         self.report = GroundReport(link, self.dry_run)
-        zones = config.perception.zones
-        self.guidance = LandingGuidance(
-            config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m, pipeline.policy
-        )
+        self.guidance = self._new_guidance()
         # The search area's centre for the blind random baseline (the paper's ROI): the geofence's centroid.
         self._area_centre_ne_m = polygon_centroid_ne_m(config.geofence.polygon_ne_m)
         self.outcome = FlightOutcome()
@@ -159,6 +170,22 @@ class FlightApp:
         self.start_sequence = StartSequence(config.start, self.dry_run)
         self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
         self.tick_setpoint: SetpointNedYaw | None = None  # sent during this lockstep tick
+        self._wall_clock = wall_clock
+        self._wall_limit_s = wall_limit_s
+        self._wall_deadline = None if wall_limit_s is None else wall_clock() + wall_limit_s
+        self._watching: CommandKind | None = None  # after a failsafe command: what the autopilot was asked to do
+        self._airborne_seen = False  # the vehicle has been in the air during this run (a dry run ends on the ground)
+        self._target_id: int | None = None  # the last decision's target (console and log report switches)
+
+    def _new_guidance(self) -> LandingGuidance:
+        zones = self.config.perception.zones
+        return LandingGuidance(
+            self.config.guidance,
+            Geofence(self.config.geofence),
+            zones.min_radius_m,
+            zones.min_radius_m,
+            self.pipeline.policy,
+        )
 
     # -- vehicle state ------------------------------------------------------------------------------------------
     def vehicle_state(self) -> VehicleState | None:
@@ -176,31 +203,61 @@ class FlightApp:
         self.recorder.write(
             RecordKind.DECISION, decision.t_s, decision=decision, source=source, state=state, inputs=inputs
         )
+        prefix = "[dry run] " if self.dry_run else ""
         if decision.phase.value != previous:
             self.recorder.write(
                 RecordKind.PHASE, decision.t_s, phase=decision.phase, previous=previous, reason=decision.reason
             )
+            logger.info("%sphase %s -> %s: %s", prefix, previous, decision.phase.value, decision.reason)
             await self.report.phase(decision.phase, decision.reason)
+        target_id = None if decision.target is None else decision.target.track_id
+        if decision.target is not None and target_id != self._target_id:  # a switch (slz report lists them too)
+            t = decision.target
+            logger.info(
+                "%starget: zone %s at north %.1f m, east %.1f m, r = %.2f m (was %s): %s",
+                prefix,
+                target_id,
+                t.north_m,
+                t.east_m,
+                t.radius_m,
+                "none" if self._target_id is None else f"zone {self._target_id}",
+                decision.reason,
+            )
+        if decision.target is not None:
+            self._target_id = target_id
         if decision.phase is LandingPhase.FAILSAFE:
             self.outcome.failsafes.append(decision.reason)
             self.recorder.write(RecordKind.FAILSAFE, decision.t_s, reason=decision.reason, action=decision.kind)
+            logger.warning("%sfailsafe: %s (%s)", prefix, decision.reason, decision.kind.value)
+        sent = False
         try:
-            await self._send(decision)
+            sent = await self._send(decision)
         finally:
-            if decision.phase in TERMINAL:
-                self.done.set()  # after its command went out: ending cancels the tasks
+            if decision.phase in TERMINAL and not self.dry_run:  # a dry run decides again while the pilot flies
+                if sent and decision.phase is LandingPhase.FAILSAFE and self.config.supervision.stay_after_failsafe:
+                    self._watch(decision)  # the vehicle is the autopilot's now: watch it until it is safe
+                else:
+                    self.done.set()  # after its command went out: ending cancels the tasks
 
-    async def _send(self, decision: Decision) -> None:
-        """Send one decision's command. One at a time: the frame and tick loops both decide, and a second command
-        must not start OFFBOARD again while the first waits for the autopilot to report it (the pilot may have taken
-        over in between: this flight never takes control back)."""
+    def _watch(self, decision: Decision) -> None:
+        """Stay after a failsafe command: until the vehicle is on the ground or the pilot has it (see on_tick)."""
+        self._watching = decision.kind
+        reason = f"{decision.reason}: watching until the vehicle is on the ground or the pilot has it"
+        self.recorder.write(RecordKind.SUPERVISION, decision.t_s, event="watching", reason=reason)
+        logger.warning("%s", reason)
+
+    async def _send(self, decision: Decision) -> bool:
+        """Send one decision's command; whether it went out. One at a time: the frame and tick loops both decide,
+        and a second command must not start OFFBOARD again while the first waits for the autopilot to report it (the
+        pilot may have taken over in between: this flight never takes control back)."""
         async with self._send_lock:
             if not self._commanding or decision.kind is CommandKind.NONE:
-                return
+                return False
             mode = self.link.status.mode
             if self._offboard and decision.kind is CommandKind.SETPOINT and mode not in _OURS:
-                return  # the pilot's mode since the last tick: nothing more goes out, and the next tick yields
+                return False  # the pilot's mode since the last tick: nothing more goes out, and the next tick yields
             await self._send_one(decision)
+            return True
 
     async def _send_one(self, decision: Decision) -> None:
         try:
@@ -323,10 +380,23 @@ class FlightApp:
     async def on_tick(self, state: VehicleState) -> None:
         """The start sequence, then pilot takeover, touchdown and perception silence, at vehicle time ``state.t_s``."""
         self.outcome.ticks += 1
-        if self.guidance.phase in TERMINAL:
-            self.done.set()
-            return
         status = self.link.status
+        if status.in_air:
+            self._airborne_seen = True
+        if self._watching is not None:
+            self._watch_tick(state)
+            return
+        if self.dry_run and self._flight_over(state):
+            return
+        if self.guidance.phase in TERMINAL:
+            if self.dry_run:  # the pilot still flies: decide again once the start's conditions hold again
+                self._rearm(state)
+            else:
+                self.done.set()
+            return
+        if self._wall_deadline is not None and self._wall_clock() >= self._wall_deadline:
+            await self._wall_limit(state)
+            return
         if self._offboard and status.mode not in _OURS and not self.dry_run:
             self._offboard = False
             self._commanding = False  # never take control back in this flight
@@ -334,7 +404,8 @@ class FlightApp:
             await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
             return
         if not self.start_sequence.started:
-            await self._start_step(state, self.start_sequence.step(state, status))
+            visible = self.head_plane_visible(state) if self.dry_run else True
+            await self._start_step(state, self.start_sequence.step(state, status, visible))
             return
         if self.guidance.phase is LandingPhase.LAND and not status.in_air:
             self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
@@ -350,10 +421,84 @@ class FlightApp:
         if decision is not None:
             await self.apply(decision, "silence", state, silent_s=silent_s)
 
+    def _watch_tick(self, state: VehicleState) -> None:
+        """After a failsafe command: end once the vehicle is on the ground, or the pilot has switched it to a mode
+        other than the one the failsafe asked for (OFFBOARD still reported is telemetry lagging the command)."""
+        status = self.link.status
+        asked = _FAILSAFE_MODES.get(self._watching or CommandKind.NONE, frozenset())
+        if not status.in_air:
+            self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
+            self.outcome.touchdown_t_s = state.t_s
+            event, reason = "on_ground", f"on the ground at north {state.north_m:.1f} m, east {state.east_m:.1f} m"
+        elif status.mode not in asked and status.mode not in _OURS:
+            event, reason = "pilot_has_it", f"the pilot has it (mode {status.mode.value})"
+        else:
+            return
+        self.outcome.reason = f"{self.outcome.reason}; {reason}"
+        self.recorder.write(RecordKind.SUPERVISION, state.t_s, event=event, reason=reason)
+        logger.warning("after the failsafe: %s", reason)
+        self.done.set()
+
+    def _flight_over(self, state: VehicleState) -> bool:
+        """A dry run ends once the vehicle, having flown, is on the ground and disarmed (the whole flight logged)."""
+        status = self.link.status
+        if not self._airborne_seen or status.in_air or status.armed:
+            return False
+        reason = "the flight is over: on the ground and disarmed"
+        self.outcome.reason = reason if self.guidance.phase is LandingPhase.IDLE else f"{self.outcome.reason}; {reason}"
+        self.recorder.write(RecordKind.SUPERVISION, state.t_s, event="on_ground", reason=reason)
+        logger.info("[dry run] %s", reason)
+        self.done.set()
+        return True
+
+    def _rearm(self, state: VehicleState) -> None:
+        """A dry run whose decisions ended (a failsafe, a landing) while the pilot flies on: a fresh state machine,
+        started again once the vehicle is in the air and sees the head plane."""
+        logger.info("[dry run] decisions ended in %s; deciding again once the start holds again", self.outcome.phase)
+        self.recorder.write(RecordKind.WAITING, state.t_s, waiting_for="a new start (the last decisions ended)")
+        self.guidance = self._new_guidance()
+        self.start_sequence = StartSequence(self.config.start, self.dry_run)
+        self._target_id = None
+
+    async def _wall_limit(self, state: VehicleState) -> None:
+        """The wall limit of ``slz fly --timeout``: the vehicle the companion flies gets the last resort (hold or
+        return) and the run stays until it is safe; a run that commands nothing (a dry run, a wait for the pilot's
+        handover) just ends."""
+        limit = f"wall limit of {self._wall_limit_s:g} s reached (slz fly --timeout)"
+        self._wall_deadline = None
+        if self._flying_it():
+            await self.apply(self.guidance.give_up(state, limit), "limit", state, reason=limit)
+            return
+        self.outcome.reason = f"{limit}: nothing commanded, the run ends"
+        self.recorder.write(RecordKind.SUPERVISION, state.t_s, event="wall_limit", reason=self.outcome.reason)
+        logger.warning("%s", self.outcome.reason)
+        self.done.set()
+
+    def _flying_it(self) -> bool:
+        """The companion commands the vehicle: it took off with it, or sends it setpoints in OFFBOARD."""
+        if not self._commanding:
+            return False
+        took_off = self.start_sequence.takes_off and self.start_sequence.stage is not StartStage.WAITING
+        return self._offboard or took_off
+
+    def head_plane_visible(self, state: VehicleState) -> bool:
+        """The pipeline could read a frame taken from the vehicle's pose at ``state.t_s``."""
+        pose = self.link.poses.pose_at(state.t_s)
+        if pose is None:
+            return False
+        try:
+            self.pipeline.projector.finest_gsd_m_per_px(pose)
+        except (PerceptionError, GeometryError):
+            return False
+        return True
+
     async def _start_step(self, state: VehicleState, step: StartStep) -> None:
         """Do what the start sequence asks at this tick: record, take off, send a transit setpoint, or start."""
         if step.action is StartAction.TIMED_OUT:
             raise VehicleError(self.link.name, step.reason)
+        if step.waiting_for is not None:
+            logger.info("[dry run] waiting for %s", step.waiting_for)
+            self.recorder.write(RecordKind.WAITING, state.t_s, waiting_for=step.waiting_for)
         if step.waiting_for_modes is not None:
             logger.info("waiting for the pilot's handover: armed, in the air and in %s", step.waiting_for_modes)
             self.recorder.write(RecordKind.WAITING_FOR_HANDOVER, state.t_s, modes=step.waiting_for_modes)
@@ -435,8 +580,9 @@ class FlightApp:
         self._commanding = False
 
     # -- the flight ------------------------------------------------------------------------------------------------
-    async def run(self, timeout_s: float) -> FlightOutcome:
-        """Connect, (take off,) land safely or end in a defined failsafe, within ``timeout_s`` of wall time."""
+    async def run(self) -> FlightOutcome:
+        """Connect, (take off,) land safely or end in a defined failsafe (and, with ``supervision``, stay until the
+        vehicle is on the ground or the pilot has it)."""
         cfg = self.config
         wall0, cpu0 = time.monotonic(), time.process_time()
         self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
@@ -459,9 +605,7 @@ class FlightApp:
             asyncio.create_task(self.done.wait(), name="done"),
         ]
         try:
-            done, _ = await asyncio.wait(tasks, timeout=timeout_s, return_when=asyncio.FIRST_COMPLETED)
-            if not done:
-                self.outcome.reason = f"mission timed out after {timeout_s:g} s"
+            done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
             for task in done:
                 if not task.cancelled() and task.exception() is not None:
                     raise task.exception()  # type: ignore[misc]

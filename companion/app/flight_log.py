@@ -32,6 +32,8 @@ class RecordKind(str, enum.Enum):
     CLOCK = "clock"
     """Whether the flight runs in lockstep."""
     WAITING_FOR_HANDOVER = "waiting_for_handover"
+    WAITING = "waiting"
+    """A dry run waits to start deciding (``waiting_for``: what it waits for), once per change of it."""
     HANDOVER = "handover"
     TAKEOFF = "takeoff"
     FRAME = "frame"
@@ -46,6 +48,8 @@ class RecordKind(str, enum.Enum):
     COMMAND = "command"
     """A command sent to the vehicle."""
     FAILSAFE = "failsafe"
+    SUPERVISION = "supervision"
+    """After a failsafe command: ``event`` (watching, on_ground, pilot_has_it) and ``reason``."""
     ERROR = "error"
     LATENCY = "latency"
     """Frame arrival to command sent, ms."""
@@ -63,6 +67,8 @@ REQUIRED_FIELDS: dict[RecordKind, tuple[str, ...]] = {
     RecordKind.PHASE: ("phase",),
     RecordKind.COMMAND: ("command",),
     RecordKind.FAILSAFE: ("reason",),
+    RecordKind.SUPERVISION: ("event", "reason"),
+    RecordKind.WAITING: ("waiting_for",),
     RecordKind.ERROR: ("error",),
     RecordKind.LATENCY: ("frame_to_command_ms",),
     RecordKind.END: ("outcome",),

@@ -167,6 +167,18 @@ class RecorderConfig(StrictModel):
     )
 
 
+class SupervisionConfig(StrictModel):
+    """What the companion does once it has handed the vehicle to the autopilot (a failsafe's hold, return or land)."""
+
+    stay_after_failsafe: bool = Field(
+        default=True,
+        description="Keep watching and recording after a failsafe command until the vehicle is on the ground or the "
+        "pilot has switched it to a mode of their own (the console and the ground station say which), so that no "
+        "flight ends with the vehicle in the air and nobody watching. False: end once the command is sent (SITL "
+        "campaigns, whose harness ends the simulator).",
+    )
+
+
 class MissionConfig(StrictModel):
     """Everything ``slz fly`` needs."""
 
@@ -179,18 +191,57 @@ class MissionConfig(StrictModel):
     perception: PerceptionConfig = Field(default_factory=PerceptionConfig)
     recorder: RecorderConfig = Field(default_factory=RecorderConfig)
     simulator: SimulatorConfig = Field(default_factory=SimulatorConfig)
+    supervision: SupervisionConfig = Field(default_factory=SupervisionConfig)
 
     @model_validator(mode="after")
-    def _landing_area_in_fence(self) -> MissionConfig:
-        area = self.perception.zones.landing_area_ne_m
-        fence = Geofence(self.geofence)
-        for north_m, east_m in area or []:
-            if not fence.contains_ne(north_m, east_m):
-                raise ValueError(
-                    f"perception.zones.landing_area_ne_m vertex ({north_m}, {east_m}) lies outside "
-                    "geofence.polygon_ne_m: the companion could not fly to a zone there"
-                )
+    def _inside_the_fence(self) -> MissionConfig:
+        problems = fence_contradictions(self)
+        if problems:
+            raise ValueError("; ".join(problems))
         return self
+
+
+def fence_contradictions(config: MissionConfig) -> list[str]:
+    """One line per place where the mission would fly outside its own geofence, each naming both fields: the
+    landing area, the start pose, the takeoff, search and landing altitudes against the fence's altitude band (every
+    setpoint is clamped into the fence, so a contradiction would silently fly another mission than the one written)."""
+    fence = Geofence(config.geofence)
+    band = config.geofence
+    problems = []
+    for north_m, east_m in config.perception.zones.landing_area_ne_m or []:
+        if not fence.contains_ne(north_m, east_m):
+            problems.append(
+                f"perception.zones.landing_area_ne_m vertex ({north_m}, {east_m}) lies outside "
+                "geofence.polygon_ne_m: the companion could not fly to a zone there"
+            )
+    start = config.start
+    start_ne = (start.start_north_m, start.start_east_m)
+    if start_ne[0] is not None and start_ne[1] is not None and not fence.contains_ne(start_ne[0], start_ne[1]):
+        problems.append(
+            f"start.start_north_m, start.start_east_m ({start_ne[0]}, {start_ne[1]}) lie outside geofence.polygon_ne_m"
+        )
+    climbs = start.arm_and_takeoff or start.start_north_m is not None  # the takeoff and the transit fly at it
+    if climbs and not band.min_altitude_m <= start.takeoff_altitude_m <= band.max_altitude_m:
+        problems.append(
+            f"start.takeoff_altitude_m ({start.takeoff_altitude_m:g} m) must lie within geofence.min_altitude_m "
+            f"({band.min_altitude_m:g} m) and geofence.max_altitude_m ({band.max_altitude_m:g} m)"
+        )
+    guidance = config.guidance
+    if not band.min_altitude_m <= guidance.search_altitude_m <= band.max_altitude_m:
+        problems.append(
+            f"guidance.search_altitude_m ({guidance.search_altitude_m:g} m) must lie within geofence.min_altitude_m "
+            f"({band.min_altitude_m:g} m) and geofence.max_altitude_m ({band.max_altitude_m:g} m)"
+        )
+    if band.min_altitude_m > guidance.land_altitude_m + guidance.land_tolerance_m:
+        problems.append(
+            f"geofence.min_altitude_m ({band.min_altitude_m:g} m) lies above guidance.land_altitude_m "
+            f"({guidance.land_altitude_m:g} m, + land_tolerance_m): the descent could never reach the landing"
+        )
+    return problems
+
+
+REQUIRED_FOR_FLIGHT = ("polygon_ne_m", "max_altitude_m")
+"""The geofence fields a config must give for ``slz fly``: no flight on a default fence."""
 
 
 def load_mission_config(path: str | Path) -> MissionConfig:
@@ -215,6 +266,16 @@ def validate_for_flight(path: str | Path, never_arm: bool = False) -> tuple[Miss
     from companion.perception.pipeline import SlzPipeline
 
     config = load_mission_config(path)
+    unset = [f"geofence.{name}" for name in REQUIRED_FOR_FLIGHT if name not in config.geofence.model_fields_set]
+    if unset:
+        raise ConfigError(
+            str(path),
+            [
+                f"{name}: required for slz fly (the field's own fence, local NED metres around the EKF origin; "
+                "there is no default fence)"
+                for name in unset
+            ],
+        )
     if never_arm and config.start.arm_and_takeoff:
         raise ConfigError(
             str(path),

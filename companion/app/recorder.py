@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 logger = logging.getLogger(__name__)
 
-SYNC_KINDS = frozenset({"header", "phase", "failsafe", "command", "end", "error"})
+SYNC_KINDS = frozenset({"header", "phase", "failsafe", "supervision", "command", "end", "error"})
 
 
 class RecorderError(Exception):

@@ -25,7 +25,7 @@ from companion.app.mission import MissionConfig
 from companion.app.recorder import plain
 from companion.geometry import GeometryError, Pose
 from companion.guidance.geofence import Geofence
-from companion.guidance.landing import Decision, LandingGuidance, VehicleState
+from companion.guidance.landing import Decision, LandingGuidance, LandingPhase, VehicleState
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.visualize import draw_camera_overlay
@@ -128,9 +128,13 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in flight.of(RecordKind.FRAME)}
     pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
     zones = config.perception.zones
-    guidance = LandingGuidance(
-        config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m, pipeline.policy
-    )
+
+    def new_guidance() -> LandingGuidance:
+        return LandingGuidance(
+            config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m, pipeline.policy
+        )
+
+    guidance = new_guidance()
     report = ReplayReport()
     results: dict[int, FrameResult] = {}
     video = VideoWriter(video_path, video_rate_hz) if video_path is not None else None
@@ -168,6 +172,8 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
                     caption = f"t {record['t_s']:6.1f} s  alt {altitude:5.1f} m  {phase}"
                     video.add(draw_camera_overlay(image, result, pipeline.projector), caption)
             else:
+                if record.get("source") == "start" and guidance.phase is not LandingPhase.IDLE:
+                    guidance = new_guidance()  # a dry run that decides again after its decisions ended
                 decision = _decide(guidance, record, results)
                 report.decisions += 1
                 phase = f"{record['decision']['phase']}: {record['decision']['reason']}"[:70]
@@ -193,6 +199,7 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
         "landed": lambda: guidance.landed(state.t_s),
         "time": lambda: guidance.time_used_up(state),
         "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
+        "limit": lambda: guidance.give_up(state, str(inputs["reason"])),
     }
     if source == "frame":
         result = results.get(int(inputs["seq"]))

@@ -89,13 +89,28 @@ def summarize(log: FlightLog) -> dict[str, Any]:
     land = next((d for d in decisions if d.kind == "land" and d.state), None)
     events = []
     starting = (RecordKind.HANDOVER, RecordKind.TAKEOFF, RecordKind.WAITING_FOR_HANDOVER)
-    for kind, r in log.tagged(RecordKind.PHASE, RecordKind.FAILSAFE, RecordKind.ERROR, *starting):
+    kinds = (RecordKind.PHASE, RecordKind.FAILSAFE, RecordKind.ERROR, RecordKind.DECISION, RecordKind.SUPERVISION)
+    target_id: object = None  # the zone decided on last: a change of it is a switch, with the decision's reason
+    for kind, r in log.tagged(*kinds, RecordKind.WAITING, *starting):
         if kind is RecordKind.PHASE:
             events.append({"t_s": r["t_s"], "event": f"phase {r['previous']} -> {r['phase']}", "reason": r["reason"]})
         elif kind is RecordKind.FAILSAFE:
             events.append({"t_s": r["t_s"], "event": f"failsafe ({r['action']})", "reason": r["reason"]})
         elif kind is RecordKind.ERROR:
             events.append({"t_s": r["t_s"], "event": f"error in {r['where']}", "reason": r["error"]})
+        elif kind is RecordKind.DECISION:
+            target = r["decision"].get("target")
+            if target is not None and target.get("track_id") != target_id:
+                was = "none" if target_id is None else f"zone {target_id}"
+                event = f"target {was} -> zone {target.get('track_id')} (r = {float(target['radius_m']):.2f} m)"
+                events.append({"t_s": r["t_s"], "event": event, "reason": r["decision"].get("reason", "")})
+                target_id = target.get("track_id")
+            elif r["decision"]["phase"] == "search" and target is None and target_id is not None:
+                target_id = None  # back to searching: the next zone is a new choice, not a switch
+        elif kind is RecordKind.SUPERVISION:
+            events.append({"t_s": r["t_s"], "event": f"supervision: {r['event']}", "reason": r["reason"]})
+        elif kind is RecordKind.WAITING:
+            events.append({"t_s": r["t_s"], "event": "waiting", "reason": f"for {r['waiting_for']}"})
         else:
             events.append({"t_s": r["t_s"], "event": kind.value.replace("_", " "), "reason": ""})
     outcome = end["outcome"] if end else None

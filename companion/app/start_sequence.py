@@ -13,7 +13,9 @@ Three starts, by configuration:
 - **The field** (no ``arm_and_takeoff``): wait, as long as the pilot flies, until the vehicle is armed, in the air and
   in one of ``start.handover_modes``; then the same as above from the climb on (nothing to climb). A vehicle on the
   ground is never started.
-- **A dry run**: start at the first tick (nothing is ever sent).
+- **A dry run** (nothing is ever sent): it may be started on the bench. It waits, as long as the pilot flies and
+  with no failsafe, until the vehicle is armed, in the air and sees the head plane (the pipeline could read a frame
+  from this pose); then it starts deciding. Each change of what it waits for is reported once (``waiting_for``).
 
 The whole start must be done within ``START_TIMEOUT_S`` of vehicle time from the first tick (in the field, from the
 pilot's handover).
@@ -79,6 +81,8 @@ class StartStep:
     yaw_deg: float = math.nan
     handed_over: FlightMode | None = None
     waiting_for_modes: str | None = None
+    waiting_for: str | None = None
+    """A dry run: what it now waits for, set at the first tick of each new wait."""
     reason: str = ""
 
 
@@ -102,6 +106,7 @@ class StartSequence:
         self._last_takeoff_try_t_s = -math.inf
         self._transit_yaw_deg: float | None = None
         self._waiting_logged = False
+        self._waiting_for: str | None = None
 
     @property
     def started(self) -> bool:
@@ -113,9 +118,22 @@ class StartSequence:
         needs no report: the next request goes out ``TAKEOFF_RETRY_S`` after the last.)"""
         self.stage = StartStage.CLIMBING
 
-    def step(self, state: VehicleState, status: VehicleStatus) -> StartStep:
-        """What to do at vehicle time ``state.t_s``, with the autopilot reporting ``status``."""
+    def step(self, state: VehicleState, status: VehicleStatus, head_plane_visible: bool = True) -> StartStep:
+        """What to do at vehicle time ``state.t_s``, with the autopilot reporting ``status`` (``head_plane_visible``:
+        the pipeline could read a frame taken from the vehicle's pose now; a dry run waits for it)."""
         start = self.config
+        if self.dry_run and self.stage is StartStage.WAITING:
+            waiting_for = None
+            if not (status.armed and status.in_air):
+                waiting_for = "the vehicle armed and in the air"
+            elif not head_plane_visible:
+                waiting_for = f"the head plane in view (in the air at {state.altitude_m:.1f} m)"
+            if waiting_for is not None:
+                new_wait = waiting_for.split(" (")[0] != (self._waiting_for or "").split(" (")[0]
+                self._waiting_for = waiting_for
+                return StartStep(StartAction.WAIT, waiting_for=waiting_for if new_wait else None)
+            self.stage = StartStage.STARTED
+            return StartStep(StartAction.START)
         if self._first_tick_t_s is None:
             self._first_tick_t_s = state.t_s
         if state.t_s - self._first_tick_t_s > START_TIMEOUT_S:

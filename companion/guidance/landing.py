@@ -146,13 +146,24 @@ class GuidanceConfig(StrictModel):
     )
     hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
     failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
-    failsafe_action: FailsafeAction = FailsafeAction.LAND
+    failsafe_action: FailsafeAction = Field(
+        default=FailsafeAction.HOLD,
+        description="T2's action. Hold by default: a landing in place lands on whatever is below, where the map "
+        "may just have refused to land (deploy/README.md, 'If the companion dies over a crowd'); return is the next "
+        "best. Land only where nobody can be below (the SITL's campaigns fly the paper's land).",
+    )
     mission_time_limit_s: float = Field(
         default=600.0,
         gt=0.0,
         le=7200.0,
-        description="Vehicle time from the start of the search to a landing decision; used up: hold (the pilot or "
-        "the operator decides). On the vehicle clock, so a lockstep mission ends the same way on any machine.",
+        description="Vehicle time from the start of the search to a landing decision; used up: last_resort (the "
+        "pilot or the operator decides). On the vehicle clock, so a lockstep mission ends the same way on any machine.",
+    )
+    last_resort: FailsafeAction = Field(
+        default=FailsafeAction.HOLD,
+        description="What the companion asks of the autopilot when a limit ends the mission before a landing (the "
+        "mission_time_limit_s, the wall limit of `slz fly --timeout`, max_reselections): hold or return, never land "
+        "(a landing the map has not chosen lands on whatever is below).",
     )
     commitment: CommitmentConfig = Field(
         default_factory=CommitmentConfig, description="How firmly a chosen zone is kept (issue 33)."
@@ -173,6 +184,11 @@ class GuidanceConfig(StrictModel):
             raise ValueError("failsafe_after_silence_s (T2) must exceed hold_after_silence_s (T1)")
         if self.land_altitude_m < self.approach_height_m:
             raise ValueError("land_altitude_m must be at least approach_height_m, or the descent never reaches it")
+        if self.last_resort is FailsafeAction.LAND:
+            raise ValueError(
+                "last_resort: must be hold or return (got land): a landing the map has not chosen lands on whatever "
+                "is below"
+            )
         return self
 
 
@@ -328,9 +344,10 @@ class LandingGuidance:
         self._last_target_s = state.t_s
         self._search_origin = None
         if self.reselections > self.config.max_reselections:
-            # Never the configured "land": the map has just refused a landing here. Hold, and the pilot decides.
+            # Never the configured "land": the map has just refused a landing here. The last resort (hold or
+            # return), and the pilot decides.
             used = f"{reason}; {self.reselections - 1} re-selections used up"
-            return self._failsafe(state, used, FailsafeAction.HOLD)
+            return self._failsafe(state, used, self.config.last_resort)
         climb_back_m = self.config.climb_back_m
         if climb_back_m is None:
             climb_to = self._start_altitude_m
@@ -610,9 +627,12 @@ class LandingGuidance:
             return None
         if state.t_s - self._started_s < self.config.mission_time_limit_s:
             return None
-        return self._failsafe(
-            state, f"no landing within {self.config.mission_time_limit_s:g} s of the start", FailsafeAction.HOLD
-        )
+        return self.give_up(state, f"no landing within {self.config.mission_time_limit_s:g} s of the start")
+
+    def give_up(self, state: VehicleState, reason: str) -> Decision:
+        """End the mission before a landing, for a limit that ``reason`` names: the failsafe phase with
+        ``last_resort`` (hold or return; never land where the map has not chosen)."""
+        return self._failsafe(state, reason, self.config.last_resort)
 
     def perception_silent(self, state: VehicleState, silent_s: float) -> Decision | None:
         """No processed frame for ``silent_s`` (wall or vehicle time, the caller's watchdog): T1 hold, T2 failsafe."""

@@ -186,6 +186,8 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
             "camera": {"url": f"sitl://127.0.0.1:{ports.frame_port}"},
             "simulator": {"lockstep_url": f"udp://127.0.0.1:{ports.control_port}"},
             "recorder": {"directory": str(spec.run_dir), **frames},
+            # A failsafe ends the mission: the harness ends the simulator (a hold would otherwise hover for ever).
+            "supervision": {"stay_after_failsafe": False},
         },
     )
     mission = deep_merge(mission, spec.mission_overrides)

@@ -1,0 +1,200 @@
+"""The field path's safety, flown against the SITL over real MAVLink: a wall limit reached mid-descent leaves the
+vehicle holding with the program still watching it, and a dry run started on the ground records the whole flight
+the pilot flies (issue 50). The same behaviours with a fake link, tick by tick, are in
+tests/test_flight_supervision.py."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.app.flight import FlightApp
+from companion.app.mission import validate_for_flight
+from companion.app.recorder import FlightRecorder, read_log
+from companion.camera.sources import open_frame_source
+from companion.guidance.landing import LandingPhase
+from companion.vehicle.lockstep import LockstepClient
+from companion.vehicle.mavsdk_link import MavsdkVehicleLink
+from sitl.config import SitlConfig
+from sitl.harness.process import SitlProcess
+from sitl.testing.helpers import GroundStation, free_udp_port, sitl_mission_yaml, state_when, wait_until
+
+pytestmark = pytest.mark.sitl
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+def start_sitl(tmp_path: Path, instance: int, seed: int, gcs_port: int, lockstep: bool) -> SitlProcess:
+    """A SITL instance with its camera and its ground-station link on ``gcs_port``."""
+    config = tmp_path / "sitl.yaml"
+    lines = ["sitl:", "  camera:", "    enabled: true", f"  seed: {seed}", f"  gcs_port_remote: {gcs_port}"]
+    if lockstep:
+        lines += ["  lockstep: true", "  speed_factor: 0.0"]
+    config.write_text("\n".join(lines) + "\n")
+    return SitlProcess(["--config", str(config)], instance, tmp_path).start()
+
+
+class TripsInDescent:
+    """The wall clock of a flight whose wall limit is reached at its first tick in the descent."""
+
+    def __init__(self) -> None:
+        self.app: FlightApp | None = None
+        self.tripped_at_s: float | None = None
+
+    def __call__(self) -> float:
+        if self.app is not None and self.app.guidance.phase is LandingPhase.DESCENT and self.tripped_at_s is None:
+            self.tripped_at_s = time.monotonic()
+        return time.monotonic() + (0.0 if self.tripped_at_s is None else 1e6)
+
+
+async def until(condition: Callable[[], Any], timeout_s: float, what: str) -> Any:
+    """Until ``condition()`` is truthy (checked every 50 ms of wall time), or fail after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not (value := condition()):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        await asyncio.sleep(0.05)
+    return value
+
+
+def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_programs_watch(
+    tmp_path: Path, instance: int
+) -> None:
+    sitl = start_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(sitl_mission_yaml(instance).replace("directory: runs/flights", f"directory: {tmp_path}"))
+    config, pipeline = validate_for_flight(mission)  # as `slz fly` loads it
+    clock = TripsInDescent()
+    recorder = FlightRecorder(tmp_path / "flight")
+    link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz, config.vehicle.system_id)
+
+    async def flight() -> tuple[dict[str, Any], dict[str, Any], Any]:
+        assert config.simulator.lockstep_url is not None
+        lockstep = LockstepClient(config.simulator.lockstep_url, config.simulator.tick_timeout_s)
+        source = open_frame_source(config.camera.url, vehicle_time_s=link.clock.now_s)
+        app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=600.0, wall_clock=clock)
+        clock.app = app
+        loop = asyncio.get_running_loop()
+
+        async def sitl_state() -> dict[str, Any]:
+            return await loop.run_in_executor(None, sitl.state)  # the flight's loop keeps acknowledging ticks
+
+        try:
+            run = asyncio.create_task(app.run())
+            await until(lambda: app.guidance.phase is LandingPhase.FAILSAFE or run.done(), 150, "the wall limit")
+            assert not run.done(), run.exception() if run.done() else None
+            held = await sitl_state()
+            while held["mode"] != "AUTO.LOITER" or held["t_s"] < 1.0:
+                held = await sitl_state()
+            later = held
+            while later["t_s"] < held["t_s"] + 10.0:  # ten simulated seconds on: still holding, still watched
+                later = await sitl_state()
+            assert not run.done()
+            assert (await loop.run_in_executor(None, sitl.request, {"cmd": "pilot_mode", "mode": "POSCTL"}))[
+                "result"
+            ] == 0
+            outcome = await asyncio.wait_for(run, 30.0)
+        finally:
+            await link.close()
+            recorder.close()
+        return held, later, outcome
+
+    try:
+        held, later, outcome = asyncio.run(flight())
+    finally:
+        sitl.stop()
+    assert clock.tripped_at_s is not None
+    # At the SITL: hold in the air (never the offboard-loss failsafe's landing), where the descent was stopped.
+    assert held["mode"] == "AUTO.LOITER"
+    assert not held["on_ground"]
+    assert held["armed"]
+    assert later["mode"] == "AUTO.LOITER"
+    assert not later["on_ground"]
+    assert -later["position_ned_m"][2] > 3.0
+    moved_m = [abs(a - b) for a, b in zip(held["position_ned_m"], later["position_ned_m"], strict=True)]
+    assert max(moved_m) < 1.0, moved_m
+    assert not later["failsafe"]
+    # At the companion: the limit's last resort from the descent, then watching until the pilot had the vehicle.
+    records = read_log(tmp_path / "flight" / "flight.jsonl")
+    phases = [r["phase"] for r in records if r["kind"] == "phase"]
+    assert phases[-2:] == ["descent", "failsafe"]
+    last = [r for r in records if r["kind"] == "decision"][-1]
+    assert last["source"] == "limit"
+    assert last["decision"]["reason"] == "wall limit of 600 s reached (slz fly --timeout): hold"
+    assert [r["command"] for r in records if r["kind"] == "command"][-1] == "hold"
+    assert [r["event"] for r in records if r["kind"] == "supervision"] == ["watching", "pilot_has_it"]
+    assert outcome.phase == "failsafe"
+    assert outcome.reason.endswith("the pilot has it (mode POSCTL)")
+
+
+def test_a_dry_run_started_on_the_ground_records_the_whole_flight_the_pilot_flies(
+    tmp_path: Path, instance: int
+) -> None:
+    gcs_port = free_udp_port()
+    sitl = start_sitl(tmp_path, instance, seed=3, gcs_port=gcs_port, lockstep=False)
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(sitl_mission_yaml(instance))
+    log = tmp_path / "flight" / "flight.jsonl"
+    command = ["fly", "--config", str(mission), "--dry-run", "--out", str(tmp_path / "flight")]
+    fly = subprocess.Popen(
+        [sys.executable, "-m", "companion.cli", *command],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    gcs = GroundStation(instance, gcs_port)
+    sysid = SitlConfig(instance=instance).system_id
+    try:
+        wait_until(lambda: log.is_file() and '"kind":"waiting"' in log.read_text(), 60, "the dry run waiting")
+        assert fly.poll() is None  # on the bench it waits: no failsafe ends it
+        wait_until(lambda: gcs.poll() is not None and gcs.vehicle_addr, 10, "the vehicle on the GCS link")
+
+        def armed() -> bool:
+            gcs.send(
+                gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            )
+            return bool(sitl.state()["armed"])
+
+        wait_until(armed, 15, "the pilot arming")
+        takeoff_amsl_m = SitlConfig().origin_alt_m + 10.0
+        gcs.send(
+            gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, takeoff_amsl_m)
+        )
+        state_when(sitl, lambda st: st["position_ned_m"][2] < -9.0, 30, "the climb to 10 m")
+        wait_until(lambda: '"source":"frame"' in log.read_text(), 30, "decisions on frames")
+        gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0))
+        out, err = fly.communicate(timeout=60)  # it ends by itself once the vehicle is down and disarmed
+        after = sitl.state()
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        gcs.close()
+        sitl.stop()
+    assert fly.returncode == 0, err[-3000:]
+    assert "dry_run: ended" in out
+    assert "the flight is over: on the ground and disarmed" in out
+    assert not after["armed"]
+    assert after["on_ground"]
+    assert after["setpoints_by_sender"] == {}  # it commanded nothing
+    # The console told the pilot what it waited for and what it decided.
+    assert "[dry run] waiting for the vehicle armed and in the air" in err
+    assert "[dry run] phase idle -> search" in err
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    kinds = [r["kind"] for r in records]
+    assert kinds.count("frame_result") >= 10
+    assert "command" not in kinds
+    waits = [r["waiting_for"] for r in records if r["kind"] == "waiting"]
+    assert waits[0] == "the vehicle armed and in the air"
+    assert any(r["kind"] == "decision" and r["source"] == "start" for r in records)
+    assert [r["event"] for r in records if r["kind"] == "supervision"][-1] == "on_ground"
+    assert kinds[-1] == "end"
