@@ -53,6 +53,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     from companion.app.recorder import FlightRecorder, prune_flights
     from companion.camera.frames import CameraError
     from companion.camera.sources import open_frame_source
+    from companion.perception.model_validation import validation_of
     from companion.vehicle.link import VehicleError
     from companion.vehicle.lockstep import LockstepClient, LockstepError
     from companion.vehicle.mavsdk_link import MavsdkVehicleLink
@@ -60,6 +61,14 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     config, pipeline = validate_for_flight(args.config, never_arm=args.never_arm)  # as `slz check-config` does
     if args.dry_run:
         config = config.model_copy(update={"mode": OperatingMode.DRY_RUN})
+    validation = validation_of(config.perception.model.path)
+    unvalidated = validation is None or not validation.real_imagery
+    if unvalidated and config.mode is OperatingMode.FLY and config.simulator.lockstep_url is None:
+        logger.warning(
+            "%s is NOT validated for real imagery: %s",
+            config.perception.model.path.name,
+            validation.summary if validation is not None else "no validation record for this model file",
+        )
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     out = Path(args.out) if args.out else config.recorder.directory / stamp
     if not args.out:
@@ -94,6 +103,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
             config=config.model_dump(mode="json"),
             model=str(model_path),
             model_sha256=model_sha256,
+            model_validated_real_imagery=validation is not None and validation.real_imagery,
             version=__version__,
         )
         return asyncio.run(fly())

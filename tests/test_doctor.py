@@ -59,8 +59,14 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
             "recorder:": "perception:\n  model:\n    path: models/density/missing.onnx\nrecorder:",
         },
     )
-    no_link = mission_config(
-        tmp_path, instance, "no_link", **{f"udpin://0.0.0.0:{14540 + instance}": "udpin://0.0.0.0:14539"}
+    no_link = mission_config(  # and a vehicle that must fly a model validated on real imagery
+        tmp_path,
+        instance,
+        "no_link",
+        **{
+            f"udpin://0.0.0.0:{14540 + instance}": "udpin://0.0.0.0:14539",
+            "recorder:": "perception:\n  model:\n    require_real_imagery_validation: true\nrecorder:",
+        },
     )
     sitl = SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
     try:
@@ -74,11 +80,13 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     finally:
         sitl.stop()
 
-    # A good board: every check passes, exit 0.
+    # A good board: every check passes, exit 0; the shipped model is flagged: it is not validated on real imagery.
     checks = lines_of(ok)
     assert ok.returncode == 0, ok.stdout + ok.stderr[-2000:]
-    assert set(checks) == {"disk", "model", "link", "clock", "camera", "failsafe"}
-    assert all(line.startswith("PASS") for line in checks.values()), checks
+    assert set(checks) == {"disk", "model", "validation", "link", "clock", "camera", "failsafe"}
+    assert all(line.startswith("PASS") for name, line in checks.items() if name != "validation"), checks
+    assert checks["validation"].startswith("WARN validation: slz_lite.onnx is NOT validated for real imagery")
+    assert "do not fly it over real people" in checks["validation"]
     assert "CPUExecutionProvider" in checks["model"]
     assert "LOCAL_POSITION_NED" in checks["link"]
     assert "ATTITUDE_QUATERNION" in checks["link"]
@@ -108,3 +116,4 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert checks["clock"].startswith("SKIP clock:")
     assert checks["failsafe"].startswith("SKIP failsafe:")
     assert checks["model"].startswith("PASS")
+    assert checks["validation"].startswith("FAIL validation: slz_lite.onnx is NOT validated for real imagery")

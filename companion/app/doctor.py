@@ -5,6 +5,8 @@ The checks use the mission config the flight will use, and the same classes ``sl
 - **disk**: the flight-log directory can be created and written (fsync'd), with enough free space;
 - **model**: the density model loads with the configured execution providers (the one chosen is named, a fallback
   is flagged) and runs at least at the camera's rate;
+- **validation**: what the model is validated on (``companion.perception.model_validation``): WARN for a model not
+  validated for real imagery (every shipped one), FAIL with ``perception.model.require_real_imagery_validation``;
 - **link**: an autopilot answers on ``vehicle.url``, and position, attitude, flight mode (heartbeat), armed and
   in-air state all stream, position and attitude at a usable rate;
 - **clock**: the vehicle clock is synchronised from the telemetry stamps, and evenly (95 % of the stamps within
@@ -40,6 +42,7 @@ from companion.camera.frames import CameraError, Frame
 from companion.camera.sources import open_frame_source
 from companion.perception.density import OnnxDensityModel
 from companion.perception.errors import PerceptionError
+from companion.perception.model_validation import validation_of
 from companion.vehicle.link import FlightMode, VehicleError
 from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 
@@ -152,6 +155,17 @@ def check_model(config: MissionConfig, min_rate_hz: float, runs: int = 20) -> Ch
     if provider != m.providers[0]:
         return CheckResult("model", Status.WARN, f"{detail}; fell back from {m.providers[0]}")
     return CheckResult("model", Status.PASS, detail)
+
+
+def check_validation(config: MissionConfig) -> CheckResult:
+    """Whether the model is validated for real imagery: WARN when not (FAIL when the config requires it)."""
+    m = config.perception.model
+    record = validation_of(m.path)
+    if record is not None and record.real_imagery:
+        return CheckResult("validation", Status.PASS, f"{m.path.name}: {record.summary}")
+    what = record.summary if record is not None else "no validation record for this model file (not a shipped model)"
+    status = Status.FAIL if m.require_real_imagery_validation else Status.WARN
+    return CheckResult("validation", status, f"{m.path.name} is NOT validated for real imagery: {what}")
 
 
 async def check_link(link: MavsdkVehicleLink, config: MissionConfig, limits: DoctorLimits) -> list[CheckResult]:
@@ -320,12 +334,13 @@ async def check_failsafe(link: MavsdkVehicleLink) -> CheckResult:
 
 
 async def diagnose(config: MissionConfig, limits: DoctorLimits | None = None) -> list[CheckResult]:
-    """Run every check in order: disk, model, link, clock, camera, failsafe."""
+    """Run every check in order: disk, model, validation, link, clock, camera, failsafe."""
     limits = limits or DoctorLimits()
     results = [check_disk(config.recorder.directory, limits.min_free_mb)]
     results.append(
         await asyncio.get_running_loop().run_in_executor(None, check_model, config, limits.min_model_rate_hz)
     )
+    results.append(check_validation(config))
     link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz, config.vehicle.system_id)
     try:
         link_results = await check_link(link, config, limits)

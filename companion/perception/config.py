@@ -60,6 +60,11 @@ class ModelConfig(StrictModel):
     fp16: bool = Field(
         default=True, description="TensorRT: allow FP16 kernels (Jetson GPUs run them at about twice the FP32 rate)."
     )
+    require_real_imagery_validation: bool = Field(
+        default=False,
+        description="slz doctor fails (instead of warning) when the model is not validated for real imagery (no "
+        "shipped model is: companion/perception/model_validation.py). Set it on a vehicle that flies over people.",
+    )
     crop_shrunk_frames: bool = Field(
         default=True,
         description="A frame shrunk for min_gsd_m_per_px runs through the model as itself plus the edge pixels its "
