@@ -118,7 +118,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
 def _cmd_doctor(args: argparse.Namespace) -> int:
     import asyncio
 
-    from companion.app.doctor import DoctorLimits, diagnose
+    from companion.app.doctor import DoctorLimits, Status, diagnose
     from companion.app.mission import load_mission_config
 
     config = load_mission_config(args.config)
@@ -130,9 +130,14 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
     for result in results:
         sys.stdout.write(result.line() + "\n")
         sys.stdout.flush()
-    failed = [r.name for r in results if not r.ok]
-    sys.stdout.write(f"NOT READY: {', '.join(failed)} failed\n" if failed else "ready to fly\n")
-    return 1 if failed else 0
+    failed = [r.name for r in results if r.status is Status.FAIL]
+    skipped = [r.name for r in results if r.status is Status.SKIP]
+    if failed or skipped:
+        unchecked = f"; {', '.join(skipped)} not checked" if skipped else ""
+        sys.stdout.write(f"NOT READY: {', '.join(failed) or 'nothing'} failed{unchecked}\n")
+    else:
+        sys.stdout.write("ready to fly\n")
+    return 1 if failed or skipped else 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
@@ -183,12 +188,30 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     return serve(main, preload=args.preload)
 
 
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Help that names each option's default, unless it has none (None, off) or its text already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if not action.option_strings or action.default in (None, False, [], argparse.SUPPRESS) or "default" in text:
+            return action.help
+        return f"{text} (default: %(default)s)"
+
+
+class Parser(argparse.ArgumentParser):
+    """``slz``'s parsers, its subcommands' and the plugins' alike: help with defaults."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``slz``."""
-    parser = argparse.ArgumentParser(prog="slz", description="SLZ Lander: safe landing in populated areas.")
+    parser = Parser(prog="slz", description="SLZ Lander: safe landing in populated areas.")
     parser.add_argument("--version", action="version", version=f"slz-lander {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     check = sub.add_parser("check-config", help="validate a mission config exactly as `slz fly` does")
     check.add_argument("path", type=Path)

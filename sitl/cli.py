@@ -17,7 +17,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from companion.cli import DEFAULT_MISSION_CONFIG, run_command
+from companion.cli import DEFAULT_MISSION_CONFIG, Parser, run_command
 from companion.config import read_yaml_file
 
 
@@ -56,7 +56,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
     from sitl.campaign.provenance import source_commit
     from sitl.campaign.report import build_report
-    from sitl.campaign.runner import Backend, CampaignError, read_results, run_campaign
+    from sitl.campaign.runner import Backend, CampaignError, check_folder_spec, read_results, run_campaign
     from sitl.campaign.spec import load_campaign_spec
 
     if args.action == "replay":
@@ -67,6 +67,11 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     spec = load_campaign_spec(args.spec)
     out = Path(args.out) if args.out else Path("runs") / "campaigns" / spec.name
     if args.report_only:
+        try:
+            check_folder_spec(spec, out)  # a folder of hand-gathered results (no spec.yaml) is reported as it is
+        except CampaignError as exc:
+            sys.stderr.write(f"slz campaign: {exc}\n")
+            return 1
         results = read_results(out / "results.jsonl")
     else:
         # SIGINT and SIGTERM stop the campaign cleanly, also when a shell started it in the background (which
@@ -209,6 +214,11 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
         }.items()
         if value is not None
     }
+    # By hand, `slz sitl` is what `slz fly --config mission_configs/sitl.yaml` flies: its camera is on. A config file
+    # says for itself (the camera's default there is off: most tests and benchmarks need no frames).
+    camera = args.camera if args.camera is not None else (None if args.config else True)
+    if camera is not None:
+        overrides["camera"] = {**base.camera.model_dump(), "enabled": camera}
     config = validate_config(SitlConfig, {**base.model_dump(), **overrides}, source="command line", prefix="sitl")
     try:
         vehicle = SitlVehicle(config)
@@ -241,6 +251,13 @@ def _sitl_arguments(sitl: argparse.ArgumentParser) -> None:
     sitl.add_argument("--log", type=Path, help="write the true trajectory here (CSV)")
     sitl.add_argument("--duration", type=float, help="stop after this many simulated seconds")
     sitl.add_argument("--bind", help="local address (default 127.0.0.1)")
+    sitl.add_argument(
+        "--camera",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="stream camera frames on TCP 5600 + instance, as `slz fly` needs (default: on; with --config, the "
+        "file's sitl.camera.enabled)",
+    )
     sitl.set_defaults(func=_cmd_sitl)
 
 
@@ -301,7 +318,7 @@ def register(subcommands: Any) -> None:
 
     demo = subcommands.add_parser("demo", help="fly one seeded landing mission in the SITL (lockstep) and draw it")
     demo.add_argument("--config", type=Path, default=DEFAULT_MISSION_CONFIG, help="the companion's mission config")
-    demo.add_argument("--seed", type=int, default=1)
+    demo.add_argument("--seed", type=int, default=1, help="the seed of the scene and the mission")
     demo.add_argument("--out", type=Path, default=Path("runs"), help="the run goes into OUT/<time>-seed<N>/")
     demo.add_argument("--instance", type=int, help="SITL instance (ports); default: a free one")
     demo.set_defaults(func=_cmd_demo)
@@ -309,7 +326,7 @@ def register(subcommands: Any) -> None:
 
 def sitl_main(argv: Sequence[str] | None = None) -> int:
     """``slz-sitl`` and ``python -m sitl``: the vehicle alone (``slz sitl``'s arguments)."""
-    parser = argparse.ArgumentParser(prog="slz-sitl", description="The SLZ Lander SITL vehicle.")
+    parser = Parser(prog="slz-sitl", description="The SLZ Lander SITL vehicle.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     _sitl_arguments(parser)
     return run_command(parser.parse_args(argv), prog="slz-sitl")

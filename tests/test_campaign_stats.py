@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import yaml
 
 from companion.config import ConfigError
 from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
@@ -557,6 +558,26 @@ def test_slz_campaign_check_against_exits_1_with_a_readable_diff(tmp_path: Path)
     assert "# Regression gate: FAILED" in done.stdout
     assert "| nearest | success | 12 | 100.0 % | 33.3 % | 8 | 0 |" in done.stdout
     assert json.loads((out / "gate.json").read_text())["failed"] is True
+
+
+def test_report_only_refuses_a_folder_of_another_campaign_and_leaves_it_as_it_was(tmp_path: Path) -> None:
+    spec_path = _gate_spec(tmp_path, runs=4)
+    spec = load_campaign_spec(spec_path)
+    out = tmp_path / "campaign"
+    out.mkdir()
+    other = spec.model_dump(mode="json")
+    other["name"] = "someone_elses"
+    (out / "spec.yaml").write_text(yaml.safe_dump(other, sort_keys=False))
+    (out / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _results(spec, {})))
+    before = sorted(p.name for p in out.iterdir())
+    command = ["campaign", "--spec", str(spec_path), "--out", str(out), "--report-only"]
+    done = subprocess.run(
+        [sys.executable, "-m", "companion.cli", *command],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stdout + done.stderr[-2000:]
+    assert "holds another campaign's results (someone_elses differs from" in done.stderr
+    assert sorted(p.name for p in out.iterdir()) == before  # no report written over it
 
 
 def test_the_roi_table_flies_the_same_scenes_with_every_zone_in_the_roi() -> None:

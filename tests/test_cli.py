@@ -236,3 +236,13 @@ def test_report_of_a_missing_flight_says_so(tmp_path: Path) -> None:
     assert result.returncode == 1
     assert f"no flight log at {tmp_path / 'nothing' / 'flight.jsonl'}" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_help_names_each_default() -> None:
+    doctor = slz("doctor", "--help")
+    assert doctor.returncode == 0
+    assert "camera frames to read (default: 10)" in " ".join(doctor.stdout.split())
+    demo = slz("demo", "--help")  # a plugin's command (sitl.cli) gets the same help
+    assert "the seed of the scene and the mission (default: 1)" in " ".join(demo.stdout.split())
+    sitl = slz("sitl", "--help")
+    assert "--camera, --no-camera" in sitl.stdout

@@ -4,6 +4,10 @@
   repository root, and must exit 0.
 - Every code block whose info string is ``sh test`` (rendered as shell) runs, each line a command in bash from the
   repository root with this venv's ``bin`` first on ``PATH``, and must exit 0.
+- Every code block whose info string is ``sh terminals`` runs as two terminals would: the commands under
+  ``# terminal 1`` start in the background (a SITL), then those under ``# terminal 2`` run one after another and must
+  exit 0. The SITL runs on a leased instance (``--instance N``) and ``mission_configs/sitl.yaml`` is read on that
+  instance's ports, so the test shares the machine; otherwise the commands are the documented ones.
 - Every ``slz`` command line shown (code blocks and inline code, synopses included) names commands and options
   that ``slz`` has, and every ``make TARGET`` shown is a target of the Makefile: a renamed option or target fails here.
 
@@ -153,6 +157,73 @@ def test_a_shell_example_marked_test_runs_as_written(block: Block) -> None:
     )
     assert run.returncode == 0, (run.stdout[-2000:], run.stderr[-2000:])
     assert "Traceback" not in run.stderr
+
+
+def terminals(block: Block) -> dict[int, list[str]]:
+    """The commands of a ``sh terminals`` block by terminal number (``# terminal N`` comment lines start each)."""
+    found: dict[int, list[str]] = {}
+    current = None
+    for line in block.text.splitlines():
+        header = re.match(r"#\s*terminal (\d+)", line.strip())
+        if header:
+            current = int(header.group(1))
+            found[current] = []
+        elif line.strip() and not line.strip().startswith("#"):
+            assert current is not None, f"{block.id}: a command before the first '# terminal N'"
+            found[current].append(line.split(" #", 1)[0].strip())
+    return found
+
+
+TERMINAL_BLOCKS = [b for b in blocks() if b.info.split() == ["sh", "terminals"]]
+
+
+@pytest.mark.sitl
+@pytest.mark.parametrize("block", TERMINAL_BLOCKS, ids=lambda b: b.id)
+def test_a_two_terminal_example_runs_as_written(block: Block, tmp_path: Path, instance: int) -> None:
+    from sitl.testing.helpers import sitl_mission_yaml
+
+    steps = terminals(block)
+    assert sorted(steps) == [1, 2], steps
+    assert steps[1] == ["slz sitl"], "terminal 1 starts the SITL alone"
+    mission = tmp_path / "sitl.yaml"  # mission_configs/sitl.yaml on the leased instance's ports, logs in tmp_path
+    mission.write_text(sitl_mission_yaml(instance).replace("directory: runs/flights", f"directory: {tmp_path}"))
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+    log = (tmp_path / "sitl.log").open("wb")
+    sitl = subprocess.Popen(
+        ["bash", "-c", f"exec {steps[1][0]} --instance {instance}"],
+        cwd=REPO_ROOT,
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        env=env,
+    )
+    outputs = []
+    try:
+        for command in steps[2]:
+            run = subprocess.run(
+                ["bash", "-euo", "pipefail", "-c", command.replace("mission_configs/sitl.yaml", str(mission))],
+                cwd=REPO_ROOT,
+                capture_output=True,
+                text=True,
+                timeout=240,
+                env=env,
+                check=False,
+            )
+            assert run.returncode == 0, (command, run.stdout[-3000:], run.stderr[-3000:])
+            assert "Traceback" not in run.stderr
+            outputs.append(run.stdout)
+    finally:
+        sitl.terminate()
+        try:
+            sitl.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            sitl.kill()
+            sitl.wait()
+        log.close()
+    assert sitl.returncode is not None
+    doctor, flown = outputs
+    assert doctor.rstrip().endswith("ready to fly")
+    assert "PASS camera:" in doctor
+    assert "fly: ended in done (landed)" in flown
 
 
 def test_every_slz_command_shown_has_its_command_and_options() -> None:

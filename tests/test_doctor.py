@@ -87,6 +87,7 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert all(line.startswith("PASS") for name, line in checks.items() if name != "validation"), checks
     assert checks["validation"].startswith("WARN validation: slz_lite.onnx is NOT validated for real imagery")
     assert "do not fly it over real people" in checks["validation"]
+    assert "Retrying failed" not in ok.stdout + ok.stderr  # no parameter asked for by a name the autopilot lacks
     assert "CPUExecutionProvider" in checks["model"]
     assert "LOCAL_POSITION_NED" in checks["link"]
     assert "ATTITUDE_QUATERNION" in checks["link"]
@@ -115,5 +116,8 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert checks["link"] == "FAIL link: udpin://0.0.0.0:14539: no autopilot answered within 3 s"
     assert checks["clock"].startswith("SKIP clock:")
     assert checks["failsafe"].startswith("SKIP failsafe:")
+    verdict = unlinked.stdout.rstrip().splitlines()[-1]  # what failed, and apart from it what was not checked
+    assert verdict.startswith("NOT READY: validation, link"), verdict
+    assert verdict.endswith("failsafe not checked"), verdict
     assert checks["model"].startswith("PASS")
     assert checks["validation"].startswith("FAIL validation: slz_lite.onnx is NOT validated for real imagery")

@@ -297,11 +297,14 @@ async def check_failsafe(link: MavsdkVehicleLink) -> CheckResult:
 
     WARN when the configured action lands (or drops) the vehicle where it is; FAIL when no known parameter answers.
     """
-    loss_s = await link.read_parameter("COM_OF_LOSS_T")
-    if loss_s is not None:
+    params = await link.read_parameters()
+    if params is None:
+        return CheckResult("failsafe", Status.FAIL, "the autopilot's parameter list did not arrive")
+    loss_s = params.get("COM_OF_LOSS_T")
+    if loss_s is not None:  # PX4: COM_OBL_ACT up to v1.13, COM_OBL_RC_ACT (alone) from v1.14: whichever it has
         actions: list[tuple[str, float, dict[int, tuple[str, bool]]]] = []
         for name, table in (("COM_OBL_ACT", PX4_OBL_ACT), ("COM_OBL_RC_ACT", PX4_OBL_RC_ACT)):
-            value = await link.read_parameter(name)
+            value = params.get(name)
             if value is not None:
                 actions.append((name, value, table))
         if not actions:
@@ -315,7 +318,7 @@ async def check_failsafe(link: MavsdkVehicleLink) -> CheckResult:
                 lands.append(name)
         detail = f"companion lost for COM_OF_LOSS_T = {loss_s:g} s: " + ", ".join(texts)
     else:
-        value = await link.read_parameter("FS_GCS_ENABLE")
+        value = params.get("FS_GCS_ENABLE")
         if value is None:
             return CheckResult(
                 "failsafe", Status.FAIL, "no offboard-loss parameter answered (COM_OF_LOSS_T, FS_GCS_ENABLE)"

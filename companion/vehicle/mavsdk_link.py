@@ -277,24 +277,26 @@ class MavsdkVehicleLink:
         action, _ = self._plugins()
         await self._call("return to launch", action.return_to_launch)
 
-    async def read_parameter(self, name: str, timeout_s: float = 5.0) -> float | None:
-        """The autopilot's parameter ``name`` (an integer parameter as a float), or None when it has none by that name
-        (or does not answer within ``timeout_s``). Reading changes nothing."""
+    async def read_parameters(self, timeout_s: float = 15.0) -> dict[str, float] | None:
+        """Every parameter of the autopilot by name (integers as floats), from one list request; None when the list
+        does not arrive within ``timeout_s``. Asking for the list, not for names it may lack, leaves no retries and
+        no "Retrying failed" errors for a parameter that another autopilot version names differently."""
         if self._system is None:
             raise VehicleError(self.url, "not connected")
         from mavsdk.asyncio.plugins.param import ParamAsync
 
         if not hasattr(self, "_param"):
             self._param = ParamAsync(self._system)
-        for getter in (self._param.get_param_int, self._param.get_param_float):
-            try:
-                return float(await asyncio.wait_for(getter(name), timeout_s))
-            except asyncio.TimeoutError:
-                return None
-            except Exception as exc:  # ParamError: WRONG_TYPE (try the other getter), or no such parameter
-                if getattr(getattr(exc, "result", None), "name", "") != "WRONG_TYPE":
-                    return None
-        return None
+        try:
+            every = await asyncio.wait_for(self._param.get_all_params(), timeout_s)
+        except asyncio.TimeoutError:
+            return None
+        except Exception as exc:  # ParamError: the list could not be read
+            logger.warning("%s: the parameter list could not be read: %s", self.url, exc)
+            return None
+        values = {p.name: float(p.value) for p in every.int_params}
+        values.update({p.name: float(p.value) for p in every.float_params})
+        return values
 
     async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
         """One message through MAVSDK's MAVLink-direct plugin (libmav packs it from the fields' JSON), broadcast: the

@@ -237,6 +237,22 @@ def _run_local(
             raise
 
 
+def check_folder_spec(spec: CampaignSpec, out_dir: Path) -> bool:
+    """Whether ``out_dir`` holds a campaign's ``spec.yaml`` (False: none yet); :class:`CampaignError` when that
+    campaign is not ``spec`` (flying or reporting it there would file its missions under the wrong campaign)."""
+    spec_path = out_dir / "spec.yaml"
+    if not spec_path.is_file():
+        return False
+    saved = read_yaml_file(spec_path)
+    if saved != spec.model_dump(mode="json"):
+        name = saved.get("name") if isinstance(saved, dict) else None
+        raise CampaignError(
+            f"{out_dir} holds another campaign's results ({name or 'its spec.yaml'} differs from {spec.name}); "
+            "use that campaign's spec, or a new folder"
+        )
+    return True
+
+
 def run_campaign(
     spec: CampaignSpec,
     out_dir: Path,
@@ -258,14 +274,9 @@ def run_campaign(
     depends on its seed and config alone.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    spec_path = out_dir / "spec.yaml"
     spec_json = spec.model_dump(mode="json")
-    if spec_path.is_file():
-        saved = read_yaml_file(spec_path)
-        if saved != spec_json:
-            raise CampaignError(f"{out_dir} holds another campaign's results (its spec.yaml differs); use a new folder")
-    else:
-        spec_path.write_text(yaml.safe_dump(spec_json, sort_keys=False))
+    if not check_folder_spec(spec, out_dir):
+        (out_dir / "spec.yaml").write_text(yaml.safe_dump(spec_json, sort_keys=False))
     results_path = out_dir / "results.jsonl"
     done = {r["mission_id"]: r for r in read_results(results_path)}
     plans = spec.missions()

@@ -186,7 +186,10 @@ class SitlProcess(ControlledSitl):
     """
 
     def __init__(self, args: list[str], instance: int, log_dir: Path, cpu: int | None = None) -> None:
-        self.args = list(args)
+        # A SITL started by a program renders only when asked to (--camera, or a config file that says so); by
+        # hand `slz sitl` streams its camera.
+        camera_said = any(a in ("--config", "--camera", "--no-camera") for a in args)
+        self.args = list(args) if camera_said else [*args, "--no-camera"]
         self.cpu = cpu
         self.instance = instance
         self.log_path = Path(log_dir) / f"sitl-{instance}.log"
