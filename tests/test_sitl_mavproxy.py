@@ -92,6 +92,10 @@ def test_mavproxy_fetches_parameters_lists_uploads_and_flies_a_mission(tmp_path:
         assert match.group(2) is None
         mavproxy.send("param show SYS_AUTOSTART")
         mavproxy.expect(r"SYS_AUTOSTART\s+4001", 5)
+        printed = [line for _, line in mavproxy.lines]
+    # SYS_STATUS's geofence bits as PX4 sends them: present and healthy, so MAVProxy never reports a breach.
+    assert not [line for line in printed if "fence breach" in line]
+    assert any("fence present" in line for line in printed)
     north, east, _ = track[-1]
     assert math.hypot(north - 10.0, east - 6.0) < 1.0  # on the land item's point
     assert any(math.hypot(n - 10.0, e) < 2.0 and -d > 4.0 for n, e, d in track)  # through the first waypoint

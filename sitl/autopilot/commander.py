@@ -338,6 +338,16 @@ class Commander:
             return True
         return bool(self.fence) and not self.fence.contains(float(position[0]), float(position[1]))
 
+    @property
+    def fence_limited(self) -> bool:
+        """A fence is in force: uploaded items, or a maximum distance or height (PX4's geofence module)."""
+        return bool(self.fence) or self.params["GF_MAX_HOR_DIST"] > 0 or self.params["GF_MAX_VER_DIST"] > 0
+
+    @property
+    def fence_breached(self) -> bool:
+        """The vehicle is outside the fence in force, in the air (SYS_STATUS reports the fence unhealthy)."""
+        return self._fence_breached
+
     def set_fence(self, fence: Fence) -> None:
         """A new geofence (an upload or a clear)."""
         self.fence = fence
@@ -345,8 +355,7 @@ class Commander:
 
     def _geofence(self) -> None:
         """GF_ACTION once, when the vehicle leaves the fence in the air (as PX4: a breach, not every step outside)."""
-        limited = self.fence or self.params["GF_MAX_HOR_DIST"] > 0 or self.params["GF_MAX_VER_DIST"] > 0
-        if not limited or self.landed_state is LandedState.ON_GROUND:
+        if not self.fence_limited or self.landed_state is LandedState.ON_GROUND:
             self._fence_breached = False
             return
         outside = self._outside_fence()

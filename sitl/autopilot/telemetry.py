@@ -281,14 +281,17 @@ class TelemetryBuilder:
         return round(t_s * 1000.0) & 0xFFFFFFFF
 
     def _sys_status(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        health = SENSORS
+        # The geofence as PX4 reports it: present (the module runs), enabled while a fence is in force, healthy
+        # unless breached. Without the bit, a ground station reads "no fence, unhealthy": MAVProxy said "fence breach".
+        fence = mavlink.MAV_SYS_STATUS_GEOFENCE
+        health = SENSORS | (0 if cmd.fence_breached else fence)
         if cmd.rc_lost:
             health &= ~mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
         if cmd.armed or cmd.prearm_problem() is None:
             health |= PREARM_CHECK
         return mav.sys_status_encode(
-            SENSORS | PREARM_CHECK,
-            SENSORS | PREARM_CHECK,
+            SENSORS | PREARM_CHECK | fence,
+            SENSORS | PREARM_CHECK | (fence if cmd.fence_limited else 0),
             health,
             500,
             int(bat.voltage_v * 1000),
