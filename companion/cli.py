@@ -151,8 +151,10 @@ def _cmd_report(args: argparse.Namespace) -> int:
     except ImportError as exc:
         sys.stderr.write(f"slz report: {exc}: install the plotting extra, pip install 'slz-lander[report]'\n")
         return 1
+    from companion.app.flight_log import flight_folder
+
     try:
-        report = build_flight_report(Path(args.flight), args.out, video=not args.no_video)
+        report = build_flight_report(flight_folder(args.flight), args.out, video=not args.no_video)
     except (ReportError, RecorderError, ReplayError, OSError) as exc:
         sys.stderr.write(f"slz report: {exc}\n")
         return 1
@@ -162,11 +164,12 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    from companion.app.flight_log import flight_folder
     from companion.app.recorder import RecorderError
     from companion.app.replay import ReplayError, replay
 
     try:
-        report = replay(Path(args.flight), video_path=args.video)
+        report = replay(flight_folder(args.flight), video_path=args.video)
     except (ReplayError, RecorderError, OSError) as exc:
         sys.stderr.write(f"slz replay: {exc}\n")
         return 1
@@ -248,12 +251,14 @@ def build_parser() -> argparse.ArgumentParser:
     doctor.set_defaults(func=_cmd_doctor)
 
     replay = sub.add_parser("replay", help="re-run a recorded flight and check it decides the same")
-    replay.add_argument("flight", type=Path, help="flight folder (flight.jsonl and frames/, recorded with png frames)")
+    replay.add_argument(
+        "flight", type=Path, help="flight folder (flight.jsonl and frames/, recorded with png frames), or a demo's run"
+    )
     replay.add_argument("--video", type=Path, help="also write the annotated camera view here (MP4)")
     replay.set_defaults(func=_cmd_replay)
 
     report = sub.add_parser("report", help="turn a flight log (real, dry run or SITL) into plots, video and a page")
-    report.add_argument("flight", type=Path, help="flight folder (flight.jsonl, frames/)")
+    report.add_argument("flight", type=Path, help="flight folder (flight.jsonl, frames/), or a demo's run folder")
     report.add_argument("--out", type=Path, help="output folder (default FLIGHT/report)")
     report.add_argument("--no-video", action="store_true", help="skip camera.mp4 (the contact sheet is kept)")
     report.set_defaults(func=_cmd_report)

@@ -77,6 +77,10 @@ def test_the_demo_lands_a_static_crowd_mission_clear_of_people(demo: Demo) -> No
     assert s["nearest_person_m"] >= CLEARANCE_M
     assert s["people_within_1_5m"] == 0
     assert f"nearest person's body is {s['nearest_person_m']:.2f} m" in demo.stdout
+    zone = s["descent_zone"]  # the zone's radius is named for what it is: as seen when the descent began
+    assert f"zone {zone['track_id']}: free radius {zone['radius_m']:.2f} m as seen from" in demo.stdout
+    assert zone["seen_from_altitude_m"] > 5.0
+    assert f"its free radius at the land decision: {s['target_radius_m']:.2f} m" in demo.stdout
     phases = [p for _, p in _phases(demo.run_dir)]
     assert phases[0] == "search"
     assert "descent" in phases
@@ -135,8 +139,12 @@ def test_every_setpoint_stays_in_the_geofence_and_within_the_descent_rate(demo: 
 
 
 def test_slz_replay_reproduces_every_logged_decision(demo: Demo) -> None:
+    # The command the demo prints, on the run folder it names.
+    shown = next(line for line in demo.stdout.splitlines() if line.startswith("look again: "))
+    replay_command = shown.split(", ")[-1]
+    assert replay_command == f"slz replay {demo.run_dir}"
     done = subprocess.run(
-        [sys.executable, "-m", "companion.cli", "replay", str(demo.run_dir / "flight")],
+        [sys.executable, "-m", "companion.cli", *replay_command.split()[1:]],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,

@@ -78,6 +78,16 @@ REQUIRED_FIELDS: dict[RecordKind, tuple[str, ...]] = {
 _KINDS = {k.value: k for k in RecordKind}
 
 
+def flight_folder(path: Path) -> Path:
+    """The flight folder of ``path``: itself when it holds ``flight.jsonl``, else its ``flight/`` sub-folder when that
+    does (the run folder ``slz demo`` and the campaign's missions print), else itself (the reader names what is
+    missing)."""
+    path = Path(path)
+    if not (path / "flight.jsonl").is_file() and (path / "flight" / "flight.jsonl").is_file():
+        return path / "flight"
+    return path
+
+
 def kind_of(record: dict[str, Any]) -> RecordKind | None:
     """A record's kind; None for a kind this reader does not know (a newer writer's). The one place a record's kind
     is read from its JSON."""
@@ -150,7 +160,7 @@ class FlightLog:
         """
         path = Path(path)
         if path.is_dir():
-            path = path / "flight.jsonl"
+            path = flight_folder(path) / "flight.jsonl"
         try:
             records = read_log(path)
         except (OSError, RecorderError) as exc:

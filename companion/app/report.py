@@ -317,7 +317,10 @@ def _markdown(flight_dir: Path, summary: dict[str, Any], files: list[Path], out_
     ]
     if outcome.get("touchdown_ne_m"):
         n, e = outcome["touchdown_ne_m"]
-        lines.append(f"- touchdown at north {n:.2f} m, east {e:.2f} m, t = {outcome['touchdown_t_s']:.1f} s")
+        t_s = outcome["touchdown_t_s"]
+        lines.append(
+            f"- touchdown (the autopilot's landing detection) at north {n:.2f} m, east {e:.2f} m, t = {t_s:.1f} s"
+        )
     if summary["land_command"]:
         land = summary["land_command"]
         verb = "decided" if dry else "sent"

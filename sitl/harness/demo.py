@@ -43,6 +43,8 @@ class DemoOutcome:
     replay_identical: bool
     top_view_path: Path
     video_path: Path
+    descent_zone: tuple[int | None, float, float] | None = None
+    """The zone the last descent began over: its track id, free radius (m) and the altitude it was seen from (m)."""
 
 
 def run(
@@ -68,9 +70,27 @@ def run(
     report = replay(run_dir / "flight", video_path=video_path)
     top_view_path = run_dir / "top_view.png"
     cv2.imwrite(str(top_view_path), draw_mission_top_view(run_dir))
+    zone = descent_zone(run_dir / "flight")
     summary = {**result.to_json(), "replay_identical": report.identical, "video": str(video_path)}
+    if zone is not None:
+        summary["descent_zone"] = {"track_id": zone[0], "radius_m": zone[1], "seen_from_altitude_m": zone[2]}
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return DemoOutcome(result, report.identical, top_view_path, video_path)
+    return DemoOutcome(result, report.identical, top_view_path, video_path, zone)
+
+
+def descent_zone(flight_dir: Path) -> tuple[int | None, float, float] | None:
+    """The zone the flight's last descent began over (track id, free radius in m, altitude it was seen from in m),
+    from the log's first decision of that descent; None without a descent."""
+    decisions = FlightLog.read(flight_dir).decisions()
+    start = None
+    for before, decision in zip([None, *decisions], decisions, strict=False):
+        if decision.phase == "descent" and (before is None or before.phase != "descent") and decision.target:
+            start = decision
+    if start is None or start.target is None or start.state is None:
+        return None
+    track_id = start.target.get("track_id")
+    altitude_m = -float(start.state["down_m"])
+    return (None if track_id is None else int(track_id)), float(start.target["radius_m"]), altitude_m
 
 
 def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: float = 27.0) -> np.ndarray:
@@ -134,16 +154,24 @@ def describe(outcome: DemoOutcome) -> str:
     lines = [f"seed {r.seed}: the companion ended in '{r.phase}' ({r.reason})"]
     if r.landed and r.touchdown_ne_m is not None:
         lines.append(
-            f"touchdown at north {r.touchdown_ne_m[0]:.2f} m, east {r.touchdown_ne_m[1]:.2f} m, "
-            f"t = {r.touchdown_t_s:.1f} s simulated ({r.wall_s:.0f} s wall)"
+            f"touchdown (ground truth: first contact) at north {r.touchdown_ne_m[0]:.2f} m, east "
+            f"{r.touchdown_ne_m[1]:.2f} m, t = {r.touchdown_t_s:.1f} s simulated ({r.wall_s:.0f} s wall); the "
+            "flight log's touchdown is the autopilot's landing detection, up to a second or two later"
         )
         lines.append(f"ground truth: the nearest person's body is {r.nearest_person_m:.2f} m from the touchdown point")
-        if r.target_radius_m is not None:
-            lines.append(f"landing zone radius {r.target_radius_m:.2f} m")
     else:
         lines.append("no touchdown")
+    zone = outcome.descent_zone
+    if zone is not None:
+        lines.append(f"zone {zone[0]}: free radius {zone[1]:.2f} m as seen from {zone[2]:.1f} m when the descent began")
+    if r.target_radius_m is not None:
+        lines.append(
+            f"its free radius at the land decision: {r.target_radius_m:.2f} m (from the walker gate, about 5 m up, "
+            "the camera sees a few metres around the footprint: a lower bound, not the zone's size)"
+        )
     lines.append(f"replay of the log: {'identical' if outcome.replay_identical else 'DIFFERENT'}")
     lines.append(f"wrote {r.run_dir}: flight/, truth.jsonl, {outcome.top_view_path.name}, {outcome.video_path.name}")
+    lines.append(f"look again: slz report {r.run_dir}, slz replay {r.run_dir}")
     return "\n".join(lines)
 
 
