@@ -14,6 +14,7 @@ nodes (an alias bomb), and NaN or infinite numbers anywhere. Error messages quot
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -242,8 +243,35 @@ def read_yaml_file(path: str | Path) -> Any:
     return parse_yaml(raw, str(path))
 
 
-def load_yaml_config(model: type[ModelT], path: str | Path, section: str | None = None) -> ModelT:
-    """Load ``path`` (YAML) and validate it, or only its top-level ``section``, against ``model``.
+def paths_from(data: Any, folder: str | Path, fields: tuple[tuple[str, ...], ...]) -> Any:
+    """``data`` (a parsed config document) with each path at one of ``fields`` (key paths into nested mappings) that
+    is a relative path string taken from ``folder``, made absolute and normalised; everything else as it is (a wrong
+    type is left for validation to name). A config file's relative paths thus mean the same files wherever the
+    command runs. Returns a new document; ``data`` is not changed."""
+    if not isinstance(data, dict):
+        return data
+    base = Path(folder).absolute()
+    out = dict(data)
+    for keys in fields:
+        node = out
+        for key in keys[:-1]:
+            child = node.get(key)
+            if not isinstance(child, dict):
+                break
+            node[key] = child = dict(child)
+            node = child
+        else:
+            value = node.get(keys[-1])
+            if isinstance(value, str) and value and not Path(value).is_absolute():
+                node[keys[-1]] = os.path.normpath(base / value)
+    return out
+
+
+def load_yaml_config(
+    model: type[ModelT], path: str | Path, section: str | None = None, path_fields: tuple[tuple[str, ...], ...] = ()
+) -> ModelT:
+    """Load ``path`` (YAML) and validate it, or only its top-level ``section``, against ``model``; the relative paths
+    at ``path_fields`` (key paths within the validated document) are taken from the file's folder (:func:`paths_from`).
 
     Raises
     ------
@@ -257,4 +285,5 @@ def load_yaml_config(model: type[ModelT], path: str | Path, section: str | None 
         if not isinstance(data, dict) or section not in data:
             raise ConfigError(str(path), [f"{section}: missing section"])
         data = data[section]
+    data = paths_from(data, path.parent, path_fields)
     return validate_config(model, data, source=str(path), prefix=section or "")

@@ -246,3 +246,27 @@ def test_help_names_each_default() -> None:
     assert "the seed of the scene and the mission (default: 1)" in " ".join(demo.stdout.split())
     sitl = slz("sitl", "--help")
     assert "--camera, --no-camera" in sitl.stdout
+
+
+def test_a_configs_relative_paths_are_taken_from_its_folder_wherever_slz_runs(tmp_path: Path) -> None:
+    import shutil
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    # The shipped configs, checked from another working directory (the field report: "model file not found").
+    for name, extra in (("sitl.yaml", []), ("px4_serial.yaml", ["--never-arm"])):
+        checked = slz("check-config", str(REPO_ROOT / "mission_configs" / name), *extra, cwd=elsewhere)
+        assert checked.returncode == 0, checked.stderr
+    # A config of one's own beside a model of one's own, relative paths in it.
+    site = tmp_path / "site"
+    (site / "nets").mkdir(parents=True)
+    shutil.copy(REPO_ROOT / "models" / "density" / "slz_lite_int8.onnx", site / "nets" / "mine.onnx")
+    config = site / "mission.yaml"
+    shipped = (REPO_ROOT / "mission_configs" / "sitl.yaml").read_text()
+    config.write_text(shipped + "perception:\n  model:\n    path: nets/mine.onnx\n")
+    checked = slz("check-config", str(config), "--show", cwd=elsewhere)
+    assert checked.returncode == 0, checked.stderr
+    assert "model mine.onnx" in checked.stdout
+    shown = json.loads(checked.stdout.split("\n", 1)[1])
+    assert shown["perception"]["model"]["path"] == str(site / "nets" / "mine.onnx")
+    assert shown["recorder"]["directory"] == str(tmp_path / "runs" / "flights")  # sitl.yaml's ../runs/flights

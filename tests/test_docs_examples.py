@@ -186,7 +186,7 @@ def test_a_two_terminal_example_runs_as_written(block: Block, tmp_path: Path, in
     assert sorted(steps) == [1, 2], steps
     assert steps[1] == ["slz sitl"], "terminal 1 starts the SITL alone"
     mission = tmp_path / "sitl.yaml"  # mission_configs/sitl.yaml on the leased instance's ports, logs in tmp_path
-    mission.write_text(sitl_mission_yaml(instance).replace("directory: runs/flights", f"directory: {tmp_path}"))
+    mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
     log = (tmp_path / "sitl.log").open("wb")
     sitl = subprocess.Popen(

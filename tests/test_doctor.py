@@ -33,9 +33,8 @@ def lines_of(run: subprocess.CompletedProcess[str]) -> dict[str, str]:
 
 def mission_config(tmp_path: Path, instance: int, name: str, **replace: str) -> Path:
     """mission_configs/sitl.yaml on this test's SITL instance, free running, with ``replace`` applied."""
-    text = sitl_mission_yaml(instance)
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path / "flights")
     text = text.replace("connect_timeout_s: 20.0", "connect_timeout_s: 3.0")
-    text = text.replace("directory: runs/flights", f"directory: {tmp_path / 'flights'}")
     for old, new in replace.items():
         assert old in text, old
         text = text.replace(old, new)

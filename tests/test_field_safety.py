@@ -71,7 +71,7 @@ def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_p
 ) -> None:
     sitl = start_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
     mission = tmp_path / "mission.yaml"
-    mission.write_text(sitl_mission_yaml(instance).replace("directory: runs/flights", f"directory: {tmp_path}"))
+    mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
     config, pipeline = validate_for_flight(mission)  # as `slz fly` loads it
     clock = TripsInDescent()
     recorder = FlightRecorder(tmp_path / "flight")

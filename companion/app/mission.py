@@ -16,7 +16,7 @@ from pydantic import Field, field_validator, model_validator
 from companion.config import ConfigError, StrictModel, load_yaml_config
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import GuidanceConfig
-from companion.perception.config import PerceptionConfig
+from companion.perception.config import MODEL_PATH_FIELDS, PerceptionConfig
 from companion.vehicle.link import FlightMode
 
 if TYPE_CHECKING:
@@ -244,9 +244,15 @@ REQUIRED_FOR_FLIGHT = ("polygon_ne_m", "max_altitude_m")
 """The geofence fields a config must give for ``slz fly``: no flight on a default fence."""
 
 
+MISSION_PATH_FIELDS = (*(("perception", *keys) for keys in MODEL_PATH_FIELDS), ("recorder", "directory"))
+"""The paths of a mission config, taken from the config file's folder when relative (:func:`load_mission_config`)."""
+
+
 def load_mission_config(path: str | Path) -> MissionConfig:
-    """Load and validate a mission config (raises ``ConfigError`` naming every bad field)."""
-    return load_yaml_config(MissionConfig, path)
+    """Load and validate a mission config (raises ``ConfigError`` naming every bad field). The relative paths it gives
+    (the model, TensorRT's engine cache, the recorder's directory) are taken from the file's folder, so the same file
+    means the same files from any working directory."""
+    return load_yaml_config(MissionConfig, path, path_fields=MISSION_PATH_FIELDS)
 
 
 def validate_for_flight(path: str | Path, never_arm: bool = False) -> tuple[MissionConfig, SlzPipeline]:

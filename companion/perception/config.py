@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import enum
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +30,24 @@ class SelectionPolicyName(str, enum.Enum):
     """Blind baseline: a seeded random point of the search area, ignoring perception (paper's "random")."""
 
 
+def _shipped_model() -> Path:
+    """models/density/slz_lite.onnx of this installation (the repository, or a copy of it such as the Jetson's
+    /opt/slz/src), absolute; relative to the working directory where the package is installed without it."""
+    beside = Path(os.path.normpath(Path(__file__).absolute().parents[2] / "models" / "density" / "slz_lite.onnx"))
+    return beside if beside.is_file() else Path("models/density/slz_lite.onnx")
+
+
+SHIPPED_MODEL = _shipped_model()
+"""The default density model."""
+
+
 class ModelConfig(StrictModel):
     """The density model and how onnxruntime runs it."""
 
     path: Path = Field(
-        default=Path("models/density/slz_lite.onnx"),
-        description="ONNX file; relative paths are relative to the working directory.",
+        default_factory=lambda: SHIPPED_MODEL,
+        description="ONNX file; in a config file, a relative path is taken from the file's folder. Default: the "
+        "shipped slz_lite.onnx (models/density/ of this installation).",
     )
     providers: list[str] = Field(
         default_factory=lambda: ["CPUExecutionProvider"],
@@ -230,6 +243,11 @@ class PerceptionConfig(StrictModel):
         return self
 
 
+MODEL_PATH_FIELDS = (("model", "path"), ("model", "engine_cache_dir"))
+"""The paths of a ``perception`` section, taken from the config file's folder when relative."""
+
+
 def load_perception_config(path: str | Path, section: str | None = "perception") -> PerceptionConfig:
-    """Load the ``perception`` section of a mission config YAML file (or the whole file if ``section=None``)."""
-    return load_yaml_config(PerceptionConfig, path, section=section)
+    """Load the ``perception`` section of a mission config YAML file (or the whole file if ``section=None``); its
+    relative paths are taken from the file's folder."""
+    return load_yaml_config(PerceptionConfig, path, section=section, path_fields=MODEL_PATH_FIELDS)

@@ -101,7 +101,14 @@ fi
 run install -d -o slz -g slz -m 0750 /var/lib/slz /var/lib/slz/flights /var/lib/slz/trt-cache
 run install -d -m 0755 /etc/slz
 if [ ! -e /etc/slz/mission.yaml ]; then
-    run install -m 0644 "$REPO/mission_configs/px4_serial.yaml" /etc/slz/mission.yaml
+    # A config's relative paths are taken from its own folder: the shipped one names the model from mission_configs/
+    # (../models/...); in /etc/slz it names the installed copy's.
+    if [ "$DRY_RUN" -eq 1 ]; then
+        echo "+ sed 's#: ../models/#: $PREFIX/src/models/#' mission_configs/px4_serial.yaml > /etc/slz/mission.yaml"
+    else
+        sed "s#: \.\./models/#: $PREFIX/src/models/#" "$REPO/mission_configs/px4_serial.yaml" >/etc/slz/mission.yaml
+        chmod 0644 /etc/slz/mission.yaml
+    fi
     say "wrote /etc/slz/mission.yaml: set the geofence, the serial port and the camera before the first flight"
 else
     say "/etc/slz/mission.yaml exists: left as it is"

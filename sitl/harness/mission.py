@@ -24,8 +24,8 @@ from typing import Any, Protocol
 import yaml
 
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
-from companion.app.mission import MissionConfig, camera_mismatches
-from companion.config import read_yaml_file, validate_config
+from companion.app.mission import MISSION_PATH_FIELDS, MissionConfig, camera_mismatches
+from companion.config import paths_from, read_yaml_file, validate_config
 from sitl.config import SitlConfig
 from sitl.harness.process import REPO_ROOT, SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
 from sitl.truth import TruthError, body_edges_m, read_truth, touchdown
@@ -176,7 +176,9 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
     )
     sitl_path = spec.run_dir / "sitl.yaml"
     sitl_path.write_text(yaml.safe_dump({"sitl": sitl_section}, sort_keys=False))
-    mission = read_yaml_file(spec.mission_config)
+    # Its relative paths are the file's (as `slz fly` reads it); the campaign's overrides name theirs from the
+    # repository. The mission.yaml written into the run folder holds them absolute.
+    mission = paths_from(read_yaml_file(spec.mission_config), spec.mission_config.parent, MISSION_PATH_FIELDS)
     frames = {"frame_every": 1, "frame_format": "png"} if spec.record_frames else {"frame_every": 0}
     mission = deep_merge(
         mission,
@@ -190,7 +192,7 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
             "supervision": {"stay_after_failsafe": False},
         },
     )
-    mission = deep_merge(mission, spec.mission_overrides)
+    mission = deep_merge(mission, paths_from(spec.mission_overrides, REPO_ROOT, MISSION_PATH_FIELDS))
     sitl_config = validate_config(SitlConfig, {**sitl_section, "instance": spec.instance}, "mission spec", "sitl")
     mission_config = validate_config(MissionConfig, mission, source="mission spec")
     mismatches = camera_mismatches(mission_config.perception, sitl_config.camera)

@@ -21,10 +21,15 @@ T = TypeVar("T")
 SITL_MISSION_CONFIG = Path(__file__).resolve().parents[2] / "mission_configs" / "sitl.yaml"
 
 
-def sitl_mission_yaml(instance: int) -> str:
+def sitl_mission_yaml(instance: int, flights_dir: Path | None = None) -> str:
     """mission_configs/sitl.yaml on SITL instance ``instance``'s ports (MAVSDK, camera, control channel). A SITL
     started without ``--lockstep`` answers the control channel with "running free": the companion runs free too."""
     text = SITL_MISSION_CONFIG.read_text()
+    # Written elsewhere, its relative paths would be taken from there: the flights go to ``flights_dir``, or where the
+    # shipped file says.
+    flights = flights_dir or SITL_MISSION_CONFIG.parent.parent / "runs" / "flights"
+    assert "directory: ../runs/flights" in text
+    text = text.replace("directory: ../runs/flights", f"directory: {flights}")
     text = text.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
     text = text.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
     return text.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + instance}")
