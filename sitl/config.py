@@ -32,6 +32,18 @@ class SitlCameraConfig(StrictModel):
     height_px: int = Field(default=480, ge=16, le=4096)
     hfov_deg: float = Field(default=90.0, gt=1.0, lt=179.0)
     tilt_deg: float = Field(default=0.0, ge=-90.0, le=90.0, description="0 = nadir, positive towards the nose.")
+    distortion: list[float] = Field(
+        default_factory=list,
+        description="A lens: OpenCV's distortion coefficients (k1, k2, p1, p2[, k3, ...]) applied to each rendered "
+        "frame (companion.perception.lens). The companion's perception.camera.distortion must match. Empty: none.",
+    )
+
+    @field_validator("distortion")
+    @classmethod
+    def _opencv_counts(cls, coefficients: list[float]) -> list[float]:
+        if len(coefficients) not in (0, 4, 5, 8, 12, 14):
+            raise ValueError(f"{len(coefficients)} coefficients; OpenCV's model takes 4, 5, 8, 12 or 14 (or none)")
+        return coefficients
 
 
 class FaultKind(str, enum.Enum):

@@ -6,10 +6,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from companion.cache import KeyedCache
 from companion.camera.frames import encode_frame
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from companion.perception.lens import LensDistortion
 from sitl.config import SitlConfig
 from sitl.dynamics.base import VehicleState
 from sitl.frame_server import FrameServer
@@ -53,6 +55,7 @@ class SimCamera:
         self.intrinsics = PinholeCamera.from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)
         self.T_body_camera = T_body_camera_from_mount(tilt_deg=cam.tilt_deg)
         self.renderer = WorldRenderer(self.park, self.crowd, self.intrinsics, self.T_body_camera, self.light)
+        self.lens = LensDistortion.from_coefficients(self.intrinsics, cam.distortion)
         self.server = FrameServer(config.bind_address, config.frame_port)
         self.period_s = 1.0 / cam.rate_hz
         self.seed = config.seed
@@ -74,14 +77,19 @@ class SimCamera:
             self.server.stats.dropped += 1
             self.seq += 1
             return False
+        sent = self.server.send(encode_frame(self.seq, t_s, self.draw(t_s, state)))
+        self.seq += 1
+        return sent
+
+    def draw(self, t_s: float, state: VehicleState) -> npt.NDArray[np.uint8]:
+        """The frame at ``t_s`` from ``state``, shape (H, W, 3) BGR uint8: rendered, weathered, then through the
+        lens when one is configured."""
         n, e, d = (float(v) for v in state.position_ned_m)
         pose = Pose.from_ned_quaternion(n, e, d, state.quaternion_wxyz)
         weather = self.weather.state_at(t_s)
         view = self.renderer.render(pose, t_s, with_mask=False, with_depth=weather.kind is WeatherKind.FOG)
         image = apply_weather(view.image_bgr, weather, self.seed * 1_000_003 + self.seq, view.depth_m)
-        sent = self.server.send(encode_frame(self.seq, t_s, image))
-        self.seq += 1
-        return sent
+        return image if self.lens is None else self.lens.distort(image)
 
     def skip(self) -> None:
         """A frame the lockstep client does not want: not drawn, counted, its sequence number passed (the frames

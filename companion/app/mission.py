@@ -310,4 +310,14 @@ def camera_mismatches(perception: PerceptionConfig, sim_camera: object, where: s
                 f"perception.camera.{key}: {ours[key]:g} does not match {where}.{key} = {theirs:g} "
                 "(the projection would put people in the wrong place)"
             )
+
+    def lens(coefficients: list[float]) -> list[float]:  # all zero is no lens, as an empty list
+        return [float(c) for c in coefficients] if any(coefficients) else []
+
+    theirs_lens = lens(list(getattr(sim_camera, "distortion", [])))
+    if theirs_lens != lens(cam.distortion):
+        problems.append(
+            f"perception.camera.distortion: {cam.distortion} does not match {where}.distortion = {theirs_lens} "
+            "(frames would be undistorted with another lens than the one they were taken with)"
+        )
     return problems

@@ -170,7 +170,8 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
                 if video is not None:
                     altitude = -float(pose.position_ned_m[2])
                     caption = f"t {record['t_s']:6.1f} s  alt {altitude:5.1f} m  {phase}"
-                    video.add(draw_camera_overlay(image, result, pipeline.projector), caption)
+                    shown = image if pipeline.lens is None else pipeline.lens.undistort(image)  # the pinhole view
+                    video.add(draw_camera_overlay(shown, result, pipeline.projector), caption)
             else:
                 if record.get("source") == "start" and guidance.phase is not LandingPhase.IDLE:
                     guidance = new_guidance()  # a dry run that decides again after its decisions ended

@@ -214,11 +214,21 @@ class CameraConfig(StrictModel):
     roll_deg: float = Field(default=0.0, ge=-90.0, le=90.0, description="Positive towards the right side.")
     yaw_deg: float = Field(default=0.0, ge=-180.0, le=180.0, description="Image rotation about the optical axis.")
     offset_frd_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    distortion: list[float] = Field(
+        default_factory=list,
+        description="OpenCV's lens distortion coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]), "
+        "as cv2.calibrateCamera gives them (scripts/calibrate_camera.py): each frame is undistorted onto the pinhole "
+        "image of these intrinsics first. Empty or all zero: no lens (frames untouched).",
+    )
 
     @model_validator(mode="after")
     def _focal_pair(self) -> CameraConfig:
         if (self.fx_px is None) != (self.fy_px is None):
             raise ValueError("fx_px and fy_px must be given together (or neither, to use hfov_deg)")
+        if len(self.distortion) not in (0, 4, 5, 8, 12, 14):
+            raise ValueError(
+                f"distortion: {len(self.distortion)} coefficients; OpenCV's model takes 4, 5, 8, 12 or 14 (or none)"
+            )
         return self
 
 

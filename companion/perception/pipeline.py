@@ -24,6 +24,7 @@ from companion.perception.density import (
     predict_downscaled,
 )
 from companion.perception.errors import PerceptionError
+from companion.perception.lens import LensDistortion
 from companion.perception.occupancy import OccupancyImage, OccupancyMapper
 from companion.perception.projection import HeadPlaneOccupancy, HeadPlaneProjector
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target, make_policy
@@ -101,6 +102,7 @@ class SlzPipeline:
         tracker: ZoneTracker,
         policy: SelectionPolicy,
         min_gsd_m_per_px: float = 0.0,
+        lens: LensDistortion | None = None,
     ) -> None:
         if not (math.isfinite(min_gsd_m_per_px) and min_gsd_m_per_px >= 0.0):
             raise PerceptionError("pipeline", f"min_gsd_m_per_px must be >= 0, got {min_gsd_m_per_px}")
@@ -111,6 +113,8 @@ class SlzPipeline:
         self.zone_finder = zone_finder
         self.tracker = tracker
         self.policy = policy
+        self.lens = lens
+        """The camera's lens: each frame is undistorted onto the pinhole image first (None: no lens)."""
 
     @classmethod
     def from_config(
@@ -133,6 +137,7 @@ class SlzPipeline:
             tracker=ZoneTracker(config.tracking),
             policy=make_policy(config.selection, config.zones.landing_area_ne_m),
             min_gsd_m_per_px=config.model.min_gsd_m_per_px,
+            lens=LensDistortion.from_coefficients(camera, config.camera.distortion),
         )
 
     def reset(self) -> None:
@@ -165,6 +170,9 @@ class SlzPipeline:
                 f"camera config says {cam.width_px}x{cam.height_px}",
             )
         timings: dict[str, float] = {}
+        lens = self.lens
+        if lens is not None:
+            frame_bgr = _timed(timings, "undistort", lambda: lens.undistort(frame_bgr))
         gsd = self.projector.finest_gsd_m_per_px(pose)
         scale = input_scale(gsd, self.min_gsd_m_per_px)
         density = _timed(timings, "density", lambda: predict_downscaled(self.density_model, frame_bgr, scale))
