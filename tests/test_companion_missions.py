@@ -77,6 +77,7 @@ def test_the_demo_lands_a_static_crowd_mission_clear_of_people(demo: Demo) -> No
     assert s["nearest_person_m"] >= CLEARANCE_M
     assert s["people_within_1_5m"] == 0
     assert f"nearest person's body is {s['nearest_person_m']:.2f} m" in demo.stdout
+    assert (demo.run_dir / "demo.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # the README's picture, made here
     zone = s["descent_zone"]  # the zone's radius is named for what it is: as seen when the descent began
     assert f"zone {zone['track_id']}: free radius {zone['radius_m']:.2f} m as seen from" in demo.stdout
     assert zone["seen_from_altitude_m"] > 5.0

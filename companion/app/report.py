@@ -259,7 +259,7 @@ def _plot_timeline(log: FlightLog, path: Path) -> None:
     plt.close(fig)
 
 
-def _camera_views(flight_dir: Path, log: FlightLog, config: MissionConfig) -> list[tuple[float, np.ndarray, str]]:
+def camera_views(flight_dir: Path, log: FlightLog, config: MissionConfig) -> list[tuple[float, np.ndarray, str]]:
     """Every saved frame with the logged zones and target drawn on it, and its caption."""
     camera, T_body_camera = camera_from_config(config.perception.camera)
     projector = HeadPlaneProjector(camera, T_body_camera, config.perception.projection)
@@ -382,7 +382,7 @@ def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bo
     _plot_top_view(flight, config, out / "top_view.png")
     _plot_timeline(flight, out / "timeline.png")
     report.files += [out / "top_view.png", out / "timeline.png"]
-    views = _camera_views(flight_dir, flight, config)
+    views = camera_views(flight_dir, flight, config)
     if views:
         _contact_sheet(views, out / "camera_sheet.jpg")
         report.files.append(out / "camera_sheet.jpg")

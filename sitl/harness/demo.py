@@ -5,7 +5,7 @@ the companion with ``mission_configs/sitl.yaml``, flies one mission in lockstep 
 writes ``runs/<id>/``: the flight log (``flight/flight.jsonl``, with every frame saved losslessly, so ``slz replay``
 re-runs it), the SITL's ground truth, ``top_view.png`` (people, the zones tracked when the landing was decided, the
 path, the touchdown), ``camera.mp4`` (the camera view with occupancy, zones and target, from a replay of the log) and
-``summary.json``."""
+``summary.json`` and ``demo.png`` (the camera view as the descent began beside the top view: the README's picture)."""
 
 from __future__ import annotations
 
@@ -19,9 +19,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.app.flight_log import FlightLog
-from companion.app.replay import replay
-from companion.app.report import tracks_at_landing
+from companion.app.flight_log import FlightLog, RecordKind
+from companion.app.replay import config_from_header, replay
+from companion.app.report import camera_views, tracks_at_landing
 from sitl.harness.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly
 from sitl.truth import people_at, read_truth, touchdown
 
@@ -71,11 +71,36 @@ def run(
     top_view_path = run_dir / "top_view.png"
     cv2.imwrite(str(top_view_path), draw_mission_top_view(run_dir))
     zone = descent_zone(run_dir / "flight")
+    figure = descent_figure(run_dir, top_view_path)
+    if figure is not None:
+        cv2.imwrite(str(run_dir / "demo.png"), figure)
     summary = {**result.to_json(), "replay_identical": report.identical, "video": str(video_path)}
     if zone is not None:
         summary["descent_zone"] = {"track_id": zone[0], "radius_m": zone[1], "seen_from_altitude_m": zone[2]}
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return DemoOutcome(result, report.identical, top_view_path, video_path, zone)
+
+
+def descent_figure(run_dir: Path, top_view_path: Path) -> np.ndarray | None:
+    """The demo's picture (the README's): the camera view when the last descent began, with the zones tracked then
+    (cyan, with their ids) and the target (yellow), beside the top view; None without a descent or a saved frame."""
+    flight_dir = run_dir / "flight"
+    log = FlightLog.read(flight_dir)
+    header = log.first(RecordKind.HEADER)
+    starts = [d.t_s for before, d in zip([None, *log.decisions()], log.decisions(), strict=False)
+              if d.phase == "descent" and (before is None or before.phase != "descent")]  # fmt: skip
+    top = cv2.imread(str(top_view_path), cv2.IMREAD_COLOR)
+    if header is None or not starts or top is None:
+        return None
+    views = [v for v in camera_views(flight_dir, log, config_from_header(header["config"])) if v[0] <= starts[-1]]
+    if not views:
+        return None
+    _, image, caption = views[-1]
+    height = top.shape[0]
+    camera = cv2.resize(image, (round(image.shape[1] * height / image.shape[0]), height), interpolation=cv2.INTER_AREA)
+    cv2.rectangle(camera, (0, 0), (camera.shape[1], 24), (0, 0, 0), -1)
+    cv2.putText(camera, caption[:80], (6, 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    return np.hstack([camera, np.full((height, 8, 3), 255, np.uint8), top])
 
 
 def descent_zone(flight_dir: Path) -> tuple[int | None, float, float] | None:
