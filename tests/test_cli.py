@@ -49,7 +49,7 @@ def test_a_config_without_a_geofence_is_refused_for_fly_naming_the_fields(tmp_pa
         flown = slz("fly", "--dry-run", "--config", path, "--out", str(tmp_path / "flight"))
         for result in (checked, flown):
             assert result.returncode == 2, result.stderr
-            assert "geofence.polygon_ne_m: required for slz fly" in result.stderr
+            assert "geofence.polygon_ne_m or geofence.polygon_latlon_deg: required for slz fly" in result.stderr
             assert "geofence.max_altitude_m: required for slz fly" in result.stderr
         assert not (tmp_path / "flight" / "flight.jsonl").exists()
 

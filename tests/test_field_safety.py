@@ -198,3 +198,51 @@ def test_a_dry_run_started_on_the_ground_records_the_whole_flight_the_pilot_flie
     assert any(r["kind"] == "decision" and r["source"] == "start" for r in records)
     assert [r["event"] for r in records if r["kind"] == "supervision"][-1] == "on_ground"
     assert kinds[-1] == "end"
+
+
+def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_flown(
+    tmp_path: Path, instance: int
+) -> None:
+    from companion.app.replay import replay
+    from sitl.geodesy import ned_to_geodetic
+
+    sitl = start_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
+    origin = SitlConfig()
+    corners_ne = [(-25.0, -25.0), (-25.0, 25.0), (25.0, 25.0), (25.0, -25.0)]  # sitl.yaml's fence, as a surveyor
+    lat0, lon0 = origin.origin_lat_deg, origin.origin_lon_deg
+    corners_latlon = [ned_to_geodetic(n, e, 0.0, lat0, lon0, 0.0)[:2] for n, e in corners_ne]
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path)
+    fence_ne = "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]\n"
+    assert fence_ne in text
+    latlon = ", ".join(f"[{lat:.9f}, {lon:.9f}]" for lat, lon in corners_latlon)
+    text = text.replace(fence_ne, f"  polygon_latlon_deg: [{latlon}]\n")
+    text = text.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(text)
+    try:
+        fly = subprocess.run(
+            [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+            cwd=REPO_ROOT,
+            capture_output=True,
+            text=True,
+            timeout=180,
+            check=False,
+        )
+    finally:
+        sitl.stop()
+    assert fly.returncode == 0, fly.stderr[-3000:]
+    assert "ended in done (landed)" in fly.stdout
+    records = read_log(tmp_path / "flight" / "flight.jsonl")
+    fence = next(r for r in records if r["kind"] == "fence")
+    # PX4's projection (a sphere) against the SITL's (WGS-84 radii at the origin): a few centimetres at 25 m.
+    got_ne = [tuple(v) for v in fence["polygon_ne_m"]]
+    assert got_ne == [pytest.approx(corner, abs=0.1) for corner in corners_ne]
+    assert (fence["origin_lat_deg"], fence["origin_lon_deg"]) == pytest.approx(
+        (origin.origin_lat_deg, origin.origin_lon_deg), abs=1e-6
+    )
+    setpoints = [r["setpoint"] for r in records if r["kind"] == "command" and r["setpoint"]]
+    assert setpoints
+    assert all(abs(sp["north_m"]) <= 25.1 and abs(sp["east_m"]) <= 25.1 for sp in setpoints)
+    # The replay projects nothing: it takes the fence the flight recorded, and decides the same.
+    report = replay(tmp_path / "flight")
+    assert report.identical, report.differences

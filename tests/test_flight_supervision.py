@@ -87,6 +87,10 @@ class FakeLink:
     async def return_to_launch(self) -> None:
         self.commands.append(("return", None))
 
+    async def global_origin(self, timeout_s: float) -> tuple[float, float]:
+        """The EKF origin these tests fly from (Zurich, PX4's SITL default)."""
+        return 47.397742, 8.545594
+
     async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
         """Kept, as a ground station would see them."""
         self.mavlink.append((name, fields))

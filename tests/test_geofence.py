@@ -55,3 +55,28 @@ def test_a_landing_area_must_lie_inside_the_geofence() -> None:
     beyond = [*roi[:2], (30.0, 15.0), roi[3]]
     with pytest.raises(ConfigError, match=r"landing_area_ne_m vertex \(30.0, 15.0\) lies outside geofence"):
         validate_config(MissionConfig, {"geofence": fence, "perception": {"zones": {"landing_area_ne_m": beyond}}})
+
+
+def test_latitude_and_longitude_project_as_px4_does_into_the_local_frame() -> None:
+    from companion.guidance.geofence import latlon_to_ne_m
+    from sitl.geodesy import geodetic_to_ned, ned_to_geodetic
+
+    lat0, lon0 = 47.397742, 8.545594
+    assert latlon_to_ne_m(lat0, lon0, lat0, lon0) == (0.0, 0.0)
+    for north_m, east_m in ((100.0, 0.0), (0.0, 100.0), (-60.0, 80.0), (500.0, -300.0)):
+        lat, lon, _ = ned_to_geodetic(north_m, east_m, 0.0, lat0, lon0, 0.0)
+        n, e = latlon_to_ne_m(lat, lon, lat0, lon0)
+        want_n, want_e, _ = geodetic_to_ned(lat, lon, 0.0, lat0, lon0, 0.0)
+        # PX4's sphere against the SITL's WGS-84 radii at the origin (meridian and prime vertical): 0.3 % at most
+        assert abs(n - want_n) <= 3e-3 * abs(want_n) + 0.01
+        assert abs(e - want_e) <= 3e-3 * abs(want_e) + 0.01
+
+
+def test_a_fence_is_given_once_in_local_ned_or_in_latitude_and_longitude() -> None:
+    corners = [(47.0, 8.0), (47.0, 8.001), (47.001, 8.001)]
+    config = GeofenceConfig.model_validate({"polygon_latlon_deg": corners})
+    assert config.polygon_latlon_deg == corners
+    with pytest.raises(ValueError, match="give polygon_ne_m or polygon_latlon_deg, not both"):
+        GeofenceConfig.model_validate({"polygon_latlon_deg": corners, "polygon_ne_m": [(0, 0), (0, 5), (5, 5)]})
+    with pytest.raises(ValueError, match=r"vertex \(97.0, 8.0\) is not a latitude and longitude"):
+        GeofenceConfig.model_validate({"polygon_latlon_deg": [(97.0, 8.0), *corners[1:]]})

@@ -40,16 +40,17 @@ from typing import Any
 from companion.app.drivers import FreeRunningDriver, LockstepDriver
 from companion.app.flight_log import RecordKind
 from companion.app.ground_report import GroundReport
-from companion.app.mission import MissionConfig, OperatingMode
+from companion.app.mission import MissionConfig, OperatingMode, with_fence_ne_m
 from companion.app.recorder import FlightRecorder
 from companion.app.stall_watchdog import StallWatchdog
 from companion.app.start_sequence import StartAction, StartSequence, StartStage, StartStep
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import GeometryError, Pose, polygon_centroid_ne_m
-from companion.guidance.geofence import Geofence
+from companion.guidance.geofence import Geofence, latlon_to_ne_m
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase, VehicleState
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
+from companion.perception.zones import ZoneFinder
 from companion.vehicle.link import FlightMode, VehicleError, VehicleLink
 from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.sim_control import SetpointNedYaw
@@ -481,6 +482,23 @@ class FlightApp:
         took_off = self.start_sequence.takes_off and self.start_sequence.stage is not StartStage.WAITING
         return self._offboard or took_off
 
+    async def _localize_fence(self, polygon_latlon_deg: list[tuple[float, float]]) -> None:
+        """A fence given in latitude and longitude: projected into local NED from the autopilot's EKF origin, as PX4
+        does, then every cross-check of the config again (ConfigError before anything is commanded)."""
+        lat0, lon0 = await self.link.global_origin(self.config.vehicle.connect_timeout_s)
+        polygon_ne_m = [latlon_to_ne_m(lat, lon, lat0, lon0) for lat, lon in polygon_latlon_deg]
+        self.config = with_fence_ne_m(self.config, polygon_ne_m)
+        self.recorder.write(RecordKind.FENCE, None, polygon_ne_m=polygon_ne_m, origin_lat_deg=lat0, origin_lon_deg=lon0)
+        logger.info(
+            "geofence: %d vertices projected from latitude and longitude around the EKF origin (%.7f, %.7f)",
+            len(polygon_ne_m),
+            lat0,
+            lon0,
+        )
+        self.guidance = self._new_guidance()
+        self._area_centre_ne_m = polygon_centroid_ne_m(polygon_ne_m)
+        self.pipeline.zone_finder = ZoneFinder(self.config.perception.zones, polygon_ne_m)
+
     def head_plane_visible(self, state: VehicleState) -> bool:
         """The pipeline could read a frame taken from the vehicle's pose at ``state.t_s``."""
         pose = self.link.poses.pose_at(state.t_s)
@@ -588,6 +606,8 @@ class FlightApp:
         self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
         await self.source.open()  # a missing camera fails the start, before the vehicle is touched
         await self.link.connect(cfg.vehicle.connect_timeout_s)
+        if cfg.geofence.polygon_latlon_deg is not None:
+            await self._localize_fence(cfg.geofence.polygon_latlon_deg)
         if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
             self.lockstep = None
         self.outcome.lockstep = self.lockstep is not None

@@ -48,6 +48,8 @@ class RecordKind(str, enum.Enum):
     COMMAND = "command"
     """A command sent to the vehicle."""
     FAILSAFE = "failsafe"
+    FENCE = "fence"
+    """A fence given in latitude and longitude, projected to local NED at the start (``polygon_ne_m``, the origin)."""
     SUPERVISION = "supervision"
     """After a failsafe command: ``event`` (watching, on_ground, pilot_has_it) and ``reason``."""
     ERROR = "error"
@@ -68,6 +70,7 @@ REQUIRED_FIELDS: dict[RecordKind, tuple[str, ...]] = {
     RecordKind.COMMAND: ("command",),
     RecordKind.FAILSAFE: ("reason",),
     RecordKind.SUPERVISION: ("event", "reason"),
+    RecordKind.FENCE: ("polygon_ne_m",),
     RecordKind.WAITING: ("waiting_for",),
     RecordKind.ERROR: ("error",),
     RecordKind.LATENCY: ("frame_to_command_ms",),

@@ -11,9 +11,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import urlparse
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
-from companion.config import ConfigError, StrictModel, load_yaml_config
+from companion.config import ConfigError, StrictModel, format_validation_error, load_yaml_config
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import GuidanceConfig
 from companion.perception.config import MODEL_PATH_FIELDS, PerceptionConfig
@@ -208,18 +208,17 @@ def fence_contradictions(config: MissionConfig) -> list[str]:
     fence = Geofence(config.geofence)
     band = config.geofence
     problems = []
+    localized = band.polygon_latlon_deg is None  # a fence in latitude and longitude: checked at the flight's start
     for north_m, east_m in config.perception.zones.landing_area_ne_m or []:
-        if not fence.contains_ne(north_m, east_m):
+        if localized and not fence.contains_ne(north_m, east_m):
             problems.append(
                 f"perception.zones.landing_area_ne_m vertex ({north_m}, {east_m}) lies outside "
                 "geofence.polygon_ne_m: the companion could not fly to a zone there"
             )
     start = config.start
-    start_ne = (start.start_north_m, start.start_east_m)
-    if start_ne[0] is not None and start_ne[1] is not None and not fence.contains_ne(start_ne[0], start_ne[1]):
-        problems.append(
-            f"start.start_north_m, start.start_east_m ({start_ne[0]}, {start_ne[1]}) lie outside geofence.polygon_ne_m"
-        )
+    n0, e0 = start.start_north_m, start.start_east_m
+    if n0 is not None and e0 is not None and localized and not fence.contains_ne(n0, e0):
+        problems.append(f"start.start_north_m, start.start_east_m ({n0}, {e0}) lie outside geofence.polygon_ne_m")
     climbs = start.arm_and_takeoff or start.start_north_m is not None  # the takeoff and the transit fly at it
     if climbs and not band.min_altitude_m <= start.takeoff_altitude_m <= band.max_altitude_m:
         problems.append(
@@ -240,8 +239,21 @@ def fence_contradictions(config: MissionConfig) -> list[str]:
     return problems
 
 
-REQUIRED_FOR_FLIGHT = ("polygon_ne_m", "max_altitude_m")
-"""The geofence fields a config must give for ``slz fly``: no flight on a default fence."""
+REQUIRED_FOR_FLIGHT = (("polygon_ne_m", "polygon_latlon_deg"), ("max_altitude_m",))
+"""The geofence fields a config must give for ``slz fly`` (one of each group): no flight on a default fence."""
+
+
+def with_fence_ne_m(config: MissionConfig, polygon_ne_m: list[tuple[float, float]]) -> MissionConfig:
+    """``config`` with its fence in local NED (a fence given in latitude and longitude, projected at the flight's
+    start), validated again with every cross-check; raises ConfigError naming what the projected fence contradicts."""
+    data = config.model_dump(mode="json")
+    data["geofence"]["polygon_ne_m"] = [list(v) for v in polygon_ne_m]
+    data["geofence"]["polygon_latlon_deg"] = None
+    try:
+        localized = MissionConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError("the fence projected from latitude and longitude", format_validation_error(exc)) from None
+    return localized
 
 
 MISSION_PATH_FIELDS = (*(("perception", *keys) for keys in MODEL_PATH_FIELDS), ("recorder", "directory"))
@@ -272,13 +284,14 @@ def validate_for_flight(path: str | Path, never_arm: bool = False) -> tuple[Miss
     from companion.perception.pipeline import SlzPipeline
 
     config = load_mission_config(path)
-    unset = [f"geofence.{name}" for name in REQUIRED_FOR_FLIGHT if name not in config.geofence.model_fields_set]
+    given = config.geofence.model_fields_set
+    unset = [" or ".join(f"geofence.{n}" for n in group) for group in REQUIRED_FOR_FLIGHT if not given & set(group)]
     if unset:
         raise ConfigError(
             str(path),
             [
-                f"{name}: required for slz fly (the field's own fence, local NED metres around the EKF origin; "
-                "there is no default fence)"
+                f"{name}: required for slz fly (the field's own fence, in local NED metres around the EKF origin or "
+                "in latitude and longitude; there is no default fence)"
                 for name in unset
             ],
         )

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
-from companion.app.mission import MissionConfig
+from companion.app.mission import MissionConfig, with_fence_ne_m
 from companion.app.recorder import plain
 from companion.geometry import GeometryError, Pose
 from companion.guidance.geofence import Geofence
@@ -100,6 +100,11 @@ def config_from_header(raw: object) -> MissionConfig:
     A log written before frames were shrunk at low altitude has no ``perception.model.min_gsd_m_per_px``: its flight
     ran the model on whole frames, so the replay does too (0, off), instead of taking today's default.
     """
+    fence = raw.get("geofence") if isinstance(raw, dict) else None
+    if isinstance(raw, dict) and isinstance(fence, dict) and fence.get("polygon_latlon_deg") is not None:
+        # A fence given in latitude and longitude: the header dumps the unused polygon_ne_m beside it (its default);
+        # the flight's projection of it is in the log's fence record.
+        raw = {**raw, "geofence": {k: v for k, v in fence.items() if k != "polygon_ne_m"}}
     config = MissionConfig.model_validate(raw)
     perception = raw.get("perception") if isinstance(raw, dict) else None
     model = perception.get("model") if isinstance(perception, dict) else None
@@ -125,6 +130,9 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     if header is None:
         raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
     config = config_from_header(header["config"])
+    fence = flight.first(RecordKind.FENCE)
+    if fence is not None:  # a fence given in latitude and longitude, as the flight projected it
+        config = with_fence_ne_m(config, [(float(n), float(e)) for n, e in fence["polygon_ne_m"]])
     frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in flight.of(RecordKind.FRAME)}
     pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
     zones = config.perception.zones

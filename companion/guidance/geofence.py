@@ -27,11 +27,24 @@ class GeofenceConfig(StrictModel):
         min_length=3,
         description="Vertices (north_m, east_m) of the allowed area, in order (either direction).",
     )
+    polygon_latlon_deg: list[tuple[float, float]] | None = Field(
+        default=None,
+        min_length=3,
+        description="The fence's vertices as (latitude_deg, longitude_deg), WGS-84, instead of polygon_ne_m: turned "
+        "into local NED at the flight's start from the autopilot's EKF origin (GPS_GLOBAL_ORIGIN), as PX4 projects "
+        "(azimuthal equidistant). Every other place in the config stays in local NED metres.",
+    )
     min_altitude_m: float = Field(default=0.0, ge=-10.0, le=500.0, description="Lowest setpoint altitude.")
     max_altitude_m: float = Field(default=60.0, gt=0.0, le=500.0, description="Highest setpoint altitude.")
 
     @model_validator(mode="after")
     def _check(self) -> GeofenceConfig:
+        if self.polygon_latlon_deg is not None:
+            if "polygon_ne_m" in self.model_fields_set:
+                raise ValueError("give polygon_ne_m or polygon_latlon_deg, not both")
+            for lat, lon in self.polygon_latlon_deg:
+                if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+                    raise ValueError(f"polygon_latlon_deg vertex ({lat}, {lon}) is not a latitude and longitude")
         if self.max_altitude_m <= self.min_altitude_m:
             raise ValueError(
                 f"max_altitude_m ({self.max_altitude_m}) must exceed min_altitude_m ({self.min_altitude_m})"
@@ -170,6 +183,24 @@ class Geofence:
             float(self.polygon[:, 1].min()),
             float(self.polygon[:, 1].max()),
         )
+
+
+EARTH_RADIUS_M = 6_371_000.0
+"""PX4's (CONSTANTS_RADIUS_OF_EARTH): its local frame is an azimuthal equidistant projection on this sphere."""
+
+
+def latlon_to_ne_m(lat_deg: float, lon_deg: float, origin_lat_deg: float, origin_lon_deg: float) -> tuple[float, float]:
+    """(north_m, east_m) of a WGS-84 point in the local NED frame whose origin is ``origin`` (PX4's map projection:
+    azimuthal equidistant on a sphere, ``lib/geo`` ``map_projection_project``)."""
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    lat0, lon0 = math.radians(origin_lat_deg), math.radians(origin_lon_deg)
+    cos_d_lon = math.cos(lon - lon0)
+    arg = max(-1.0, min(1.0, math.sin(lat0) * math.sin(lat) + math.cos(lat0) * math.cos(lat) * cos_d_lon))
+    c = math.acos(arg)
+    k = c / math.sin(c) if abs(c) > 1e-12 else 1.0
+    north = k * (math.cos(lat0) * math.sin(lat) - math.sin(lat0) * math.cos(lat) * cos_d_lon) * EARTH_RADIUS_M
+    east = k * math.cos(lat) * math.sin(lon - lon0) * EARTH_RADIUS_M
+    return north, east
 
 
 def horizontal_distance_m(a_ne: tuple[float, float], b_ne: tuple[float, float]) -> float:

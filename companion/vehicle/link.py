@@ -120,6 +120,11 @@ class VehicleLink(Protocol):
         """Return to launch."""
         ...
 
+    async def global_origin(self, timeout_s: float) -> tuple[float, float]:
+        """The autopilot's EKF origin (GPS_GLOBAL_ORIGIN): latitude and longitude in degrees, where its local NED
+        frame starts; :class:`VehicleError` when it gives none within ``timeout_s`` (wall)."""
+        ...
+
     async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
         """Send one MAVLink message by name (``"STATUSTEXT"``) with its fields (names as in the MAVLink XML) over the
         vehicle link; the autopilot forwards it to the ground station. Raises :class:`VehicleError` when refused."""

@@ -277,6 +277,21 @@ class MavsdkVehicleLink:
         action, _ = self._plugins()
         await self._call("return to launch", action.return_to_launch)
 
+    async def global_origin(self, timeout_s: float) -> tuple[float, float]:
+        """The EKF origin (GPS_GLOBAL_ORIGIN), latitude and longitude in degrees (see VehicleLink)."""
+        if self._system is None:
+            raise VehicleError(self.url, "not connected")
+        try:
+            origin = await asyncio.wait_for(self._telemetry.get_gps_global_origin(), timeout_s)
+        except asyncio.TimeoutError:
+            raise VehicleError(self.url, f"no GPS_GLOBAL_ORIGIN within {timeout_s:g} s") from None
+        except Exception as exc:  # TelemetryError: the autopilot has no origin yet
+            raise VehicleError(self.url, f"no GPS_GLOBAL_ORIGIN: {exc}") from None
+        lat, lon = float(origin.latitude_deg), float(origin.longitude_deg)
+        if not (math.isfinite(lat) and math.isfinite(lon)):
+            raise VehicleError(self.url, "GPS_GLOBAL_ORIGIN not set (no GPS fix yet?)")
+        return lat, lon
+
     async def read_parameters(self, timeout_s: float = 15.0) -> dict[str, float] | None:
         """Every parameter of the autopilot by name (integers as floats), from one list request; None when the list
         does not arrive within ``timeout_s``. Asking for the list, not for names it may lack, leaves no retries and
