@@ -109,7 +109,8 @@ class CameraSourceConfig(StrictModel):
         default=0.0,
         ge=0.0,
         le=2.0,
-        description="For sources without capture times (V4L2, RTSP, files): time from exposure to arrival.",
+        description="For sources without capture times (V4L2, RTSP, files): time from exposure to arrival "
+        "(scripts/measure_latency.py measures it from a recorded flight).",
     )
 
 
