@@ -195,7 +195,9 @@ def describe(outcome: DemoOutcome) -> str:
             "the camera sees a few metres around the footprint: a lower bound, not the zone's size)"
         )
     lines.append(f"replay of the log: {'identical' if outcome.replay_identical else 'DIFFERENT'}")
-    lines.append(f"wrote {r.run_dir}: flight/, truth.jsonl, {outcome.top_view_path.name}, {outcome.video_path.name}")
+    names = [outcome.top_view_path.name, outcome.video_path.name, "demo.png", "summary.json"]
+    names = [name for name in names if (Path(r.run_dir) / name).exists()]
+    lines.append(f"wrote {r.run_dir}: flight/, truth.jsonl, {', '.join(names)}")
     lines.append(f"look again: slz report {r.run_dir}, slz replay {r.run_dir}")
     return "\n".join(lines)
 
