@@ -437,3 +437,23 @@ def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the_vehic
     starts = [r for r in records if r["kind"] == "decision" and r["source"] == "start"]
     assert len(starts) >= 2
     assert app.outcome.reason.endswith("the flight is over: on the ground and disarmed")
+
+
+def test_a_pilot_who_takes_over_as_the_wall_limit_passes_keeps_the_vehicle(
+    tmp_path: Path, config: PerceptionConfig
+) -> None:
+    link, clock = FakeLink(), Clock()
+    app = limited_flight(tmp_path, config, link, clock)
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        sent = len(link.commands)
+        link.status.mode = FlightMode.POSCTL  # the pilot's switch and the limit, seen at the same tick
+        clock.now_s = 1000.0
+        await tick(app, link, 1.1)
+        for k in range(10):
+            await tick(app, link, 1.2 + 0.1 * k)
+        assert len(link.commands) == sent  # no hold, no return: the vehicle is the pilot's
+
+    asyncio.run(flight())
+    assert app.outcome.phase == "yielded"

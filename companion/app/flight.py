@@ -255,8 +255,9 @@ class FlightApp:
             if not self._commanding or decision.kind is CommandKind.NONE:
                 return False
             mode = self.link.status.mode
-            if self._offboard and decision.kind is CommandKind.SETPOINT and mode not in _OURS:
-                return False  # the pilot's mode since the last tick: nothing more goes out, and the next tick yields
+            if self._offboard and mode not in _OURS:
+                return False  # the pilot's mode since the last tick: nothing more goes out (no setpoint, no land, no
+                # hold or return either: that would take the vehicle back), and the next tick yields
             await self._send_one(decision)
             return True
 
@@ -395,14 +396,14 @@ class FlightApp:
             else:
                 self.done.set()
             return
-        if self._wall_deadline is not None and self._wall_clock() >= self._wall_deadline:
-            await self._wall_limit(state)
-            return
         if self._offboard and status.mode not in _OURS and not self.dry_run:
             self._offboard = False
             self._commanding = False  # never take control back in this flight
             mode = status.mode.value
             await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
+            return
+        if self._wall_deadline is not None and self._wall_clock() >= self._wall_deadline:  # after the pilot's word
+            await self._wall_limit(state)
             return
         if not self.start_sequence.started:
             visible = self.head_plane_visible(state) if self.dry_run else True
