@@ -10,6 +10,7 @@ from pydantic import Field, field_validator, model_validator
 from companion.config import StrictModel, load_yaml_config
 from sitl.autopilot.params import PARAMS
 from sitl.dynamics.base import DynamicsBackend
+from sitl.render.sensor import SensorConfig
 from sitl.world.scenario import ScenarioConfig
 
 API_PORT_REMOTE = 14540
@@ -36,6 +37,11 @@ class SitlCameraConfig(StrictModel):
         default_factory=list,
         description="A lens: OpenCV's distortion coefficients (k1, k2, p1, p2[, k3, ...]) applied to each rendered "
         "frame (companion.perception.lens). The companion's perception.camera.distortion must match. Empty: none.",
+    )
+    sensor: SensorConfig = Field(
+        default_factory=SensorConfig,
+        description="What a real camera does to the picture: motion blur, defocus, vignetting, exposure and white "
+        "balance drift, noise, JPEG (sitl/render/sensor.py). Off by default: the paper tables were flown without.",
     )
 
     @field_validator("distortion")

@@ -16,6 +16,7 @@ from sitl.config import SitlConfig
 from sitl.dynamics.base import VehicleState
 from sitl.frame_server import FrameServer
 from sitl.render.camera import Light, WorldRenderer
+from sitl.render.sensor import image_velocity_px_s, optics, readout
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import WeatherKind
@@ -56,6 +57,7 @@ class SimCamera:
         self.T_body_camera = T_body_camera_from_mount(tilt_deg=cam.tilt_deg)
         self.renderer = WorldRenderer(self.park, self.crowd, self.intrinsics, self.T_body_camera, self.light)
         self.lens = LensDistortion.from_coefficients(self.intrinsics, cam.distortion)
+        self.sensor = cam.sensor
         self.server = FrameServer(config.bind_address, config.frame_port)
         self.period_s = 1.0 / cam.rate_hz
         self.seed = config.seed
@@ -89,7 +91,27 @@ class SimCamera:
         weather = self.weather.state_at(t_s)
         view = self.renderer.render(pose, t_s, with_mask=False, with_depth=weather.kind is WeatherKind.FOG)
         image = apply_weather(view.image_bgr, weather, self.seed * 1_000_003 + self.seq, view.depth_m)
-        return image if self.lens is None else self.lens.distort(image)
+        sensor = self.sensor
+        if sensor.enabled:
+            image = optics(image, sensor, self.seed, self._image_velocity_px_s(pose, state), self.intrinsics.fx_px)
+        if self.lens is not None:
+            image = self.lens.distort(image)
+        return readout(image, sensor, self.seed, self.seq, t_s) if sensor.enabled else image
+
+    def _image_velocity_px_s(self, pose: Pose, state: VehicleState) -> tuple[float, float]:
+        """How fast the picture moves during the exposure (px/s), from the vehicle's true velocity and rates."""
+        T_world_camera = pose.T_world_body @ self.T_body_camera
+        R_world_camera = T_world_camera[:3, :3]
+        altitude_m = max(-float(T_world_camera[2, 3]), 0.5)
+        depth_m = altitude_m / max(float(R_world_camera[2, 2]), 0.1)  # along the optical axis to the ground
+        return image_velocity_px_s(
+            state.velocity_ned_mps,
+            state.rates_frd_radps,
+            R_world_camera.T,
+            self.T_body_camera[:3, :3].T,
+            self.intrinsics.fx_px,
+            depth_m,
+        )
 
     def skip(self) -> None:
         """A frame the lockstep client does not want: not drawn, counted, its sequence number passed (the frames

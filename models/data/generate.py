@@ -43,6 +43,7 @@ from companion.perception.config import ProjectionConfig
 from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
 from sitl.render.meshes import head_height_m
+from sitl.render.sensor import SensorConfig, optics, readout
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import GroundKind, ScenarioConfig, Style, WeatherKind
@@ -87,13 +88,16 @@ def generate(
     first: int = 0,
     altitude_range_m: tuple[float, float] = (8.0, 40.0),
     ground: GroundKind = GroundKind.PROCEDURAL,
+    sensor: SensorConfig | None = None,
 ) -> list[GeneratedFrame]:
     """Render frames ``first .. first + frames - 1`` of ``split`` into ``out_dir/<split>`` (module docstring).
 
     ``altitude_range_m`` is the (lowest, highest) camera altitude in metres, drawn uniformly; the default 8-40 m
     gives the frames the shipped models were trained and evaluated on, 2-40 m adds the final descent. ``ground``
     ``real`` paints the parks' ground from the real frames held out from training (``sitl/world/ground.py``): the
-    held-out split's real-ground variant.
+    held-out split's real-ground variant. ``sensor`` (``--sensor``): the SITL camera's effects (motion blur for a
+    speed drawn per frame up to 5 m/s, defocus, vignetting, exposure and white balance drift, noise, JPEG;
+    ``sitl/render/sensor.py``), seeded per scene and frame; None draws the frames as before, bit for bit.
     """
     lo_m, hi_m = altitude_range_m
     if not (math.isfinite(lo_m) and math.isfinite(hi_m) and 2.0 <= lo_m < hi_m <= 120.0):
@@ -140,6 +144,13 @@ def generate(
         t_s = 0.1 * (i % frames_per_scene) * 10  # a second apart: walkers move between a scene's frames
         view = renderer.render(pose, t_s, with_mask=True, with_depth=True)
         image = apply_weather(view.image_bgr, weather, seed * 1000 + i, view.depth_m)
+        if sensor is not None and sensor.enabled:
+            motion_rng = np.random.default_rng([seed, 51, i])  # its own stream: the frames' other draws stay put
+            speed_mps, heading = float(motion_rng.uniform(0.0, 5.0)), float(motion_rng.uniform(0.0, 2.0 * math.pi))
+            px_s = camera.fx_px * speed_mps / altitude_m
+            velocity_px_s = (px_s * math.cos(heading), px_s * math.sin(heading))
+            image = optics(image, sensor, seed, velocity_px_s, camera.fx_px)
+            image = readout(image, sensor, seed, i, t_s)
         heads, in_view = _visible_heads(crowd, camera, renderer.T_body_camera, pose, view.person_mask)
         stem = f"{i:06d}"
         cv2.imwrite(str(split_dir / f"{stem}.png"), image)
@@ -217,6 +228,11 @@ def main() -> int:
         default=GroundKind.PROCEDURAL.value,
         help="the parks' ground (real: the real frames held out from training)",
     )
+    parser.add_argument(
+        "--sensor",
+        action="store_true",
+        help="a camera that looks like a camera: the SITL's sensor effects (sitl/render/sensor.py, all on)",
+    )
     args = parser.parse_args()
     written = generate(
         args.out,
@@ -226,6 +242,7 @@ def main() -> int:
         first=args.first,
         altitude_range_m=tuple(args.altitude_m),
         ground=GroundKind(args.ground),
+        sensor=SensorConfig(enabled=True) if args.sensor else None,
     )
     heads = sum(f.heads for f in written)
     sys.stdout.write(f"wrote {len(written)} frames, {heads} visible heads, to {args.out / args.split}\n")
