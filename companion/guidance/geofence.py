@@ -201,8 +201,3 @@ def latlon_to_ne_m(lat_deg: float, lon_deg: float, origin_lat_deg: float, origin
     north = k * (math.cos(lat0) * math.sin(lat) - math.sin(lat0) * math.cos(lat) * cos_d_lon) * EARTH_RADIUS_M
     east = k * math.cos(lat) * math.sin(lon - lon0) * EARTH_RADIUS_M
     return north, east
-
-
-def horizontal_distance_m(a_ne: tuple[float, float], b_ne: tuple[float, float]) -> float:
-    """Horizontal distance between two (north_m, east_m) points."""
-    return math.hypot(a_ne[0] - b_ne[0], a_ne[1] - b_ne[1])

@@ -189,16 +189,6 @@ class SlzPipeline:
             return 1.0
         return input_scale(self.projector.finest_gsd_m_per_px(pose), self.min_gsd_m_per_px)
 
-    def process_density(
-        self,
-        density: DensityMap,
-        pose: Pose,
-        t_s: float,
-        area_centre_ne_m: tuple[float, float] | None = None,
-    ) -> FrameResult:
-        """Run every stage after the network on an existing density map (replays, benchmarks)."""
-        return self._after_density(density, pose, t_s, area_centre_ne_m, {"density": 0.0})
-
     def _after_density(
         self,
         density: DensityMap,

@@ -1,9 +1,9 @@
-"""Drawing what the pipeline saw and decided: camera overlay and top view (for demos, dry runs, reports)."""
+"""Drawing what the pipeline saw and decided onto the camera view (for demos, dry runs, reports, replays)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -12,16 +12,12 @@ import numpy.typing as npt
 from companion.geometry import F64Array, Pose
 from companion.perception.pipeline import FrameResult
 from companion.perception.projection import HeadPlaneProjector
-from companion.perception.selection import Target
-from companion.perception.tracking import TrackedZone
 
 U8Image = npt.NDArray[np.uint8]
-ToPixel = Callable[[float, float], tuple[int, int]]
 
 ZONE_BGR = (255, 200, 0)
 TARGET_BGR = (0, 255, 255)
 OCCUPIED_BGR = (0, 0, 255)
-PERSON_BGR = (255, 0, 255)
 
 
 def _circle_points(north_m: float, east_m: float, radius_m: float, n: int = 48) -> F64Array:
@@ -91,65 +87,3 @@ def draw_circles_overlay(
         north_m, east_m, radius_m = target
         polyline(_circle_points(north_m, east_m, max(radius_m, 0.3)), TARGET_BGR, 2)
     return out
-
-
-def draw_top_view(
-    result: FrameResult,
-    people_ne_m: F64Array | None = None,
-    people_radius_m: F64Array | None = None,
-    size_px: int = 480,
-) -> U8Image:
-    """Top view of the head-plane grid, north up: free (light), occupied (dark), unknown (grey).
-
-    Tracks are drawn in cyan, the target in yellow, and, when given, ground-truth people in magenta.
-    """
-    hp = result.head_plane
-    img = np.full(hp.free.shape, 110, dtype=np.uint8)
-    img[hp.known] = 40
-    img[hp.free] = 235
-    view: U8Image = np.asarray(cv2.cvtColor(np.flipud(img), cv2.COLOR_GRAY2BGR), dtype=np.uint8)
-    scale = size_px / max(hp.grid.rows, hp.grid.cols)
-    view = np.asarray(
-        cv2.resize(view, (round(hp.grid.cols * scale), round(hp.grid.rows * scale)), interpolation=cv2.INTER_NEAREST),
-        dtype=np.uint8,
-    )
-    px_per_m = scale / hp.grid.resolution_m
-
-    def to_px(north_m: float, east_m: float) -> tuple[int, int]:
-        row, col = hp.grid.world_to_cell(north_m, east_m)
-        return round((col + 0.5) * scale), round((hp.grid.rows - row - 0.5) * scale)
-
-    if people_ne_m is not None:
-        radii = people_radius_m if people_radius_m is not None else np.full(len(people_ne_m), 0.25)
-        for (n, e), r in zip(people_ne_m, radii, strict=True):
-            cv2.circle(view, to_px(n, e), max(1, round(r * px_per_m)), PERSON_BGR, -1, cv2.LINE_AA)
-    for track in result.tracks:
-        _draw_zone(view, to_px, track, px_per_m)
-    if result.target is not None:
-        _draw_target(view, to_px, result.target, px_per_m)
-    n, e = result.pose.position_ned_m[:2]
-    cv2.drawMarker(view, to_px(float(n), float(e)), (0, 160, 0), cv2.MARKER_CROSS, 14, 2)
-    return view
-
-
-def _draw_zone(view: U8Image, to_px: ToPixel, track: TrackedZone, px_per_m: float) -> None:
-    centre = to_px(track.north_m, track.east_m)
-    cv2.circle(view, centre, max(1, round(track.radius_m * px_per_m)), ZONE_BGR, 1, cv2.LINE_AA)
-    cv2.putText(view, str(track.track_id), centre, cv2.FONT_HERSHEY_SIMPLEX, 0.4, ZONE_BGR, 1)
-
-
-def _draw_target(view: U8Image, to_px: ToPixel, target: Target, px_per_m: float) -> None:
-    centre = to_px(target.north_m, target.east_m)
-    cv2.circle(view, centre, max(3, round(target.radius_m * px_per_m)), TARGET_BGR, 2, cv2.LINE_AA)
-
-
-def side_by_side(left: U8Image, right: U8Image) -> U8Image:
-    """Two BGR images next to each other, the shorter padded at the bottom."""
-    h = max(left.shape[0], right.shape[0])
-
-    def pad(img: U8Image) -> U8Image:
-        return np.asarray(
-            cv2.copyMakeBorder(img, 0, h - img.shape[0], 0, 0, cv2.BORDER_CONSTANT, value=(0, 0, 0)), dtype=np.uint8
-        )
-
-    return np.hstack([pad(left), pad(right)])

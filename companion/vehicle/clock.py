@@ -69,11 +69,6 @@ class VehicleClock:
         k = min(len(ordered) - 1, math.floor((1.0 - fraction) * len(ordered)))
         return ordered[-1] - ordered[k]
 
-    @property
-    def latest_stamp_s(self) -> float | None:
-        """The newest vehicle time received."""
-        return self._latest_stamp_s
-
     def now_s(self, wall_s: float | None = None) -> float:
         """Vehicle time at monotonic wall time ``wall_s`` (now if None). Raises RuntimeError before any stamp."""
         if not self._offsets:

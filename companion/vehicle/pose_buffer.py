@@ -12,7 +12,6 @@ from __future__ import annotations
 import bisect
 import math
 from collections import deque
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -24,14 +23,6 @@ F64Array = npt.NDArray[np.float64]
 
 class PoseBufferError(Exception):
     """Bad telemetry given to the pose buffer (what, and the offending value)."""
-
-
-@dataclass(frozen=True)
-class StampedSample:
-    """One telemetry sample: vehicle time (s), position (3,) NED m or quaternion (4,) [w, x, y, z]."""
-
-    t_s: float
-    value: F64Array
 
 
 def slerp(q0: F64Array, q1: F64Array, fraction: float) -> F64Array:

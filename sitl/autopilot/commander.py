@@ -127,10 +127,6 @@ class Commander:
         R = quaternion_to_matrix(self._state.quaternion_wxyz)
         return math.atan2(R[1, 0], R[0, 0])
 
-    def altitude_above_home_m(self) -> float:
-        """Height of the vehicle above home, m."""
-        return float(self.home_ned_m[2] - self.position()[2])
-
     def _capture_hold(self) -> None:
         self.hold_ned_m = self.position()
         self.hold_yaw_rad = self._yaw()
