@@ -46,6 +46,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     import asyncio
     import datetime
     import hashlib
+    import math
 
     from companion.app.flight import FlightApp
     from companion.app.flight_log import SCHEMA_VERSION, RecordKind
@@ -58,6 +59,9 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     from companion.vehicle.lockstep import LockstepClient, LockstepError
     from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 
+    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0.0):
+        sys.stderr.write(f"slz fly: --timeout must be a positive number of seconds, got {args.timeout:g}\n")
+        return 2
     config, pipeline = validate_for_flight(args.config, never_arm=args.never_arm)  # as `slz check-config` does
     if args.dry_run:
         config = config.model_copy(update={"mode": OperatingMode.DRY_RUN})
