@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -22,6 +23,9 @@ from companion.config import ConfigError
 logger = logging.getLogger("slz")
 
 DEFAULT_MISSION_CONFIG = Path("mission_configs/sitl.yaml")
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""What stops ``slz fly`` (the systemd unit's KillSignal, Ctrl-C, a harness): a vehicle it flies gets the last
+resort first."""
 EXIT_FAILSAFE = 3
 """``slz fly`` ended in a failsafe: the vehicle is the autopilot's (land, hold, return). The systemd unit does not
 restart on it (``RestartPreventExitStatus``), so a companion never takes back a vehicle it handed over."""
@@ -89,7 +93,14 @@ def _cmd_fly(args: argparse.Namespace) -> int:
                 config.camera.url, vehicle_time_s=link.clock.now_s, latency_s=config.camera.latency_s
             )
             app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=args.timeout)
-            outcome = await app.run()
+            loop = asyncio.get_running_loop()
+            for stop_signal in STOP_SIGNALS:  # the service stopped, Ctrl-C: the last resort first, then the end
+                loop.add_signal_handler(stop_signal, app.request_stop, f"{stop_signal.name} received")
+            try:
+                outcome = await app.run()
+            finally:
+                for stop_signal in STOP_SIGNALS:
+                    loop.remove_signal_handler(stop_signal)
         finally:
             await link.close()
         sys.stdout.write(f"{config.mode.value}: ended in {outcome.phase} ({outcome.reason}); log {recorder.path}\n")

@@ -246,3 +246,39 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     # The replay projects nothing: it takes the fence the flight recorded, and decides the same.
     report = replay(tmp_path / "flight")
     assert report.identical, report.differences
+
+
+def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_failsafe(
+    tmp_path: Path, instance: int
+) -> None:
+    import signal
+
+    sitl = start_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
+    log = tmp_path / "flight" / "flight.jsonl"
+    fly = subprocess.Popen(
+        [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_until(lambda: log.is_file() and '"phase":"approach"' in log.read_text(), 120, "the approach")
+        fly.send_signal(signal.SIGINT)  # the systemd unit's KillSignal
+        out, err = fly.communicate(timeout=30)
+        held = state_when(sitl, lambda st: st["mode"] == "AUTO.LOITER", 10, "the hold")
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        sitl.stop()
+    assert fly.returncode == 3, err[-3000:]  # a failsafe: the service does not restart on it
+    assert "SIGINT received: stopping: hold" in out
+    assert not held["on_ground"]
+    assert not held["failsafe"]  # the autopilot's own offboard-loss failsafe never fired
+    records = read_log(log)
+    last = [r for r in records if r["kind"] == "decision"][-1]
+    assert last["source"] == "stop"
+    assert [r["command"] for r in records if r["kind"] == "command"][-1] == "hold"
+    assert records[-1]["kind"] == "end"

@@ -177,6 +177,8 @@ class FlightApp:
         self._watching: CommandKind | None = None  # after a failsafe command: what the autopilot was asked to do
         self._airborne_seen = False  # the vehicle has been in the air during this run (a dry run ends on the ground)
         self._target_id: int | None = None  # the last decision's target (console and log report switches)
+        self._stop_requested: str | None = None  # why the program is asked to stop (a signal), seen at the next tick
+        self._end_after_failsafe = False  # a stop: the last resort goes out, then the program ends (no watch)
 
     def _new_guidance(self) -> LandingGuidance:
         zones = self.config.perception.zones
@@ -235,7 +237,8 @@ class FlightApp:
             sent = await self._send(decision)
         finally:
             if decision.phase in TERMINAL and not self.dry_run:  # a dry run decides again while the pilot flies
-                if sent and decision.phase is LandingPhase.FAILSAFE and self.config.supervision.stay_after_failsafe:
+                stay = self.config.supervision.stay_after_failsafe and not self._end_after_failsafe
+                if sent and decision.phase is LandingPhase.FAILSAFE and stay:
                     self._watch(decision)  # the vehicle is the autopilot's now: watch it until it is safe
                 else:
                     self.done.set()  # after its command went out: ending cancels the tasks
@@ -402,6 +405,9 @@ class FlightApp:
             mode = status.mode.value
             await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
             return
+        if self._stop_requested is not None:  # after the pilot's word too
+            await self._stop(state, self._stop_requested)
+            return
         if self._wall_deadline is not None and self._wall_clock() >= self._wall_deadline:  # after the pilot's word
             await self._wall_limit(state)
             return
@@ -474,6 +480,30 @@ class FlightApp:
         self.outcome.reason = f"{limit}: nothing commanded, the run ends"
         self.recorder.write(RecordKind.SUPERVISION, state.t_s, event="wall_limit", reason=self.outcome.reason)
         logger.warning("%s", self.outcome.reason)
+        self.done.set()
+
+    def request_stop(self, why: str) -> None:
+        """Ask the program to stop (``slz fly`` on SIGINT or SIGTERM: the service stopped, Ctrl-C): at the next tick
+        a vehicle it flies gets ``guidance.last_resort`` before it ends, instead of an offboard-loss failsafe later.
+        Asked twice, it ends at once."""
+        if self._stop_requested is not None:
+            logger.error("%s again: ending now", why)
+            self.done.set()
+            return
+        logger.warning("%s: the vehicle gets the last resort, then the program ends", why)
+        self._stop_requested = why
+
+    async def _stop(self, state: VehicleState, why: str) -> None:
+        """A stop asked of the program: the last resort for a vehicle it flies, then the end (no watch: a stopping
+        service cannot stay); a run that commands nothing just ends."""
+        reason = f"{why}: stopping"
+        self._stop_requested = None
+        if self._flying_it() and self.guidance.phase not in TERMINAL:
+            self._end_after_failsafe = True
+            await self.apply(self.guidance.give_up(state, reason), "stop", state, reason=reason)
+            return
+        self.outcome.reason = f"{reason}, nothing commanded"
+        self.recorder.write(RecordKind.SUPERVISION, state.t_s, event="stopped", reason=self.outcome.reason)
         self.done.set()
 
     def _flying_it(self) -> bool:

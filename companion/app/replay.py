@@ -209,6 +209,7 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
         "time": lambda: guidance.time_used_up(state),
         "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
         "limit": lambda: guidance.give_up(state, str(inputs["reason"])),
+        "stop": lambda: guidance.give_up(state, str(inputs["reason"])),
     }
     if source == "frame":
         result = results.get(int(inputs["seq"]))
