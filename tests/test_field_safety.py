@@ -6,6 +6,7 @@ tests/test_flight_supervision.py."""
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import subprocess
 import sys
@@ -198,6 +199,14 @@ def test_a_dry_run_started_on_the_ground_records_the_whole_flight_the_pilot_flie
     assert any(r["kind"] == "decision" and r["source"] == "start" for r in records)
     assert [r["event"] for r in records if r["kind"] == "supervision"][-1] == "on_ground"
     assert kinds[-1] == "end"
+    # The path of the whole flight, the wait on the bench included: poses once a second, from the ground to the
+    # ground, in the air at 10 m between.
+    poses = [r for r in records if r["kind"] == "pose"]
+    started = next(r["t_s"] for r in records if r["kind"] == "decision" and r["source"] == "start")
+    assert [p["in_air"] for p in poses[:1]] == [False]
+    assert any(p["t_s"] < started for p in poses)
+    assert min(p["down_m"] for p in poses) < -8.0  # sampled once a second on the way to 10 m
+    assert all(b["t_s"] - a["t_s"] >= 0.99 for a, b in itertools.pairwise(poses))
 
 
 def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_flown(
@@ -243,9 +252,18 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     setpoints = [r["setpoint"] for r in records if r["kind"] == "command" and r["setpoint"]]
     assert setpoints
     assert all(abs(sp["north_m"]) <= 25.1 and abs(sp["east_m"]) <= 25.1 for sp in setpoints)
-    # The replay projects nothing: it takes the fence the flight recorded, and decides the same.
+    # The replay projects nothing: it takes the fence the flight recorded, and decides the same; so does the report.
     report = replay(tmp_path / "flight")
     assert report.identical, report.differences
+    reported = subprocess.run(
+        [sys.executable, "-m", "companion.cli", "report", str(tmp_path / "flight"), "--no-video"],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert reported.returncode == 0, reported.stderr[-2000:]
 
 
 def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_failsafe(

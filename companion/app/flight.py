@@ -63,6 +63,7 @@ TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAIL
 FRAMES_UNREAD = TERMINAL | {LandingPhase.LAND}
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
+POSE_RECORD_PERIOD_S = 1.0  # vehicle time between two `pose` records: the flight's path in the log
 _OURS = (FlightMode.OFFBOARD, FlightMode.UNKNOWN)  # modes in which offboard setpoints are still the companion's
 # The modes a failsafe command leads to (PX4: a return ends in the autopilot's own landing, then its hold).
 _FAILSAFE_MODES = {
@@ -177,6 +178,7 @@ class FlightApp:
         self._watching: CommandKind | None = None  # after a failsafe command: what the autopilot was asked to do
         self._airborne_seen = False  # the vehicle has been in the air during this run (a dry run ends on the ground)
         self._target_id: int | None = None  # the last decision's target (console and log report switches)
+        self._pose_recorded_s = -math.inf  # vehicle time of the last `pose` record
         self._stop_requested: str | None = None  # why the program is asked to stop (a signal), seen at the next tick
         self._end_after_failsafe = False  # a stop: the last resort goes out, then the program ends (no watch)
 
@@ -388,6 +390,19 @@ class FlightApp:
         status = self.link.status
         if status.in_air:
             self._airborne_seen = True
+        if state.t_s - self._pose_recorded_s >= POSE_RECORD_PERIOD_S:
+            self._pose_recorded_s = state.t_s
+            self.recorder.write(
+                RecordKind.POSE,
+                state.t_s,
+                north_m=state.north_m,
+                east_m=state.east_m,
+                down_m=state.down_m,
+                yaw_deg=state.yaw_deg,
+                mode=status.mode,
+                armed=status.armed,
+                in_air=status.in_air,
+            )
         if self._watching is not None:
             self._watch_tick(state)
             return

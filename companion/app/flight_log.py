@@ -48,6 +48,9 @@ class RecordKind(str, enum.Enum):
     COMMAND = "command"
     """A command sent to the vehicle."""
     FAILSAFE = "failsafe"
+    POSE = "pose"
+    """The vehicle once a second of its clock, whatever the flight does (``north_m``, ``east_m``, ``down_m``,
+    ``yaw_deg``, ``mode``, ``armed``, ``in_air``): the whole flight's path, a dry run's wait included."""
     FENCE = "fence"
     """A fence given in latitude and longitude, projected to local NED at the start (``polygon_ne_m``, the origin)."""
     SUPERVISION = "supervision"
@@ -71,6 +74,7 @@ REQUIRED_FIELDS: dict[RecordKind, tuple[str, ...]] = {
     RecordKind.FAILSAFE: ("reason",),
     RecordKind.SUPERVISION: ("event", "reason"),
     RecordKind.FENCE: ("polygon_ne_m",),
+    RecordKind.POSE: ("north_m", "east_m", "down_m"),
     RecordKind.WAITING: ("waiting_for",),
     RecordKind.ERROR: ("error",),
     RecordKind.LATENCY: ("frame_to_command_ms",),

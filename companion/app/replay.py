@@ -114,6 +114,16 @@ def config_from_header(raw: object) -> MissionConfig:
     return config
 
 
+def flight_config(flight: FlightLog, header: dict[str, Any]) -> MissionConfig:
+    """The config the flight ran with: its header's (:func:`config_from_header`), with a fence given in latitude and
+    longitude as the flight projected it (its ``fence`` record)."""
+    config = config_from_header(header["config"])
+    fence = flight.first(RecordKind.FENCE)
+    if fence is not None:
+        config = with_fence_ne_m(config, [(float(n), float(e)) for n, e in fence["polygon_ne_m"]])
+    return config
+
+
 def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float = 10.0) -> ReplayReport:
     """Replay the flight in ``log_dir`` (its ``flight.jsonl`` and ``frames/``); see the module docstring.
 
@@ -129,10 +139,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     header = flight.first(RecordKind.HEADER)
     if header is None:
         raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
-    config = config_from_header(header["config"])
-    fence = flight.first(RecordKind.FENCE)
-    if fence is not None:  # a fence given in latitude and longitude, as the flight projected it
-        config = with_fence_ne_m(config, [(float(n), float(e)) for n, e in fence["polygon_ne_m"]])
+    config = flight_config(flight, header)
     frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in flight.of(RecordKind.FRAME)}
     pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
     zones = config.perception.zones

@@ -30,7 +30,7 @@ import numpy as np
 
 from companion.app.flight_log import DecisionRecord, FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig
-from companion.app.replay import VideoWriter
+from companion.app.replay import VideoWriter, flight_config
 from companion.geometry import Pose
 from companion.perception.pipeline import camera_from_config
 from companion.perception.projection import HeadPlaneProjector
@@ -178,11 +178,14 @@ def _plot_top_view(log: FlightLog, config: MissionConfig, path: Path) -> None:
         ax.add_patch(
             Polygon(area[:, ::-1], closed=True, fill=False, edgecolor="green", lw=1.2, ls="--", label="landing area")
         )
-    if decisions:
-        ne = np.array([[d.state["north_m"], d.state["east_m"]] for d in decisions if d.state])
-        if len(ne):
-            ax.plot(ne[:, 1], ne[:, 0], color="0.45", lw=1.5, label="path (vehicle states)")
-            ax.plot(ne[0, 1], ne[0, 0], "o", color="0.2", label="start")
+    poses = log.of(RecordKind.POSE)  # the whole flight once a second; older logs: the states decisions saw
+    states = [(r["north_m"], r["east_m"]) for r in poses] or [
+        (d.state["north_m"], d.state["east_m"]) for d in decisions if d.state
+    ]
+    if states:
+        ne = np.array(states, dtype=float)
+        ax.plot(ne[:, 1], ne[:, 0], color="0.45", lw=1.5, label="path" if poses else "path (vehicle states)")
+        ax.plot(ne[0, 1], ne[0, 0], "o", color="0.2", label="start")
     setpoints = np.array([[d.setpoint["north_m"], d.setpoint["east_m"]] for d in decisions if d.setpoint is not None])
     if len(setpoints):
         label = "setpoints " + ("sent" if log.count(RecordKind.COMMAND) else "decided (not sent)")
@@ -374,7 +377,7 @@ def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bo
     header = flight.first(RecordKind.HEADER)
     if header is None:
         raise ReportError(f"{log}: no header record (the config the flight ran with)")
-    config = MissionConfig.model_validate(header["config"])
+    config = flight_config(flight, header)
     out = out_dir or flight_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
     report = FlightReport(out)

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from companion.app.flight_log import FlightLog, RecordKind
-from companion.app.replay import config_from_header, replay
+from companion.app.replay import flight_config, replay
 from companion.app.report import camera_views, tracks_at_landing
 from sitl.harness.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly
 from sitl.truth import people_at, read_truth, touchdown
@@ -92,7 +92,7 @@ def descent_figure(run_dir: Path, top_view_path: Path) -> np.ndarray | None:
     top = cv2.imread(str(top_view_path), cv2.IMREAD_COLOR)
     if header is None or not starts or top is None:
         return None
-    views = [v for v in camera_views(flight_dir, log, config_from_header(header["config"])) if v[0] <= starts[-1]]
+    views = [v for v in camera_views(flight_dir, log, flight_config(log, header)) if v[0] <= starts[-1]]
     if not views:
         return None
     _, image, caption = views[-1]
