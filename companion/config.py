@@ -21,6 +21,8 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from companion.errors import SlzError
+
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
 MAX_CONFIG_BYTES = 1 << 20  # 1 MiB: the shipped configs are a few kB
@@ -35,7 +37,7 @@ class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False)
 
 
-class ConfigError(Exception):
+class ConfigError(SlzError):
     """A configuration could not be loaded or is invalid.
 
     Parameters

@@ -26,10 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
+
 F64Array = npt.NDArray[np.float64]
 
 
-class GeometryError(ValueError):
+class GeometryError(SlzError, ValueError):
     """A geometric input is not what it claims (a zero quaternion, a degenerate camera): where, and what."""
 
     def __init__(self, where: str, what: str) -> None:

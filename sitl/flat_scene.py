@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
 from companion.geometry import F64Array, PinholeCamera, Pose
 from companion.perception.projection import plane_homography
 from sitl.world.park import smooth_noise
@@ -49,7 +50,7 @@ class RenderedFrame:
     person_mask: npt.NDArray[np.bool_]
 
 
-class SceneError(Exception):
+class SceneError(SlzError):
     """A scene cannot be generated as asked (e.g. more people than fit without overlap)."""
 
 

@@ -19,13 +19,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
+
 TRUTH_SCHEMA_VERSION = 2
 """1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version."""
 
 F64Array = npt.NDArray[np.float64]
 
 
-class TruthError(Exception):
+class TruthError(SlzError):
     """A ground-truth log cannot be read (which file, what is wrong)."""
 
 

@@ -20,6 +20,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from companion.config import quote
+from companion.errors import SlzError
 from companion.vehicle.sim_control import Event, Tick, same_setpoint
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
@@ -55,7 +56,7 @@ the autopilot by its heartbeat, so at PX4's 1 Hz a campaign mission's companion 
 IDLE_COMMAND = 0.1  # armed on the ground: props spin at idle
 
 
-class SitlError(Exception):
+class SitlError(SlzError):
     """The SITL vehicle cannot start or had to stop (what failed, and where)."""
 
     def __init__(self, where: str, what: str) -> None:

@@ -21,6 +21,7 @@ PACKAGES = ("companion", "sitl")
 
 # Longest matching prefix wins. A module may import modules on its own floor or below.
 FLOORS: dict[str, int] = {
+    "companion.errors": 0,
     "companion.cache": 0,
     "companion.config": 0,
     "companion.geometry": 0,
@@ -182,3 +183,22 @@ def test_the_graph_sees_lazy_and_type_checking_imports() -> None:
     assert "sitl.dynamics.rigid_body" in graph["sitl.dynamics.factory"]  # inside make_dynamics
     assert "companion.camera.opencv_source" in graph["companion.camera.sources"]  # inside open_frame_source
     assert "sitl.campaign.ray_backend" in graph["sitl.campaign.runner"]  # only with --backend ray
+
+
+def test_every_error_the_project_defines_derives_from_one_root() -> None:
+    """One root, so ``except SlzError`` catches what the project raises on purpose and nothing else."""
+    import importlib
+
+    from companion.errors import SlzError
+
+    outside = []
+    for package in (*PACKAGES, "models"):
+        for path in sorted((REPO_ROOT / package).rglob("*.py")):
+            tree = ast.parse(path.read_text(), str(path))
+            for node in tree.body:
+                if isinstance(node, ast.ClassDef) and node.name.endswith("Error"):
+                    name = ".".join(path.relative_to(REPO_ROOT).with_suffix("").parts).removesuffix(".__init__")
+                    cls = getattr(importlib.import_module(name), node.name)
+                    if isinstance(cls, type) and issubclass(cls, BaseException) and not issubclass(cls, SlzError):
+                        outside.append(f"{name}.{node.name}")
+    assert outside == []

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.app.recorder import RecorderError, read_log
+from companion.errors import SlzError
 
 SCHEMA_VERSION = 2
 """1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version."""
@@ -134,7 +135,7 @@ class DecisionRecord:
         )
 
 
-class FlightLogError(Exception):
+class FlightLogError(SlzError):
     """A flight log does not follow its schema (which file, which line, which field)."""
 
 

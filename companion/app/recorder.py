@@ -22,12 +22,14 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
+
 logger = logging.getLogger(__name__)
 
 SYNC_KINDS = frozenset({"header", "phase", "failsafe", "supervision", "command", "end", "error"})
 
 
-class RecorderError(Exception):
+class RecorderError(SlzError):
     """The flight log could not be opened or written (which file, what happened)."""
 
 

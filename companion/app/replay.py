@@ -23,6 +23,7 @@ import numpy as np
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig, with_fence_ne_m
 from companion.app.recorder import plain
+from companion.errors import SlzError
 from companion.geometry import GeometryError, Pose
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import Decision, LandingGuidance, LandingPhase, VehicleState
@@ -35,7 +36,7 @@ logger = logging.getLogger(__name__)
 MAX_LISTED = 20
 
 
-class ReplayError(Exception):
+class ReplayError(SlzError):
     """The log cannot be replayed (which file, what is missing)."""
 
 

@@ -31,6 +31,7 @@ import numpy as np
 from companion.app.flight_log import DecisionRecord, FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig
 from companion.app.replay import VideoWriter, flight_config
+from companion.errors import SlzError
 from companion.geometry import Pose
 from companion.perception.pipeline import camera_from_config
 from companion.perception.projection import HeadPlaneProjector
@@ -52,7 +53,7 @@ PHASE_COLOURS = {
 SHEET_FRAMES = 6
 
 
-class ReportError(Exception):
+class ReportError(SlzError):
     """The flight log cannot be reported on (which file, what is missing)."""
 
 

@@ -33,10 +33,12 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+from companion.errors import SlzError
+
 logger = logging.getLogger(__name__)
 
 
-class ServeError(Exception):
+class ServeError(SlzError):
     """A request that cannot be served (what was wrong with it)."""
 
 

@@ -24,6 +24,8 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
+
 MAGIC = b"SLZF"
 U8Image = npt.NDArray[np.uint8]
 
@@ -47,7 +49,7 @@ class CameraFault(str, enum.Enum):
     """A device (OpenCV) source failed."""
 
 
-class CameraError(Exception):
+class CameraError(SlzError):
     """A frame source failed (what, which source, and the kind of fault)."""
 
     def __init__(self, source: str, what: str, fault: CameraFault = CameraFault.DEVICE) -> None:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from companion.errors import SlzError
 
-class PerceptionError(Exception):
+
+class PerceptionError(SlzError):
     """Something in the SLZ perception pipeline failed.
 
     Parameters

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from companion.errors import SlzError
 from companion.vehicle.clock import VehicleClock
 from companion.vehicle.pose_buffer import PoseBuffer
 
@@ -25,7 +26,7 @@ class Setpoint:
     yaw_deg: float
 
 
-class VehicleError(Exception):
+class VehicleError(SlzError):
     """The vehicle link failed (what, and which link)."""
 
     def __init__(self, link: str, what: str) -> None:

@@ -20,6 +20,7 @@ import math
 from typing import Any
 from urllib.parse import urlparse
 
+from companion.errors import SlzError
 from companion.vehicle.sim_control import (
     Command,
     Event,
@@ -35,7 +36,7 @@ from companion.vehicle.sim_control import (
 logger = logging.getLogger(__name__)
 
 
-class LockstepError(Exception):
+class LockstepError(SlzError):
     """The simulator's lockstep channel failed (what, and which channel)."""
 
     def __init__(self, url: str, what: str) -> None:

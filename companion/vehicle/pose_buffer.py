@@ -16,12 +16,13 @@ from collections import deque
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
 from companion.geometry import Pose
 
 F64Array = npt.NDArray[np.float64]
 
 
-class PoseBufferError(Exception):
+class PoseBufferError(SlzError):
     """Bad telemetry given to the pose buffer (what, and the offending value)."""
 
 

@@ -24,6 +24,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from companion.errors import SlzError
+
 
 class Command(str, enum.Enum):
     """Requests the SITL answers."""
@@ -147,7 +149,7 @@ MAX_REQUEST_BYTES = 8192
 MAX_REQUEST_DEPTH = 8
 
 
-class RequestError(ValueError):
+class RequestError(SlzError, ValueError):
     """A control request's field is missing or out of range (answered as an error event)."""
 
 

@@ -38,8 +38,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
 
-class DatasetError(Exception):
+
+class DatasetError(SlzError):
     """A dataset is missing or malformed (what, and which file)."""
 
     def __init__(self, path: Path, what: str) -> None:

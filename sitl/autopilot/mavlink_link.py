@@ -34,6 +34,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.errors import SlzError
+
 logger = logging.getLogger(__name__)
 
 MAX_DATAGRAMS_PER_RECEIVE = 256
@@ -70,7 +72,7 @@ def for_autopilot(msg: Any, system_id: int) -> bool:
     return getattr(msg, "target_system", 0) in (0, system_id) and getattr(msg, "target_component", 0) in (0, 1)
 
 
-class LinkError(Exception):
+class LinkError(SlzError):
     """A link could not be opened (e.g. the port is taken)."""
 
     def __init__(self, name: str, what: str) -> None:

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.errors import SlzError
 from sitl.autopilot.commander import Fence
 from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
 from sitl.autopilot.navigator import NavCommand, Navigator, NavItem
@@ -113,7 +114,7 @@ class Upload:
     retries: int = 0
 
 
-class ItemRefusedError(Exception):
+class ItemRefusedError(SlzError):
     """An uploaded item cannot be stored (the MAV_MISSION_RESULT and why)."""
 
     def __init__(self, result: MissionResult, why: str) -> None:

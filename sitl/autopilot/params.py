@@ -13,6 +13,8 @@ import struct
 import zlib
 from dataclasses import dataclass
 
+from companion.errors import SlzError
+
 
 class ParamType(enum.IntEnum):
     """MAV_PARAM_TYPE values used here."""
@@ -178,7 +180,7 @@ PARAMS: tuple[ParamSpec, ...] = tuple(
 )
 
 
-class ParamError(Exception):
+class ParamError(SlzError):
     """A parameter operation failed: unknown name or value out of range."""
 
     def __init__(self, name: str, what: str) -> None:

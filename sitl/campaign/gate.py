@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from companion.errors import SlzError
 from sitl.campaign.spec import CampaignSpec
 from sitl.campaign.stats import holm, mcnemar_exact
 
@@ -24,7 +25,7 @@ GATED: dict[str, bool] = {"success": True, "warning_1m": False, "warning_1_5m": 
 """The gated outcomes and whether True is the good value."""
 
 
-class GateError(Exception):
+class GateError(SlzError):
     """A baseline that cannot be compared with this campaign (which file, what differs)."""
 
 

@@ -23,6 +23,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from companion.errors import SlzError
+
 if TYPE_CHECKING:
     from sitl.harness.instances import InstanceLease
     from sitl.harness.warm import WarmWorker
@@ -33,7 +35,7 @@ MAX_RETRIES = 3  # a mission is flown again this many times when its node or wor
 WAIT_S = 1.0  # the driver wakes at least this often (wall), to notice an interrupt
 
 
-class RayBackendError(Exception):
+class RayBackendError(SlzError):
     """Ray is missing, or the cluster cannot be reached (the address, and what went wrong)."""
 
 

@@ -32,6 +32,7 @@ import yaml
 
 from companion.app.recorder import open_append, read_log
 from companion.config import ConfigError, read_yaml_file, validate_config
+from companion.errors import SlzError
 from sitl.campaign.metrics import stale
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan
@@ -47,7 +48,7 @@ logger = logging.getLogger(__name__)
 INSTANCE_BASE = 30
 
 
-class CampaignError(Exception):
+class CampaignError(SlzError):
     """A campaign cannot start or resume (which folder, what is wrong)."""
 
 

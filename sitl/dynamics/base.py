@@ -12,10 +12,12 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
+
 F64Array = npt.NDArray[np.float64]
 
 
-class DynamicsError(Exception):
+class DynamicsError(SlzError):
     """A dynamics backend failed or cannot be created.
 
     Parameters

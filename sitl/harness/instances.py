@@ -24,6 +24,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
 
+from companion.errors import SlzError
 from sitl.config import MAX_INSTANCE, SitlConfig
 
 logger = logging.getLogger(__name__)
@@ -31,7 +32,7 @@ logger = logging.getLogger(__name__)
 LOCK_DIR = Path(tempfile.gettempdir()) / "slz-sitl-instances"
 
 
-class InstanceError(Exception):
+class InstanceError(SlzError):
     """No SITL instance could be leased (which were tried, and why)."""
 
 

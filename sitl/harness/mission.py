@@ -26,6 +26,7 @@ import yaml
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MISSION_PATH_FIELDS, MissionConfig, camera_mismatches
 from companion.config import paths_from, read_yaml_file, validate_config
+from companion.errors import SlzError
 from sitl.config import SitlConfig
 from sitl.harness.process import REPO_ROOT, SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
 from sitl.truth import TruthError, body_edges_m, read_truth, touchdown
@@ -38,7 +39,7 @@ SETTLE_WALL_S = 60.0  # after the companion ends: how long the SITL may run to f
 TRUTH_AFTER_TOUCHDOWN_S = 1.0  # simulated: longer than any camera frame period the configs use
 
 
-class MissionError(Exception):
+class MissionError(SlzError):
     """A mission could not be flown (which process, what happened, the end of its log)."""
 
 

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from companion.errors import SlzError
 from companion.vehicle.sim_control import Command, Event
 from sitl.config import CONTROL_PORT
 
@@ -82,7 +83,7 @@ def log_tail(path: Path, lines: int) -> str:
         return "(no log)"
 
 
-class SitlProcessError(Exception):
+class SitlProcessError(SlzError):
     """The SITL process failed to start, answer or stop (what, and the end of its log)."""
 
 

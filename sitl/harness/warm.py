@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from companion.errors import SlzError
 from companion.vehicle.sim_control import Command
 from sitl.harness.process import (
     REPO_ROOT,
@@ -44,7 +45,7 @@ SITL_PRELOAD = ("sitl.cli", "sitl.vehicle", "sitl.sim_camera")
 COMPANION_PRELOAD = ("companion.app.flight", "companion.app.mission", "companion.vehicle.mavsdk_link", "mavsdk.asyncio")
 
 
-class ServeProcessError(Exception):
+class ServeProcessError(SlzError):
     """A warm process failed to start, to answer, or to finish a command (which process, what, its log's end)."""
 
 

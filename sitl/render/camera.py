@@ -24,6 +24,7 @@ import numpy.typing as npt
 import trimesh
 
 from companion.cache import KeyedCache
+from companion.errors import SlzError
 from companion.geometry import F64Array, PinholeCamera, Pose
 from sitl.render.meshes import bake_lighting, object_mesh, person_mesh, shadow_mesh
 from sitl.world.crowd import Crowd
@@ -35,7 +36,7 @@ T_ENU_NED = np.array([[0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.
 T_CV_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
-class RenderError(Exception):
+class RenderError(SlzError):
     """Rendering failed or cannot start (what, and where)."""
 
     def __init__(self, where: str, what: str) -> None:

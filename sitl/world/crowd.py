@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.errors import SlzError
 from sitl.world.scenario import ScenarioConfig, Style, WalkerKind
 
 F64Array = npt.NDArray[np.float64]
@@ -73,7 +74,7 @@ class Appearance:
     hat_bgr: tuple[int, int, int] | None
 
 
-class CrowdError(Exception):
+class CrowdError(SlzError):
     """A crowd cannot be generated as configured (what failed, with the numbers)."""
 
 
