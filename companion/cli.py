@@ -128,6 +128,10 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         return 1
     finally:
         recorder.close()
+        if recorder.path.is_file():
+            from companion.app.landing_report import write_landing_report
+
+            write_landing_report(recorder.directory)  # beside the log: what the operator files
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:

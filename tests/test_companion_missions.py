@@ -21,6 +21,7 @@ import pytest
 
 from companion.app.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
+from companion.perception.config import PerceptionConfig
 from sitl.harness.instances import leased_instance
 from sitl.harness.mission import MissionResult, MissionSpec, fly
 from sitl.testing.helpers import ListeningGroundStation, free_udp_port
@@ -78,6 +79,13 @@ def test_the_demo_lands_a_static_crowd_mission_clear_of_people(demo: Demo) -> No
     assert s["people_within_1_5m"] == 0
     assert f"nearest person's body is {s['nearest_person_m']:.2f} m" in demo.stdout
     assert (demo.run_dir / "demo.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # the README's picture, made here
+    # The landing report the operator files, beside the flight log.
+    landing = json.loads((demo.run_dir / "flight" / "landing_report.json").read_text())
+    assert landing["ended_in"] == "done"
+    assert landing["zone"]["radius_m"] == pytest.approx(s["target_radius_m"])
+    assert landing["zone_when_descent_began"]["radius_m"] == pytest.approx(s["descent_zone"]["radius_m"])
+    footprint_m = float(PerceptionConfig().zones.min_radius_m)
+    assert landing["nearest_occupied_m"] is None or landing["nearest_occupied_m"] >= footprint_m - 0.25
     zone = s["descent_zone"]  # the zone's radius is named for what it is: as seen when the descent began
     assert f"zone {zone['track_id']}: free radius {zone['radius_m']:.2f} m as seen from" in demo.stdout
     assert zone["seen_from_altitude_m"] > 5.0

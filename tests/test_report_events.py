@@ -3,8 +3,10 @@ decision's reason (a field report jumped from zone 1 to zone 10 without saying w
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from companion.app.flight_log import FlightLog, RecordKind
@@ -37,3 +39,54 @@ def test_the_report_lists_each_switch_of_target_with_its_reason(tmp_path: Path) 
         (3.0, "target zone 1 -> zone 10 (r = 3.50 m)", "approach target 10; switched: zone 10 is larger"),
         (5.0, "target none -> zone 3 (r = 2.20 m)", "approach target 3"),
     ]
+
+
+def test_the_landing_report_names_the_site_the_zone_and_the_nearest_occupied_ground(tmp_path: Path) -> None:
+    from companion.app.landing_report import REPORT_NAME, write_landing_report
+
+    recorder = FlightRecorder(tmp_path)
+    recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0", model="m.onnx", model_sha256="ab")
+    high = VehicleState(10.0, 0.0, 0.0, -20.0, 0.0)
+    gate = VehicleState(30.0, 4.0, 3.0, -5.0, 0.0)
+    low = VehicleState(40.0, 4.0, 3.0, -2.0, 0.0)
+    zone_high, zone_low = Target(4.0, 3.0, 5.1, 7), Target(4.05, 3.0, 2.2, 7)
+    plan = [
+        (high, LandingPhase.APPROACH, CommandKind.SETPOINT, zone_high, None),
+        (high, LandingPhase.DESCENT, CommandKind.SETPOINT, zone_high, 6.5),
+        (gate, LandingPhase.DESCENT, CommandKind.SETPOINT, zone_low, 2.9),
+        (low, LandingPhase.LAND, CommandKind.LAND, zone_low, None),
+    ]
+    for state, phase, kind, target, nearest in plan:
+        decision = Decision(state.t_s, phase, kind, None, target, f"{phase.value} over zone 7")
+        observed = {} if nearest is None else {"observed": {"nearest_occupied_m": nearest}}
+        recorder.write(
+            RecordKind.DECISION, state.t_s, decision=decision, source="frame", state=state, inputs={}, **observed
+        )
+    outcome = {"phase": "done", "reason": "landed", "touchdown_ne_m": [4.1, 3.05], "touchdown_t_s": 44.0}
+    recorder.write(RecordKind.END, None, outcome=outcome)
+    recorder.close()
+    path = write_landing_report(tmp_path)
+    assert path == tmp_path / REPORT_NAME
+    report = json.loads(path.read_text())
+    assert report["ended_in"] == "done"
+    assert report["land_decided"] == {"t_s": 40.0, "north_m": 4.0, "east_m": 3.0, "sent": True}
+    assert report["touchdown"]["north_m"] == 4.1
+    assert report["zone"] == {"track_id": 7, "north_m": 4.05, "east_m": 3.0, "radius_m": 2.2}
+    assert report["zone_when_descent_began"]["radius_m"] == 5.1
+    assert report["zone_when_descent_began"]["seen_from_altitude_m"] == 20.0
+    assert report["nearest_occupied_m"] == 2.9  # the last map that decided, at the gate
+    assert [e["event"] for e in report["decisions"]] == ["target none -> zone 7 (r = 5.10 m)"]
+
+
+def test_the_nearest_occupied_cell_is_measured_from_the_point() -> None:
+    from companion.guidance.footprint import nearest_occupied_m
+    from companion.perception.projection import GridSpec, HeadPlaneOccupancy
+
+    grid = GridSpec(north_min_m=0.0, east_min_m=0.0, resolution_m=0.5, rows=20, cols=20)
+    free = np.ones((20, 20), bool)
+    known = np.ones((20, 20), bool)
+    assert nearest_occupied_m(HeadPlaneOccupancy(grid, free, known), 5.0, 5.0) is None
+    free[4, 16] = False  # the cell centred at north 2.25 m, east 8.25 m
+    assert nearest_occupied_m(HeadPlaneOccupancy(grid, free, known), 2.25, 5.25) == pytest.approx(3.0)
+    known[4, 16] = False  # unseen is not occupied
+    assert nearest_occupied_m(HeadPlaneOccupancy(grid, free, known), 2.25, 5.25) is None

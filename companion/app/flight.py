@@ -46,6 +46,7 @@ from companion.app.stall_watchdog import StallWatchdog
 from companion.app.start_sequence import StartAction, StartSequence, StartStage, StartStep
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import GeometryError, Pose, polygon_centroid_ne_m
+from companion.guidance.footprint import nearest_occupied_m
 from companion.guidance.geofence import Geofence, latlon_to_ne_m
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase, VehicleState
 from companion.perception.errors import PerceptionError
@@ -200,13 +201,22 @@ class FlightApp:
         return None if t is None or pose is None else state_of(t, pose)
 
     # -- applying decisions --------------------------------------------------------------------------------------
-    async def apply(self, decision: Decision, source: str, state: VehicleState | None, **inputs: Any) -> None:
-        """Record a decision (with what produced it and from which inputs) and, when flying, send it."""
+    async def apply(
+        self,
+        decision: Decision,
+        source: str,
+        state: VehicleState | None,
+        observed: dict[str, Any] | None = None,
+        **inputs: Any,
+    ) -> None:
+        """Record a decision (with what produced it, from which inputs, and what the map showed around its target:
+        ``observed``) and, when flying, send it."""
         previous = self.outcome.phase
         self.outcome.phase = decision.phase.value
         self.outcome.reason = decision.reason
+        extra = {} if observed is None else {"observed": observed}
         self.recorder.write(
-            RecordKind.DECISION, decision.t_s, decision=decision, source=source, state=state, inputs=inputs
+            RecordKind.DECISION, decision.t_s, decision=decision, source=source, state=state, inputs=inputs, **extra
         )
         prefix = "[dry run] " if self.dry_run else ""
         if decision.phase.value != previous:
@@ -346,7 +356,13 @@ class FlightApp:
             self.outcome.frames_dropped_old += 1
             return
         decision = self.guidance.on_frame(result, state)
-        await self.apply(decision, "frame", state, seq=frame.seq)
+        observed = None
+        trusted = state.altitude_m >= self.config.guidance.perception_min_altitude_m  # maps that decide
+        if decision.target is not None and decision.phase in (LandingPhase.DESCENT, LandingPhase.LAND) and trusted:
+            # What the map showed around the landing point: the landing report's "nearest person seen".
+            nearest = nearest_occupied_m(result.head_plane, decision.target.north_m, decision.target.east_m)
+            observed = {"nearest_occupied_m": None if nearest is None else round(nearest, 3)}
+        await self.apply(decision, "frame", state, observed, seq=frame.seq)
         await self.report.decision_values(result.t_s, len(result.tracks), decision.target, state)
         if self._commanding and decision.kind is not CommandKind.NONE and math.isfinite(frame.arrival_wall_s):
             latency_ms = 1000.0 * (time.monotonic() - frame.arrival_wall_s)

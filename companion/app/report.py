@@ -29,8 +29,10 @@ import cv2
 import numpy as np
 
 from companion.app.flight_log import DecisionRecord, FlightLog, FlightLogError, RecordKind
+from companion.app.landing_report import landing_report
 from companion.app.mission import MissionConfig
 from companion.app.replay import VideoWriter, flight_config
+from companion.app.timeline import flight_events
 from companion.errors import SlzError
 from companion.geometry import Pose
 from companion.perception.pipeline import camera_from_config
@@ -88,32 +90,7 @@ def summarize(log: FlightLog) -> dict[str, Any]:
     decisions = log.decisions()
     latencies = [float(r["frame_to_command_ms"]) for r in log.of(RecordKind.LATENCY)]
     land = next((d for d in decisions if d.kind == "land" and d.state), None)
-    events = []
-    starting = (RecordKind.HANDOVER, RecordKind.TAKEOFF, RecordKind.WAITING_FOR_HANDOVER)
-    kinds = (RecordKind.PHASE, RecordKind.FAILSAFE, RecordKind.ERROR, RecordKind.DECISION, RecordKind.SUPERVISION)
-    target_id: object = None  # the zone decided on last: a change of it is a switch, with the decision's reason
-    for kind, r in log.tagged(*kinds, RecordKind.WAITING, *starting):
-        if kind is RecordKind.PHASE:
-            events.append({"t_s": r["t_s"], "event": f"phase {r['previous']} -> {r['phase']}", "reason": r["reason"]})
-        elif kind is RecordKind.FAILSAFE:
-            events.append({"t_s": r["t_s"], "event": f"failsafe ({r['action']})", "reason": r["reason"]})
-        elif kind is RecordKind.ERROR:
-            events.append({"t_s": r["t_s"], "event": f"error in {r['where']}", "reason": r["error"]})
-        elif kind is RecordKind.DECISION:
-            target = r["decision"].get("target")
-            if target is not None and target.get("track_id") != target_id:
-                was = "none" if target_id is None else f"zone {target_id}"
-                event = f"target {was} -> zone {target.get('track_id')} (r = {float(target['radius_m']):.2f} m)"
-                events.append({"t_s": r["t_s"], "event": event, "reason": r["decision"].get("reason", "")})
-                target_id = target.get("track_id")
-            elif r["decision"]["phase"] == "search" and target is None and target_id is not None:
-                target_id = None  # back to searching: the next zone is a new choice, not a switch
-        elif kind is RecordKind.SUPERVISION:
-            events.append({"t_s": r["t_s"], "event": f"supervision: {r['event']}", "reason": r["reason"]})
-        elif kind is RecordKind.WAITING:
-            events.append({"t_s": r["t_s"], "event": "waiting", "reason": f"for {r['waiting_for']}"})
-        else:
-            events.append({"t_s": r["t_s"], "event": kind.value.replace("_", " "), "reason": ""})
+    events = flight_events(log)
     outcome = end["outcome"] if end else None
     return {
         "version": header.get("version") if header else None,
@@ -305,6 +282,27 @@ def _contact_sheet(views: list[tuple[float, np.ndarray, str]], path: Path) -> No
     cv2.imwrite(str(path), np.vstack(rows), [cv2.IMWRITE_JPEG_QUALITY, 85])
 
 
+def _landing_lines(landing: dict[str, Any]) -> list[str]:
+    """The landing report's zone and nearest occupied ground, for the page."""
+    lines = []
+    zone, first = landing.get("zone"), landing.get("zone_when_descent_began") or {}
+    if zone is not None:
+        seen = ""
+        if first.get("radius_m") is not None and first.get("seen_from_altitude_m") is not None:
+            seen = (
+                f"{first['radius_m']:.2f} m as seen from {first['seen_from_altitude_m']:.1f} m when the descent began, "
+            )
+        lines.append(
+            f"- landing zone {zone['track_id']}: free radius {seen}{zone['radius_m']:.2f} m at the land decision"
+        )
+    if landing.get("nearest_occupied_m") is not None:
+        lines.append(
+            f"- nearest ground the map called occupied, from the landing point: {landing['nearest_occupied_m']:.2f} m "
+            "(with the map's safety dilation: a lower bound of the distance to a person)"
+        )
+    return lines
+
+
 def _markdown(flight_dir: Path, summary: dict[str, Any], files: list[Path], out_dir: Path) -> str:
     outcome = summary["outcome"] or {}
     lat = summary["latency_ms"]
@@ -338,6 +336,7 @@ def _markdown(flight_dir: Path, summary: dict[str, Any], files: list[Path], out_
         )
     if outcome.get("failsafes"):
         lines.append(f"- failsafes: {', '.join(outcome['failsafes'])}")
+    lines += _landing_lines(summary.get("landing_report") or {})
     lines += [""]
     for f in files:
         if f.suffix in (".png", ".jpg"):
@@ -383,6 +382,7 @@ def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bo
     out.mkdir(parents=True, exist_ok=True)
     report = FlightReport(out)
     report.summary = summarize(flight)
+    report.summary["landing_report"] = landing_report(flight)
     _plot_top_view(flight, config, out / "top_view.png")
     _plot_timeline(flight, out / "timeline.png")
     report.files += [out / "top_view.png", out / "timeline.png"]

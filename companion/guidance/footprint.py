@@ -47,3 +47,14 @@ def footprint_view(head_plane: HeadPlaneOccupancy, north_m: float, east_m: float
     known = head_plane.known[np.ix_(rows, cols)] & inside
     occupied = known & ~head_plane.free[np.ix_(rows, cols)]
     return FootprintView(min(1.0, float(known.sum()) / max(total, 1.0)), bool(occupied.any()))
+
+
+def nearest_occupied_m(head_plane: HeadPlaneOccupancy, north_m: float, east_m: float) -> float | None:
+    """The horizontal distance (m) from a point to the nearest cell centre the map saw occupied (a person, with the
+    map's safety dilation: so a lower bound of the distance to a body); None when the map saw no occupied cell."""
+    occupied = head_plane.known & ~head_plane.free
+    rows, cols = np.nonzero(occupied)
+    if not len(rows):
+        return None
+    g = head_plane.grid
+    return float(np.hypot(g.north_centres_m[rows] - north_m, g.east_centres_m[cols] - east_m).min())

@@ -1,0 +1,114 @@
+"""The landing report an operator files: one JSON document per flight, beside its flight log.
+
+``slz fly`` writes ``landing_report.json`` when a flight ends, and ``slz report`` summarises it (and writes it for a
+log that has none): how the flight ended, where it landed or was to land (the land decision's point and the touchdown
+the autopilot reported), when, the zone (its id, and its free radius when the descent began and at the land decision),
+the nearest ground the map called occupied around the landing point in the last map that decided (taken at or above
+``guidance.perception_min_altitude_m``; a person, or a false positive, with the map's safety dilation: a lower bound of
+the distance to a body), and the decisions on the way (phase changes, switches of
+target, failsafes, with their reasons). Everything comes from the flight log: a report of an older log simply lacks
+what that log did not record (``null``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
+from companion.app.timeline import flight_events
+
+logger = logging.getLogger(__name__)
+
+REPORT_NAME = "landing_report.json"
+VERSION = 1
+
+
+def _zone(target: dict[str, Any] | None) -> dict[str, Any] | None:
+    if target is None:
+        return None
+    return {
+        "track_id": target.get("track_id"),
+        "north_m": target["north_m"],
+        "east_m": target["east_m"],
+        "radius_m": target["radius_m"],
+    }
+
+
+def landing_report(log: FlightLog) -> dict[str, Any]:
+    """The flight's landing report (see the module docstring), a JSON-able mapping."""
+    header = log.first(RecordKind.HEADER) or {}
+    end = log.first(RecordKind.END)
+    outcome = end["outcome"] if end else {}
+    records = log.of(RecordKind.DECISION)
+    land_index = next((i for i in range(len(records) - 1, -1, -1) if records[i]["decision"]["kind"] == "land"), None)
+    land = records[land_index] if land_index is not None else None
+    descent = None  # the decision that began the last descent before the landing (or before the end)
+    last = land_index if land_index is not None else len(records) - 1
+    for i in range(last, -1, -1):
+        if records[i]["decision"]["phase"] == "descent" and (
+            i == 0 or records[i - 1]["decision"]["phase"] != "descent"
+        ):
+            descent = records[i]
+            break
+    observed = None  # the nearest occupied ground seen around the landing point, by the last frame that decided
+    for record in records[: (land_index + 1) if land_index is not None else len(records)]:
+        if record.get("observed") and record["source"] == "frame":
+            observed = record["observed"]
+    config = header.get("config") or {}
+    mode = config.get("mode")
+    return {
+        "version": VERSION,
+        "mode": mode,
+        "software": header.get("version"),
+        "model": header.get("model"),
+        "model_sha256": header.get("model_sha256"),
+        "ended_in": outcome.get("phase"),
+        "reason": outcome.get("reason"),
+        "failsafes": outcome.get("failsafes", []),
+        "land_decided": None
+        if land is None
+        else {
+            "t_s": land["t_s"],
+            "north_m": land["state"]["north_m"] if land.get("state") else None,
+            "east_m": land["state"]["east_m"] if land.get("state") else None,
+            "sent": mode != "dry_run",
+        },
+        "touchdown": None
+        if not outcome.get("touchdown_ne_m")
+        else {
+            "t_s": outcome.get("touchdown_t_s"),
+            "north_m": outcome["touchdown_ne_m"][0],
+            "east_m": outcome["touchdown_ne_m"][1],
+            "by": "the autopilot's landing detection",
+        },
+        "zone": _zone(land["decision"].get("target") if land else None),
+        "zone_when_descent_began": None
+        if descent is None
+        else {
+            **(_zone(descent["decision"].get("target")) or {}),
+            "seen_from_altitude_m": -descent["state"]["down_m"] if descent.get("state") else None,
+        },
+        "nearest_occupied_m": None if observed is None else observed.get("nearest_occupied_m"),
+        "decisions": flight_events(log),
+    }
+
+
+def write_landing_report(flight_dir: Path) -> Path | None:
+    """Write ``landing_report.json`` beside the flight log in ``flight_dir`` (flushed and fsync'd); None, logged, when
+    the log cannot be read (the flight itself is not affected)."""
+    try:
+        report = landing_report(FlightLog.read(flight_dir))
+    except (FlightLogError, KeyError, TypeError, ValueError) as exc:
+        logger.error("no landing report for %s: %s", flight_dir, exc)
+        return None
+    path = flight_dir / REPORT_NAME
+    with path.open("w", encoding="utf-8") as f:
+        json.dump(report, f, indent=2)
+        f.write("\n")
+        f.flush()
+        os.fsync(f.fileno())
+    return path
