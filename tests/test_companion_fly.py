@@ -8,12 +8,17 @@ import sys
 from pathlib import Path
 
 import pytest
-from pymavlink.dialects.v20 import common as mavlink
 
 from companion.app.replay import replay
-from sitl.config import SitlConfig
 from sitl.harness.process import SitlProcess
-from sitl.testing.helpers import GroundStation, free_udp_port, sitl_mission_yaml, state_when, wait_until
+from sitl.testing.helpers import (
+    GroundStation,
+    free_udp_port,
+    pilot_takes_off,
+    sitl_mission_yaml,
+    state_when,
+    wait_until,
+)
 
 pytestmark = pytest.mark.sitl
 
@@ -29,29 +34,6 @@ def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int, gcs_port: i
     mission = mission.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
     (tmp_path / "mission.yaml").write_text(mission)
     return SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
-
-
-def pilot_takes_off(
-    sitl: SitlProcess, gcs: GroundStation, instance: int, altitude_m: float, then_modes: tuple[str, ...] = ()
-) -> None:
-    """The pilot (a ground station) arms and takes off; returns once the vehicle holds at ``altitude_m``, or is
-    already in one of ``then_modes`` there (a companion waiting for the hold may take over before a poll sees it)."""
-    wait_until(lambda: gcs.poll() is not None and gcs.vehicle_addr, 10, "the vehicle on the GCS link")
-    sysid = SitlConfig(instance=instance).system_id  # PX4 style: instance + 1
-
-    def armed() -> bool:  # the pre-arm checks pass a moment after start: the pilot retries, as pilots do
-        gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
-        return bool(sitl.state()["armed"])
-
-    wait_until(armed, 15, f"the pilot arming vehicle {sysid}")
-    takeoff_amsl_m = SitlConfig().origin_alt_m + altitude_m
-    gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, takeoff_amsl_m))
-    state_when(
-        sitl,
-        lambda st: st["mode"] in ("AUTO.LOITER", *then_modes) and st["position_ned_m"][2] < -(altitude_m - 1.0),
-        30,
-        f"hover at {altitude_m:g} m",
-    )
 
 
 def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path, instance: int) -> None:

@@ -27,7 +27,14 @@ from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 from sitl.config import SitlConfig
 from sitl.harness.process import SitlProcess
-from sitl.testing.helpers import GroundStation, free_udp_port, sitl_mission_yaml, state_when, wait_until
+from sitl.testing.helpers import (
+    GroundStation,
+    free_udp_port,
+    pilot_takes_off,
+    sitl_mission_yaml,
+    state_when,
+    wait_until,
+)
 
 pytestmark = pytest.mark.sitl
 
@@ -154,25 +161,12 @@ def test_a_dry_run_started_on_the_ground_records_the_whole_flight_the_pilot_flie
         text=True,
     )
     gcs = GroundStation(instance, gcs_port)
-    sysid = SitlConfig(instance=instance).system_id
     try:
         wait_until(lambda: log.is_file() and '"kind":"waiting"' in log.read_text(), 60, "the dry run waiting")
         assert fly.poll() is None  # on the bench it waits: no failsafe ends it
-        wait_until(lambda: gcs.poll() is not None and gcs.vehicle_addr, 10, "the vehicle on the GCS link")
-
-        def armed() -> bool:
-            gcs.send(
-                gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            )
-            return bool(sitl.state()["armed"])
-
-        wait_until(armed, 15, "the pilot arming")
-        takeoff_amsl_m = SitlConfig().origin_alt_m + 10.0
-        gcs.send(
-            gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, takeoff_amsl_m)
-        )
-        state_when(sitl, lambda st: st["position_ned_m"][2] < -9.0, 30, "the climb to 10 m")
+        pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)  # the dry run commands nothing: the takeoff holds
         wait_until(lambda: '"source":"frame"' in log.read_text(), 30, "decisions on frames")
+        sysid = SitlConfig(instance=instance).system_id
         gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0))
         out, err = fly.communicate(timeout=60)  # it ends by itself once the vehicle is down and disarmed
         after = sitl.state()

@@ -250,3 +250,26 @@ class ListeningGroundStation:
     def of(self, kind: str, system_id: int | None = None) -> list[Any]:
         """The messages of one type (from one system when given), in arrival order."""
         return [m for m in self.messages if m.get_type() == kind and system_id in (None, m.get_srcSystem())]
+
+
+def pilot_takes_off(
+    sitl: SitlProcess, gcs: GroundStation, instance: int, altitude_m: float, then_modes: tuple[str, ...] = ()
+) -> None:
+    """The pilot (a ground station) arms and takes off; returns once the vehicle holds at ``altitude_m``, or is
+    already in one of ``then_modes`` there (a companion waiting for the hold may take over before a poll sees it)."""
+    wait_until(lambda: gcs.poll() is not None and gcs.vehicle_addr, 10, "the vehicle on the GCS link")
+    sysid = SitlConfig(instance=instance).system_id  # PX4 style: instance + 1
+
+    def armed() -> bool:  # the pre-arm checks pass a moment after start: the pilot retries, as pilots do
+        gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+        return bool(sitl.state()["armed"])
+
+    wait_until(armed, 15, f"the pilot arming vehicle {sysid}")
+    takeoff_amsl_m = SitlConfig().origin_alt_m + altitude_m
+    gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, takeoff_amsl_m))
+    state_when(
+        sitl,
+        lambda st: st["mode"] in ("AUTO.LOITER", *then_modes) and st["position_ned_m"][2] < -(altitude_m - 1.0),
+        30,
+        f"hover at {altitude_m:g} m",
+    )
