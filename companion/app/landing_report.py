@@ -89,6 +89,7 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
         "zone_when_descent_began": None
         if descent is None
         else {
+            "t_s": descent["t_s"],
             **(_zone(descent["decision"].get("target")) or {}),
             "seen_from_altitude_m": -descent["state"]["down_m"] if descent.get("state") else None,
         },

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from companion.app.flight_log import FlightLog, RecordKind
+from companion.app.landing_report import landing_report
 from companion.app.replay import flight_config, replay
 from companion.app.report import camera_views, tracks_at_landing
 from sitl.harness.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly
@@ -70,8 +71,13 @@ def run(
     report = replay(run_dir / "flight", video_path=video_path)
     top_view_path = run_dir / "top_view.png"
     cv2.imwrite(str(top_view_path), draw_mission_top_view(run_dir))
-    zone = descent_zone(run_dir / "flight")
-    figure = descent_figure(run_dir, top_view_path)
+    log = FlightLog.read(run_dir / "flight")
+    began = landing_report(log)["zone_when_descent_began"]  # the operator's figures, the demo's too
+    zone = None
+    if began is not None and began.get("radius_m") is not None and began["seen_from_altitude_m"] is not None:
+        track_id = began["track_id"]
+        zone = (None if track_id is None else int(track_id)), float(began["radius_m"]), began["seen_from_altitude_m"]
+    figure = None if began is None else descent_figure(run_dir, log, top_view_path, float(began["t_s"]))
     if figure is not None:
         cv2.imwrite(str(run_dir / "demo.png"), figure)
     summary = {**result.to_json(), "replay_identical": report.identical, "video": str(video_path)}
@@ -81,18 +87,16 @@ def run(
     return DemoOutcome(result, report.identical, top_view_path, video_path, zone)
 
 
-def descent_figure(run_dir: Path, top_view_path: Path) -> np.ndarray | None:
-    """The demo's picture (the README's): the camera view when the last descent began, with the zones tracked then
-    (cyan, with their ids) and the target (yellow), beside the top view; None without a descent or a saved frame."""
+def descent_figure(run_dir: Path, log: FlightLog, top_view_path: Path, descent_t_s: float) -> np.ndarray | None:
+    """The demo's picture (the README's): the camera view when the last descent began (at vehicle time
+    ``descent_t_s``; ``log``: the flight's log), with the zones tracked then (cyan, with their ids) and the target
+    (yellow), beside the top view; None without a saved frame."""
     flight_dir = run_dir / "flight"
-    log = FlightLog.read(flight_dir)
     header = log.first(RecordKind.HEADER)
-    starts = [d.t_s for before, d in zip([None, *log.decisions()], log.decisions(), strict=False)
-              if d.phase == "descent" and (before is None or before.phase != "descent")]  # fmt: skip
     top = cv2.imread(str(top_view_path), cv2.IMREAD_COLOR)
-    if header is None or not starts or top is None:
+    if header is None or top is None:
         return None
-    views = [v for v in camera_views(flight_dir, log, flight_config(log, header)) if v[0] <= starts[-1]]
+    views = [v for v in camera_views(flight_dir, log, flight_config(log, header)) if v[0] <= descent_t_s]
     if not views:
         return None
     _, image, caption = views[-1]
@@ -101,21 +105,6 @@ def descent_figure(run_dir: Path, top_view_path: Path) -> np.ndarray | None:
     cv2.rectangle(camera, (0, 0), (camera.shape[1], 24), (0, 0, 0), -1)
     cv2.putText(camera, caption[:80], (6, 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
     return np.hstack([camera, np.full((height, 8, 3), 255, np.uint8), top])
-
-
-def descent_zone(flight_dir: Path) -> tuple[int | None, float, float] | None:
-    """The zone the flight's last descent began over (track id, free radius in m, altitude it was seen from in m),
-    from the log's first decision of that descent; None without a descent."""
-    decisions = FlightLog.read(flight_dir).decisions()
-    start = None
-    for before, decision in zip([None, *decisions], decisions, strict=False):
-        if decision.phase == "descent" and (before is None or before.phase != "descent") and decision.target:
-            start = decision
-    if start is None or start.target is None or start.state is None:
-        return None
-    track_id = start.target.get("track_id")
-    altitude_m = -float(start.state["down_m"])
-    return (None if track_id is None else int(track_id)), float(start.target["radius_m"]), altitude_m
 
 
 def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: float = 27.0) -> np.ndarray:
