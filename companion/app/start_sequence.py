@@ -106,7 +106,7 @@ class StartSequence:
         self._last_takeoff_try_t_s = -math.inf
         self._transit_yaw_deg: float | None = None
         self._waiting_logged = False
-        self._waiting_for: str | None = None
+        self._waiting_for: str | None = None  # a dry run: what it waits for now (air, view)
 
     @property
     def started(self) -> bool:
@@ -123,17 +123,15 @@ class StartSequence:
         the pipeline could read a frame taken from the vehicle's pose now; a dry run waits for it)."""
         start = self.config
         if self.dry_run and self.stage is StartStage.WAITING:
-            waiting_for = None
             if not (status.armed and status.in_air):
-                waiting_for = "the vehicle armed and in the air"
+                wait, waiting_for = "air", "the vehicle armed and in the air"
             elif not head_plane_visible:
-                waiting_for = f"the head plane in view (in the air at {state.altitude_m:.1f} m)"
-            if waiting_for is not None:
-                new_wait = waiting_for.split(" (")[0] != (self._waiting_for or "").split(" (")[0]
-                self._waiting_for = waiting_for
-                return StartStep(StartAction.WAIT, waiting_for=waiting_for if new_wait else None)
-            self.stage = StartStage.STARTED
-            return StartStep(StartAction.START)
+                wait, waiting_for = "view", f"the head plane in view (in the air at {state.altitude_m:.1f} m)"
+            else:
+                self.stage = StartStage.STARTED
+                return StartStep(StartAction.START)
+            new_wait, self._waiting_for = wait != self._waiting_for, wait  # each new wait said once
+            return StartStep(StartAction.WAIT, waiting_for=waiting_for if new_wait else None)
         if self._first_tick_t_s is None:
             self._first_tick_t_s = state.t_s
         if state.t_s - self._first_tick_t_s > START_TIMEOUT_S:
