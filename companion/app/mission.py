@@ -220,18 +220,16 @@ def fence_contradictions(config: MissionConfig) -> list[str]:
     n0, e0 = start.start_north_m, start.start_east_m
     if n0 is not None and e0 is not None and localized and not fence.contains_ne(n0, e0):
         problems.append(f"start.start_north_m, start.start_east_m ({n0}, {e0}) lie outside geofence.polygon_ne_m")
-    climbs = start.arm_and_takeoff or start.start_north_m is not None  # the takeoff and the transit fly at it
-    if climbs and not band.min_altitude_m <= start.takeoff_altitude_m <= band.max_altitude_m:
-        problems.append(
-            f"start.takeoff_altitude_m ({start.takeoff_altitude_m:g} m) must lie within geofence.min_altitude_m "
-            f"({band.min_altitude_m:g} m) and geofence.max_altitude_m ({band.max_altitude_m:g} m)"
-        )
     guidance = config.guidance
-    if not band.min_altitude_m <= guidance.search_altitude_m <= band.max_altitude_m:
-        problems.append(
-            f"guidance.search_altitude_m ({guidance.search_altitude_m:g} m) must lie within geofence.min_altitude_m "
-            f"({band.min_altitude_m:g} m) and geofence.max_altitude_m ({band.max_altitude_m:g} m)"
-        )
+    altitudes = [("guidance.search_altitude_m", guidance.search_altitude_m)]
+    if start.arm_and_takeoff or start.start_north_m is not None:  # the takeoff and the transit fly at it
+        altitudes.insert(0, ("start.takeoff_altitude_m", start.takeoff_altitude_m))
+    for name, altitude_m in altitudes:
+        if not band.min_altitude_m <= altitude_m <= band.max_altitude_m:
+            problems.append(
+                f"{name} ({altitude_m:g} m) must lie within geofence.min_altitude_m ({band.min_altitude_m:g} m) and "
+                f"geofence.max_altitude_m ({band.max_altitude_m:g} m)"
+            )
     if band.min_altitude_m > guidance.land_altitude_m + guidance.land_tolerance_m:
         problems.append(
             f"geofence.min_altitude_m ({band.min_altitude_m:g} m) lies above guidance.land_altitude_m "
