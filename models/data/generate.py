@@ -42,11 +42,10 @@ from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import ProjectionConfig
 from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
-from sitl.render.meshes import head_height_m
 from sitl.render.sensor import SensorConfig, optics, readout
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
-from sitl.world.scenario import GroundKind, ScenarioConfig, Style, WeatherKind
+from sitl.world.scenario import GroundKind, PeopleModel, ScenarioConfig, Style, WeatherKind
 from sitl.world.weather import WeatherSchedule, apply_weather
 
 
@@ -89,6 +88,7 @@ def generate(
     altitude_range_m: tuple[float, float] = (8.0, 40.0),
     ground: GroundKind = GroundKind.PROCEDURAL,
     sensor: SensorConfig | None = None,
+    people: PeopleModel = PeopleModel.PROCEDURAL,
 ) -> list[GeneratedFrame]:
     """Render frames ``first .. first + frames - 1`` of ``split`` into ``out_dir/<split>`` (module docstring).
 
@@ -98,6 +98,8 @@ def generate(
     held-out split's real-ground variant. ``sensor`` (``--sensor``): the SITL camera's effects (motion blur for a
     speed drawn per frame up to 5 m/s, defocus, vignetting, exposure and white balance drift, noise, JPEG;
     ``sitl/render/sensor.py``), seeded per scene and frame; None draws the frames as before, bit for bit.
+    ``people`` (``--people makehuman``): MakeHuman bodies in the same places (``sitl/render/bodies``); heads are
+    labelled at each body's own head height.
     """
     lo_m, hi_m = altitude_range_m
     if not (math.isfinite(lo_m) and math.isfinite(hi_m) and 2.0 <= lo_m < hi_m <= 120.0):
@@ -117,7 +119,7 @@ def generate(
         if scene != scene_seed:
             scene_seed = scene
             scenario = ScenarioConfig(
-                moving_fraction=0.2, weather=WEATHER[split], style=STYLE[split], child_fraction=0.15
+                moving_fraction=0.2, weather=WEATHER[split], style=STYLE[split], child_fraction=0.15, people=people
             )
             crowd = Crowd(scenario, seed)
             park = Park(seed, style=STYLE[split], ground=ground)
@@ -151,7 +153,7 @@ def generate(
             velocity_px_s = (px_s * math.cos(heading), px_s * math.sin(heading))
             image = optics(image, sensor, seed, velocity_px_s, camera.fx_px)
             image = readout(image, sensor, seed, i, t_s)
-        heads, in_view = _visible_heads(crowd, camera, renderer.T_body_camera, pose, view.person_mask)
+        heads, in_view = _visible_heads(renderer, pose, view.person_mask)
         stem = f"{i:06d}"
         cv2.imwrite(str(split_dir / f"{stem}.png"), image)
         cv2.imwrite(str(split_dir / f"{stem}.mask.png"), view.person_mask.astype(np.uint8) * 255)
@@ -187,15 +189,15 @@ def generate(
     return written
 
 
-def _visible_heads(
-    crowd: Crowd, camera: PinholeCamera, T_body_camera: np.ndarray, pose: Pose, mask: np.ndarray
-) -> tuple[list[list[float]], int]:
+def _visible_heads(renderer: WorldRenderer, pose: Pose, mask: np.ndarray) -> tuple[list[list[float]], int]:
     """Pixel centres of the visible heads, and how many heads project into the frame at all."""
     heads: list[list[float]] = []
     in_view = 0
     h, w = mask.shape
-    for i, appearance in enumerate(crowd.appearances):
-        projector = HeadPlaneProjector(camera, T_body_camera, ProjectionConfig(head_height_m=head_height_m(appearance)))
+    crowd, camera = renderer.crowd, renderer.camera
+    for i in range(len(crowd)):
+        config = ProjectionConfig(head_height_m=renderer.head_height_m(i))
+        projector = HeadPlaneProjector(camera, renderer.T_body_camera, config)
         pixel, ok = projector.plane_to_pixel(crowd.positions_ne_m[i : i + 1], pose)
         u, v = (float(c) for c in pixel[0])
         if not ok[0] or not (0.0 <= u < w and 0.0 <= v < h):
@@ -229,6 +231,12 @@ def main() -> int:
         help="the parks' ground (real: the real frames held out from training)",
     )
     parser.add_argument(
+        "--people",
+        choices=[p.value for p in PeopleModel],
+        default=PeopleModel.PROCEDURAL.value,
+        help="how people are drawn (makehuman: MakeHuman bodies, clothes, hair and poses)",
+    )
+    parser.add_argument(
         "--sensor",
         action="store_true",
         help="a camera that looks like a camera: the SITL's sensor effects (sitl/render/sensor.py, all on)",
@@ -243,6 +251,7 @@ def main() -> int:
         altitude_range_m=tuple(args.altitude_m),
         ground=GroundKind(args.ground),
         sensor=SensorConfig(enabled=True) if args.sensor else None,
+        people=PeopleModel(args.people),
     )
     heads = sum(f.heads for f in written)
     sys.stdout.write(f"wrote {len(written)} frames, {heads} visible heads, to {args.out / args.split}\n")

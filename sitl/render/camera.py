@@ -26,7 +26,14 @@ import trimesh
 from companion.cache import KeyedCache
 from companion.errors import SlzError
 from companion.geometry import F64Array, PinholeCamera, Pose
-from sitl.render.meshes import bake_lighting, object_mesh, person_mesh, shadow_mesh
+from sitl.render.bodies.figure import (
+    WALK_PHASES,
+    crowd_figures,
+    figure_head_height_m,
+    figure_trimesh,
+    walk_phase_at,
+)
+from sitl.render.meshes import bake_lighting, head_height_m, object_mesh, person_mesh, shadow_mesh
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 
@@ -112,6 +119,10 @@ LIT_GROUNDS: KeyedCache[npt.NDArray[np.uint8]] = KeyedCache("lit grounds", capac
 OBJECT_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("park objects", capacity=2)
 PERSON_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("person meshes", capacity=512)
 SHADOW_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("shadow meshes", capacity=512)
+SHADOW_SCALE_MAKEHUMAN = 0.6
+WALK_MESHES: KeyedCache[tuple[F64Array, F64Array, F64Array]] = KeyedCache("walking bodies", capacity=4096)
+"""MakeHuman walkers: per figure and step of the walk cycle, the body facing north (vertices, vertex normals, RGB
+colours before light); each frame turns it to the walker's heading and lights it."""
 
 
 def _patch_pyrender(pyrender: Any, GL: Any) -> None:
@@ -217,6 +228,7 @@ class WorldRenderer:
         self.scene = pyrender.Scene(ambient_light=[1.0, 1.0, 1.0], bg_color=[0.78, 0.82, 0.86, 1.0])
         self._black: dict[Any, tuple[int, int, int]] = {}
         self._people_nodes: list[Any] = []
+        self.figures = crowd_figures(crowd)
         self._build_static()
         self._build_people()
         cam = pyrender.IntrinsicsCamera(
@@ -270,23 +282,54 @@ class WorldRenderer:
     def _person(self, index: int) -> trimesh.Trimesh:
         """Person ``index`` at the origin, lit (a copy: the caller moves it)."""
         a = self.crowd.appearances[index]
+        figure = self.figures[index] if self.figures is not None else None
 
         def build() -> trimesh.Trimesh:
             heading = float(np.random.default_rng([index, 6]).uniform(-math.pi, math.pi))
-            mesh = person_mesh(a, heading)
+            mesh = person_mesh(a, heading) if figure is None else figure_trimesh(figure, heading)
             return bake_lighting(mesh, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
 
-        return PERSON_MESHES.get((a, index, self.light.key), build).copy()
+        key = (a, index, self.light.key) if figure is None else (figure, index, self.light.key)
+        return PERSON_MESHES.get(key, build).copy()
+
+    def _walking_body(self, index: int) -> tuple[F64Array, npt.NDArray[np.uint8]]:
+        """MakeHuman walker ``index`` at the origin now: (vertices (N, 3), lit colours (N, 4)).
+
+        The step of the walk cycle follows the distance walked and the body faces its last step; each step of the
+        cycle is built once, then turned and lit per frame (Lambert on its normals, as :func:`bake_lighting`).
+        """
+        assert self.figures is not None
+        figure = self.figures[index]
+        phase = walk_phase_at(float(self.crowd.walked_m[index]), figure.height_m)
+
+        def build() -> tuple[F64Array, F64Array, F64Array]:
+            mesh = figure_trimesh(figure, 0.0, walk_phase=phase)
+            rgb = np.asarray(mesh.visual.vertex_colors[:, :3], dtype=np.float64)
+            return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.vertex_normals, dtype=np.float64), rgb
+
+        vertices, normals, rgb = WALK_MESHES.get((figure, round(phase * WALK_PHASES)), build)
+        heading = float(self.crowd.step_heading_rad[index])
+        c, s = math.cos(heading), math.sin(heading)
+        turn = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # about z by -heading (ENU)
+        light = self.light
+        diffuse = np.clip((normals @ turn.T) @ (-light.sun_dir_enu), 0.0, 1.0)[:, None]
+        lit = light.ambient + (1.0 - light.ambient) * diffuse * light.sun_rgb[None, :]
+        colours = np.empty((len(rgb), 4), dtype=np.uint8)
+        colours[:, :3] = np.clip(rgb * lit, 0, 255).astype(np.uint8)
+        colours[:, 3] = 255
+        return vertices @ turn.T, colours
 
     def _shadow(self, index: int, north_m: float, east_m: float) -> trimesh.Trimesh:
         """Person ``index``'s shadow on the ground at (``north_m``, ``east_m``), lit (shared: never modified)."""
         a = self.crowd.appearances[index]
 
         def build() -> trimesh.Trimesh:
-            mesh = shadow_mesh(north_m, east_m, a.radius_m, self.light.sun_dir_enu, a.height_m)
+            # A MakeHuman body is narrower than the procedural footprint radius (shoulders ~0.45 m across).
+            radius_m = a.radius_m * (SHADOW_SCALE_MAKEHUMAN if self.figures is not None else 1.0)
+            mesh = shadow_mesh(north_m, east_m, radius_m, self.light.sun_dir_enu, a.height_m)
             return bake_lighting(mesh, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
 
-        return SHADOW_MESHES.get((a, index, north_m, east_m, self.light.key), build)
+        return SHADOW_MESHES.get((a, index, north_m, east_m, self.light.key, self.figures is not None), build)
 
     def _build_people(self) -> None:
         pr = self._pyrender
@@ -313,12 +356,19 @@ class WorldRenderer:
         self._mover_parts = []
         offset = 0
         faces, colours = [], []
+        self._walker_faces: dict[int, npt.NDArray[np.int64]] = {}
         for i in self._mover_ids:
             body, shadow = self._person(i), self._shadow(i, 0.0, 0.0)
             self._mover_parts.append((np.asarray(body.vertices), np.asarray(shadow.vertices)))
-            faces.append(np.asarray(body.faces) + offset)
-            colours.append(np.asarray(body.visual.vertex_colors))
-            offset += len(body.vertices)
+            body_faces = np.asarray(body.faces)
+            body_colours = np.asarray(body.visual.vertex_colors)
+            if self.figures is not None:  # a walking body: its own mesh (the walk's topology), at its step
+                vertices, body_colours = self._walking_body(i)
+                body_faces = figure_trimesh(self.figures[i], 0.0, walk_phase=0.0).faces
+                self._mover_parts[-1] = (vertices, np.asarray(shadow.vertices))
+            faces.append(np.asarray(body_faces) + offset)
+            colours.append(body_colours)
+            offset += len(self._mover_parts[-1][0])
         self._mover_node: Any = None
         self._mover_shadow_node: Any = None
         if self._mover_ids:
@@ -331,6 +381,12 @@ class WorldRenderer:
             )
             self._shadow_colours_all = np.tile(np.asarray(template.visual.vertex_colors[:1]), (sum(shadow_counts), 1))
 
+    def head_height_m(self, index: int) -> float:
+        """Height above the ground of the centre of person ``index``'s head (the point a density model finds)."""
+        if self.figures is not None:
+            return figure_head_height_m(self.figures[index])
+        return head_height_m(self.crowd.appearances[index])
+
     def T_gl_camera(self, pose: Pose) -> F64Array:
         """The pyrender camera pose (ENU world, OpenGL camera axes) for a vehicle pose."""
         T_ned_camera = pose.T_world_body @ self.T_body_camera
@@ -338,16 +394,24 @@ class WorldRenderer:
 
     def _update_movers(self) -> None:
         pr = self._pyrender
-        bodies, shadows = [], []
+        bodies, shadows, walk_colours = [], [], []
         for i, (body, shadow) in zip(self._mover_ids, self._mover_parts, strict=True):
             north, east = self.crowd.positions_ne_m[i]
             shift = np.array([east, north, 0.0])
+            if self.figures is not None:
+                body, colours = self._walking_body(i)
+                walk_colours.append(colours)
             bodies.append(body + shift)
             shadows.append(shadow + shift)
+        if walk_colours:
+            self._mover_colours = np.concatenate(walk_colours)
         if self._mover_node is not None:
             # In place: rewrite the interleaved [x y z r g b a] float32 vertex buffers pyrender uploaded.
-            for node, positions in ((self._mover_node, bodies), (self._mover_shadow_node, shadows)):
-                self._rewrite_positions(node.mesh.primitives[0], np.concatenate(positions))
+            body_primitive = self._mover_node.mesh.primitives[0]
+            if walk_colours:
+                body_primitive.color_0 = self._mover_colours
+            self._rewrite_positions(body_primitive, np.concatenate(bodies))
+            self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], np.concatenate(shadows))
             return
         body_mesh = pr.Mesh(
             [

@@ -51,7 +51,7 @@ def _adult_types(style: Style) -> tuple[BodyType, ...]:
     return ADULT_TYPES
 
 
-def _hue_range(style: Style) -> tuple[int, int]:
+def hue_range(style: Style) -> tuple[int, int]:
     """OpenCV hue (0-179) range of clothing colours: warm for training, cool for held-out, all otherwise."""
     return {Style.TRAIN: (0, 45), Style.HELDOUT: (90, 150)}.get(style, (0, 180))
 
@@ -91,6 +91,7 @@ class Crowd:
 
     def __init__(self, config: ScenarioConfig, seed: int) -> None:
         self.config = config
+        self.seed = seed
         rng = np.random.default_rng([seed, 1])
         n = int(rng.integers(config.people_min, config.people_max + 1))
         self.radii_m = rng.uniform(config.person_radius_m.low, config.person_radius_m.high, size=n)
@@ -106,6 +107,10 @@ class Crowd:
         self._speed_mps = rng.uniform(config.walking_speed_mps.low, config.walking_speed_mps.high, size=mover_count)
         self._heading_rad = rng.uniform(-math.pi, math.pi, size=mover_count)
         self._bound_m = config.roi_side_m / 2 + 10.0
+        self.walked_m = np.zeros(n)
+        """Distance each person has walked (a walking body's step follows it)."""
+        self.step_heading_rad = np.random.default_rng([seed, 8]).uniform(-math.pi, math.pi, size=n)
+        """Direction of each person's last step, from north towards east (a walking body faces it)."""
 
     def __len__(self) -> int:
         return len(self.radii_m)
@@ -148,7 +153,7 @@ class Crowd:
         height = float(rng.uniform(1.0, 1.4) if child else rng.uniform(1.55, 1.95))
         hat = body is BodyType.ADULT_WITH_HAT or rng.random() < 0.15
 
-        hue_low, hue_high = _hue_range(style)
+        hue_low, hue_high = hue_range(style)
 
         def colour() -> tuple[int, int, int]:
             hsv = np.array(
@@ -185,6 +190,10 @@ class Crowd:
                 else:
                     step = self._persistent_step(period)
                 new = self.positions_ne_m[movers] + step
+                length = np.hypot(step[:, 0], step[:, 1])
+                self.walked_m[movers] += length
+                stepped = length > 0
+                self.step_heading_rad[movers[stepped]] = np.arctan2(step[stepped, 1], step[stepped, 0])
                 # Reflect at a boundary 10 m outside the ROI so the crowd does not drift away.
                 over = np.abs(new) > self._bound_m
                 new[over] = np.sign(new[over]) * (2 * self._bound_m - np.abs(new[over]))

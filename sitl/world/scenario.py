@@ -60,6 +60,16 @@ class WalkerKind(str, enum.Enum):
     """A pedestrian: walking speed, heading that persists and turns slowly."""
 
 
+class PeopleModel(str, enum.Enum):
+    """How people are drawn."""
+
+    PROCEDURAL = "procedural"
+    """Cylinders, boxes and spheres per body type (the first SITL's people; its campaigns' records)."""
+    MAKEHUMAN = "makehuman"
+    """MakeHuman's CC0 bodies: sex, age, ancestry and shape targets, fitted clothes, hair, skinned to a skeleton,
+    posed from MakeHuman's poses; walking people step through a walk cycle (``sitl/render/bodies``)."""
+
+
 class Range(StrictModel):
     """A closed interval ``[low, high]`` sampled uniformly."""
 
@@ -103,6 +113,10 @@ class ScenarioConfig(StrictModel):
     start_altitude_m: Range = Field(default_factory=lambda: _range(15.0, 40.0))
     style: Style = Field(default=Style.ANY, description="Appearance family (datasets: a train/held-out style split).")
     ground: GroundKind = Field(default=GroundKind.PROCEDURAL, description="The park's ground texture.")
+    people: PeopleModel = Field(default=PeopleModel.PROCEDURAL, description="How people are drawn.")
+    bright_clothing_share: float = Field(
+        default=0.25, ge=0.0, le=1.0, description="MakeHuman people: share of tops in a bright colour (the rest muted)."
+    )
 
     @model_validator(mode="after")
     def _feasible(self) -> ScenarioConfig:
