@@ -2,7 +2,8 @@
 
 Run: ``.venv/bin/python bench/render.py``. pyrender offscreen through EGL (Mesa llvmpipe on a CPU-only machine).
 Measures the colour frame alone, with depth, and with depth and the person-mask pass, then the weather effect; writes
-``bench/results/render.json`` with the machine's context.
+``bench/results/render.json`` with the machine's context. Then procedural against MakeHuman people at 640x480 on the
+same scene (same places, same walkers), in alternating rounds so that both see the machine at the same moment.
 """
 
 from __future__ import annotations
@@ -22,13 +23,14 @@ from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount  # 
 from sitl.render.camera import Light, WorldRenderer  # noqa: E402
 from sitl.world.crowd import Crowd  # noqa: E402
 from sitl.world.park import Park  # noqa: E402
-from sitl.world.scenario import ScenarioConfig, WeatherKind  # noqa: E402
+from sitl.world.scenario import PeopleModel, ScenarioConfig, WalkerKind, WeatherKind  # noqa: E402
 from sitl.world.weather import WeatherState, apply_weather  # noqa: E402
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=60)
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds of the people A/B")
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "bench" / "results" / "render.json")
     args = parser.parse_args()
     config = ScenarioConfig(people_min=120, people_max=120, moving_fraction=0.2)
@@ -62,12 +64,53 @@ def main() -> int:
         finally:
             renderer.close()
         rows[f"{width}x{height}"] = row
-    report = {"benchmark": "render", "people": 120, "moving_fraction": 0.2, "machine": machine_context(), "sizes": rows}
+    people = _people_ab(args.frames, args.rounds)
+    report = {
+        "benchmark": "render",
+        "people": 120,
+        "moving_fraction": 0.2,
+        "machine": machine_context(),
+        "sizes": rows,
+        "people_ab_640x480": people,
+    }
     sys.stdout.write(f"SITL camera, median ms per frame, {report['machine']}\n")
     for size, row in rows.items():
         sys.stdout.write(f"{size:<9} " + "  ".join(f"{k} {v:.1f}" for k, v in row.items()) + "\n")
+    for model, row in people.items():
+        sys.stdout.write(f"640x480 {model:<11} " + "  ".join(f"{k} {v:.2f}" for k, v in row.items()) + "\n")
     save_report(report, args.out)
     return 0
+
+
+def _people_ab(frames: int, rounds: int) -> dict[str, dict[str, float]]:
+    """Procedural against MakeHuman people, 640x480, 120 people, 20 % walking pedestrians, alternating rounds."""
+    camera = PinholeCamera.from_hfov(640, 480, 90.0)
+    times: dict[str, dict[str, list[float]]] = {
+        m.value: {"colour_ms": [], "colour_depth_and_mask_ms": []} for m in PeopleModel
+    }
+    for round_ in range(rounds):
+        for model in PeopleModel:
+            config = ScenarioConfig(
+                people_min=120, people_max=120, moving_fraction=0.2, walker=WalkerKind.PERSISTENT, people=model
+            )
+            renderer = WorldRenderer(
+                Park(1), Crowd(config, 1), camera, T_body_camera_from_mount(), Light.from_angles(50, 120, 0.45)
+            )
+            try:
+                for label, with_mask in (("colour_ms", False), ("colour_depth_and_mask_ms", True)):
+                    for k in range(frames + 10):
+                        pose = Pose.from_ned_euler(0.05 * k, 0.0, -20.0, 0.03 * np.sin(k), 0.0, 0.4)
+                        t_s = 0.1 * k + 100.0 * round_ + (50.0 if with_mask else 0.0)
+                        start = time.perf_counter()
+                        renderer.render(pose, t_s, with_mask=with_mask, with_depth=with_mask)
+                        if k >= 10:  # after warm-up
+                            times[model.value][label].append((time.perf_counter() - start) * 1e3)
+            finally:
+                renderer.close()
+    out = {model: {label: float(np.median(v)) for label, v in row.items()} for model, row in times.items()}
+    base, new = out[PeopleModel.PROCEDURAL.value], out[PeopleModel.MAKEHUMAN.value]
+    out["makehuman_over_procedural"] = {label: new[label] / base[label] for label in base}
+    return out
 
 
 if __name__ == "__main__":

@@ -292,11 +292,11 @@ class WorldRenderer:
         key = (a, index, self.light.key) if figure is None else (figure, index, self.light.key)
         return PERSON_MESHES.get(key, build).copy()
 
-    def _walking_body(self, index: int) -> tuple[F64Array, npt.NDArray[np.uint8]]:
-        """MakeHuman walker ``index`` at the origin now: (vertices (N, 3), lit colours (N, 4)).
+    def _walking_body(self, index: int) -> tuple[F64Array, F64Array, F64Array]:
+        """MakeHuman walker ``index`` at the origin now: vertices, vertex normals and RGB before light, each (N, 3).
 
         The step of the walk cycle follows the distance walked and the body faces its last step; each step of the
-        cycle is built once, then turned and lit per frame (Lambert on its normals, as :func:`bake_lighting`).
+        cycle is built once, then turned per frame (and lit with the other walkers, :meth:`_light_walkers`).
         """
         assert self.figures is not None
         figure = self.figures[index]
@@ -310,14 +310,17 @@ class WorldRenderer:
         vertices, normals, rgb = WALK_MESHES.get((figure, round(phase * WALK_PHASES)), build)
         heading = float(self.crowd.step_heading_rad[index])
         c, s = math.cos(heading), math.sin(heading)
-        turn = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # about z by -heading (ENU)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # (row vectors) about z by -heading, ENU
+        return vertices @ turn, normals @ turn, rgb
+
+    def _light_walkers(self, normals: F64Array, rgb: F64Array) -> npt.NDArray[np.uint8]:
+        """RGBA (N, 4) of walking bodies: Lambert on their normals (N, 3), as :func:`bake_lighting` bakes the rest."""
         light = self.light
-        diffuse = np.clip((normals @ turn.T) @ (-light.sun_dir_enu), 0.0, 1.0)[:, None]
-        lit = light.ambient + (1.0 - light.ambient) * diffuse * light.sun_rgb[None, :]
-        colours = np.empty((len(rgb), 4), dtype=np.uint8)
-        colours[:, :3] = np.clip(rgb * lit, 0, 255).astype(np.uint8)
-        colours[:, 3] = 255
-        return vertices @ turn.T, colours
+        diffuse = np.maximum(normals @ (-light.sun_dir_enu), 0.0)[:, None]
+        lit = rgb * (light.ambient + (1.0 - light.ambient) * diffuse * light.sun_rgb[None, :])
+        colours = np.full((len(rgb), 4), 255, dtype=np.uint8)
+        colours[:, :3] = np.minimum(lit, 255.0)
+        return colours
 
     def _shadow(self, index: int, north_m: float, east_m: float) -> trimesh.Trimesh:
         """Person ``index``'s shadow on the ground at (``north_m``, ``east_m``), lit (shared: never modified)."""
@@ -363,7 +366,8 @@ class WorldRenderer:
             body_faces = np.asarray(body.faces)
             body_colours = np.asarray(body.visual.vertex_colors)
             if self.figures is not None:  # a walking body: its own mesh (the walk's topology), at its step
-                vertices, body_colours = self._walking_body(i)
+                vertices, normals, rgb = self._walking_body(i)
+                body_colours = self._light_walkers(normals, rgb)
                 body_faces = figure_trimesh(self.figures[i], 0.0, walk_phase=0.0).faces
                 self._mover_parts[-1] = (vertices, np.asarray(shadow.vertices))
             faces.append(np.asarray(body_faces) + offset)
@@ -394,17 +398,19 @@ class WorldRenderer:
 
     def _update_movers(self) -> None:
         pr = self._pyrender
-        bodies, shadows, walk_colours = [], [], []
+        bodies, shadows, walk_normals, walk_rgb = [], [], [], []
         for i, (body, shadow) in zip(self._mover_ids, self._mover_parts, strict=True):
             north, east = self.crowd.positions_ne_m[i]
             shift = np.array([east, north, 0.0])
             if self.figures is not None:
-                body, colours = self._walking_body(i)
-                walk_colours.append(colours)
+                body, normals, rgb = self._walking_body(i)
+                walk_normals.append(normals)
+                walk_rgb.append(rgb)
             bodies.append(body + shift)
             shadows.append(shadow + shift)
+        walk_colours = bool(walk_rgb)
         if walk_colours:
-            self._mover_colours = np.concatenate(walk_colours)
+            self._mover_colours = self._light_walkers(np.concatenate(walk_normals), np.concatenate(walk_rgb))
         if self._mover_node is not None:
             # In place: rewrite the interleaved [x y z r g b a] float32 vertex buffers pyrender uploaded.
             body_primitive = self._mover_node.mesh.primitives[0]

@@ -244,51 +244,87 @@ def _colours(part: BodyPart, figure: Figure) -> U8Array:
     return rgba
 
 
-def figure_mesh(
-    figure: Figure, walk_phase: float | None = None, stride: float = 1.0, library: BodyLibrary | None = None
-) -> FigureMesh:
-    """The person's mesh, posed (``walk_phase`` in [0, 1): a step of a walk on top of the figure's pose)."""
-    lib = library or load_library()
+@dataclass(frozen=True)
+class _Dressed:
+    """A figure's dressed body at rest (BVH axes, decimetres), everything but the pose (built once per figure)."""
+
+    heads_rest: F64Array  # (B, 3)
+    crown_rest: F64Array  # (3,) the head bone's tail
+    rest_height_dm: float
+    vertices: F64Array  # (N, 3)
+    bone_ids: I64Array  # (N, 4)
+    bone_weights: F64Array  # (N, 4)
+    faces: I64Array  # (F, 3)
+    colours_rgba: U8Array  # (N, 4)
+
+
+@functools.lru_cache(maxsize=1024)
+def _dressed(figure: Figure) -> _Dressed:
+    lib = load_library()
     base = _shaped_base(lib, figure)
     heads_rest = to_bvh_axes(np.array([base[g].mean(axis=0) for g in lib.head_groups]))
-    rest_height = float(base[:, 1].max() - base[:, 1].min())
-    pose_array = lib.poses[WALK_BASE_POSE if walk_phase is not None else figure.pose]
-    rotations = {name: pose_array[i] for i, name in enumerate(lib.rig.names)}
-    if walk_phase is not None:
-        rotations = walk_pose(rotations, walk_phase, stride)
-    rot, head = lib.rig.pose(heads_rest, rotations)
-    names = [figure.suit, figure.shoes, *(n for n in (figure.hair, figure.hat) if n)]
-    worn = [_part(lib, n) for n in names]
+    k = lib.rig.names.index("head")
+    crown_rest = to_bvh_axes(base[lib.tail_groups[k]].mean(axis=0)[None, :])[0]
+    # Shoes are drawn as the feet they hide, in the shoes' colour: from above a shoe is the foot's outline, and its
+    # own mesh would cost a tenth of the person's triangles.
+    shoes = _part(lib, figure.shoes)
+    worn = [_part(lib, n) for n in (figure.suit, figure.hair, figure.hat) if n]
     body = lib.parts_of(PartKind.BODY, figure.sex)[0]
     hidden = np.zeros(len(lib.base_vertices), dtype=bool)
     for garment in worn:
         hidden[garment.fitting.delete_verts] = True
-    vertices, faces, colours = [], [], []
+    shod = np.zeros(len(lib.base_vertices), dtype=bool)
+    shod[shoes.fitting.delete_verts] = True
+    vertices, faces, colours, ids, weights = [], [], [], [], []
     offset = 0
     for part in (body, *worn):
         rest = to_bvh_axes(part.fitting.fit(base))
-        posed = skin(rest, part.bone_ids, part.bone_weights, heads_rest, rot, head)
         part_faces = part.faces
+        part_colours = _colours(part, figure)
         if part is body:
             covered = hidden[part.fitting.refs[:, 0]]
             part_faces = part_faces[~covered[part_faces].any(axis=1)]  # skin under a garment: not drawn
-        vertices.append(posed)
+            part_colours[shod[part.fitting.refs[:, 0]], :3] = figure.shoes_rgb
+        vertices.append(rest)
         faces.append(part_faces + offset)
-        colours.append(_colours(part, figure))
-        offset += len(posed)
-    scale = figure.height_m / rest_height  # decimetres of this body -> metres of the wanted height
-    v = np.concatenate(vertices) @ T_ENU_BVH.T * scale
+        colours.append(part_colours)
+        ids.append(part.bone_ids)
+        weights.append(part.bone_weights)
+        offset += len(rest)
+    return _Dressed(
+        heads_rest=heads_rest,
+        crown_rest=crown_rest,
+        rest_height_dm=float(base[:, 1].max() - base[:, 1].min()),
+        vertices=np.concatenate(vertices),
+        bone_ids=np.concatenate(ids),
+        bone_weights=np.concatenate(weights),
+        faces=np.concatenate(faces),
+        colours_rgba=np.concatenate(colours),
+    )
+
+
+def figure_mesh(figure: Figure, walk_phase: float | None = None, stride: float = 1.0) -> FigureMesh:
+    """The person's mesh, posed (``walk_phase`` in [0, 1): a step of a walk on top of the figure's pose)."""
+    lib = load_library()
+    dressed = _dressed(figure)
+    pose_array = lib.poses[WALK_BASE_POSE if walk_phase is not None else figure.pose]
+    rotations = {name: pose_array[i] for i, name in enumerate(lib.rig.names)}
+    if walk_phase is not None:
+        rotations = walk_pose(rotations, walk_phase, stride)
+    rot, head = lib.rig.pose(dressed.heads_rest, rotations)
+    posed = skin(dressed.vertices, dressed.bone_ids, dressed.bone_weights, dressed.heads_rest, rot, head)
+    scale = figure.height_m / dressed.rest_height_dm  # decimetres of this body -> metres of the wanted height
+    v = posed @ T_ENU_BVH.T * scale
     # The centre of the head: half way along the head bone (skull base to crown), posed.
     k = lib.rig.names.index("head")
-    crown_rest = to_bvh_axes(base[lib.tail_groups[k]].mean(axis=0)[None, :])[0]
-    crown = head[k] + rot[k] @ (crown_rest - heads_rest[k])
+    crown = head[k] + rot[k] @ (dressed.crown_rest - dressed.heads_rest[k])
     head_centre = (0.5 * (head[k] + crown) @ T_ENU_BVH.T) * scale
     floor = float(v[:, 2].min())
     v = v - np.array([head_centre[0], head_centre[1], floor])
     return FigureMesh(
         vertices_m=np.asarray(v, dtype=np.float64),
-        faces=np.concatenate(faces),
-        colours_rgba=np.concatenate(colours),
+        faces=dressed.faces,
+        colours_rgba=dressed.colours_rgba.copy(),
         head_height_m=float(head_centre[2] - floor),
     )
 

@@ -50,6 +50,8 @@ CELL_DM = 0.75
 lowest a mission looks from). Finer cells cost the software rasterizer its frame budget (bench/render.py): a person
 is ~880 triangles at 7.5 cm, 1,600 at 5.5 cm, 6,100 at 3 cm."""
 BONES_PER_VERTEX = 4
+LEG_CELL_FACTOR = 1.5
+"""Garments below the waist are clustered in cells this much larger."""
 
 
 class BodyLibraryError(SlzError):
@@ -174,9 +176,14 @@ class BodyLibrary:
         return tuple(p for p in self.parts if p.kind is kind and sex in p.sexes)
 
 
-def _cluster(positions: F64Array, faces: I64Array, cell: float) -> tuple[I64Array, I64Array]:
-    """Vertex clustering: (representative vertex per kept vertex (K,), faces (F', 3) over kept vertices)."""
-    keys = np.floor(positions / cell).astype(np.int64)
+def _cluster(positions: F64Array, faces: I64Array, cell: F64Array) -> tuple[I64Array, I64Array]:
+    """Vertex clustering: (representative vertex per kept vertex (K,), faces (F', 3) over kept vertices).
+
+    ``cell`` (N,) is each vertex's cell size; vertices of different cell sizes never share a cell.
+    """
+    keys = np.column_stack(
+        [np.floor(positions / cell[:, None]).astype(np.int64), np.round(cell * 1000).astype(np.int64)]
+    )
     _, cluster, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     cluster = cluster.ravel()
     n_clusters = len(counts)
@@ -275,14 +282,19 @@ def pack(asset_root: Path, out: Path = PACK_PATH, cell_dm: float = CELL_DM) -> P
                 f"{path}: {len(fitting.refs)} fitted vertices for {len(obj.vertices)} in {fitting.obj_file}"
             )
         rest = fitting.fit(base.vertices)
-        keep, faces = _cluster(rest, obj.faces, cell_dm)
+        regions = _garment_regions(rest, obj.faces, waist_dm)
+        # Below the waist a camera above sees less (the torso covers the legs near the nadir): coarser cells there.
+        cells = np.where(regions == int(Region.BOTTOM), cell_dm * LEG_CELL_FACTOR, cell_dm)
+        if kind is not PartKind.SUIT:
+            cells = np.full(len(rest), cell_dm)
+        keep, faces = _cluster(rest, obj.faces, cells)
         refs = fitting.refs[keep]
         w = fitting.weights[keep]
         vertex_weights = np.einsum("nk,nkb->nb", w, dense[refs])  # (N, B)
         ids = np.argsort(-vertex_weights, axis=1)[:, :BONES_PER_VERTEX]
         top = np.take_along_axis(vertex_weights, ids, axis=1)
         top = top / np.maximum(top.sum(axis=1, keepdims=True), 1e-9)
-        region = _garment_regions(rest, obj.faces, waist_dm)[keep]
+        region = regions[keep]
         if kind is PartKind.BODY:
             region = np.full(len(keep), int(Region.SKIN), dtype=np.int64)
         elif kind is PartKind.SHOES:
