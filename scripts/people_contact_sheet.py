@@ -107,7 +107,7 @@ def sheet(sdd_root: Path | None) -> U8Image:
             blocks.append((f"SDD (real) ~{gsd} m/px", sdd_tiles(sdd_root, gsd)))
         for label, tiles in blocks:
             tiles = (tiles + [blank] * PER_ROW)[:PER_ROW]
-            caption = np.full((TILE_PX, 200, 3), 255, dtype=np.uint8)
+            caption = np.full((TILE_PX + 4, 200, 3), 255, dtype=np.uint8)
             cv2.putText(caption, label, (6, TILE_PX // 2 + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1)
             framed = [np.pad(t, ((2, 2), (2, 2), (0, 0)), constant_values=255) for t in tiles]
             rows.append(np.hstack([caption, *framed]))

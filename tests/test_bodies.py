@@ -55,7 +55,7 @@ def test_a_fitting_file_reads_weighted_lines_single_indices_and_ranges(tmp_path:
 def test_a_fitting_file_without_vertices_names_the_file(tmp_path: Path) -> None:
     path = tmp_path / "empty.mhclo"
     path.write_text("name empty\nobj_file empty.obj\n", encoding="utf-8")
-    with pytest.raises(AssetFormatError, match="empty.mhclo: no fitted vertices"):
+    with pytest.raises(AssetFormatError, match=r"empty\.mhclo: no fitted vertices"):
         read_fitting(path)
 
 
@@ -103,7 +103,8 @@ def test_the_shipped_library_is_whole_and_small() -> None:
         assert part.faces.max() < len(part.fitting.refs), part.name
         np.testing.assert_allclose(part.bone_weights.sum(axis=1), 1.0, atol=2e-3, err_msg=part.name)
         assert part.bone_ids.max() < len(lib.rig.names)
-    assert len(lib.parts_of(PartKind.SUIT, "female")) >= 4 and len(lib.parts_of(PartKind.SUIT, "male")) >= 6
+    assert len(lib.parts_of(PartKind.SUIT, "female")) >= 4
+    assert len(lib.parts_of(PartKind.SUIT, "male")) >= 6
     assert {"standing01", "sit01"} <= set(lib.poses)
     assert len(lib.macro_targets) == 12
 
@@ -161,7 +162,8 @@ def test_a_walk_steps_its_legs_through_the_cycle_on_one_topology() -> None:
     low_b = b.vertices_m[b.vertices_m[:, 2] < 0.3]
     # A quarter and three quarters through the cycle the feet are apart along the walk (north), the other way round.
     spread_a = np.ptp(low_a[:, 1])
-    assert spread_a > 0.3 and np.ptp(low_b[:, 1]) > 0.3
+    assert spread_a > 0.3
+    assert np.ptp(low_b[:, 1]) > 0.3
     assert not np.allclose(a.vertices_m, b.vertices_m)
     assert walk_phase_at(0.0, 1.7) == 0.0
     assert walk_phase_at(0.8 * 1.7 * 0.5, 1.7) == pytest.approx(0.5)
@@ -195,7 +197,8 @@ def test_makehuman_people_stand_where_procedural_people_stood_and_their_heads_ar
     procedural, makehuman = _world(31, people=PeopleModel.PROCEDURAL), _world(31)
     try:
         np.testing.assert_array_equal(procedural.crowd.positions_ne_m, makehuman.crowd.positions_ne_m)
-        assert procedural.figures is None and makehuman.figures is not None
+        assert procedural.figures is None
+        assert makehuman.figures is not None
         view = makehuman.render(POSE, 0.0)
         assert 0.003 < view.person_mask.mean() < 0.2
         hits, checked = 0, 0
@@ -250,8 +253,28 @@ def test_the_same_seed_draws_the_same_pixels_cached_or_not() -> None:
 def test_crowd_figures_follow_the_crowds_heights_and_sitters() -> None:
     crowd = Crowd(ScenarioConfig(people=PeopleModel.MAKEHUMAN), 33)
     figures = crowd_figures(crowd)
-    assert figures is not None and len(figures) == len(crowd)
+    assert figures is not None
+    assert len(figures) == len(crowd)
     for a, f in zip(crowd.appearances, figures, strict=True):
         assert f.height_m == a.height_m
         assert (f.pose == "sit01") == ("sitting" in a.body.value)
     assert crowd_figures(Crowd(ScenarioConfig(), 33)) is None
+
+
+@pytest.mark.unit
+def test_a_scenario_names_the_people_field_when_its_value_is_unknown() -> None:
+    with pytest.raises(ValueError, match="people"):
+        ScenarioConfig(people="clay")  # type: ignore[arg-type]
+
+
+@pytest.mark.integration
+def test_the_training_data_draws_makehuman_people_with_their_heads_labelled(tmp_path: Path) -> None:
+    from models.data.generate import Split, generate
+
+    written = generate(tmp_path, Split.TRAIN, frames=2, width_px=320, height_px=240, people=PeopleModel.MAKEHUMAN)
+    assert sum(f.heads for f in written) > 5
+    procedural = generate(tmp_path / "p", Split.TRAIN, frames=2, width_px=320, height_px=240)
+    # The same scenes: as many people in view, the heads found at each body's own height.
+    assert [f.people_in_view for f in written] == [f.people_in_view for f in procedural]
+    image = (tmp_path / "train" / "000000.png").read_bytes()
+    assert image != (tmp_path / "p" / "train" / "000000.png").read_bytes()
