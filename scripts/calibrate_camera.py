@@ -26,6 +26,8 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
+from companion.geometry import PinholeCamera
+
 MIN_VIEWS = 6
 """Fewer photographs with the whole board found than this do not constrain five coefficients."""
 
@@ -38,26 +40,22 @@ class CalibrationError(Exception):
 class Calibration:
     """A camera's intrinsics (pixels) and OpenCV distortion coefficients, with the RMS reprojection error (px)."""
 
-    width_px: int
-    height_px: int
-    fx_px: float
-    fy_px: float
-    cx_px: float
-    cy_px: float
+    camera: PinholeCamera
     distortion: list[float]
     rms_px: float
     views: int
 
     def camera_section(self) -> dict[str, object]:
         """The ``perception.camera`` fields it determines."""
+        c = self.camera
         return {
-            "width_px": self.width_px,
-            "height_px": self.height_px,
-            "fx_px": round(self.fx_px, 3),
-            "fy_px": round(self.fy_px, 3),
-            "cx_px": round(self.cx_px, 3),
-            "cy_px": round(self.cy_px, 3),
-            "distortion": [round(c, 6) for c in self.distortion],
+            "width_px": c.width_px,
+            "height_px": c.height_px,
+            "fx_px": round(c.fx_px, 3),
+            "fy_px": round(c.fy_px, 3),
+            "cx_px": round(c.cx_px, 3),
+            "cy_px": round(c.cy_px, 3),
+            "distortion": [round(k, 6) for k in self.distortion],
         }
 
 
@@ -96,12 +94,7 @@ def calibrate(images_bgr: Sequence[npt.NDArray[np.uint8]], pattern: tuple[int, i
         [board] * len(image_points), image_points, (width_px, height_px), None, None
     )
     return Calibration(
-        width_px,
-        height_px,
-        float(K[0, 0]),
-        float(K[1, 1]),
-        float(K[0, 2]),
-        float(K[1, 2]),
+        PinholeCamera(width_px, height_px, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])),
         [float(c) for c in np.ravel(coefficients)],
         float(rms),
         len(image_points),
