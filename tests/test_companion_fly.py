@@ -16,6 +16,7 @@ from sitl.testing.helpers import (
     free_udp_port,
     pilot_takes_off,
     sitl_mission_yaml,
+    start_camera_sitl,
     state_when,
     wait_until,
 )
@@ -28,12 +29,10 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int, gcs_port: int) -> SitlProcess:
     """A SITL instance with its camera, its ground-station link on ``gcs_port``, and ``tmp_path/mission.yaml``:
     mission_configs/sitl.yaml on its ports."""
-    sitl_config = tmp_path / "sitl.yaml"
-    sitl_config.write_text(f"sitl:\n  camera:\n    enabled: true\n  seed: {seed}\n  gcs_port_remote: {gcs_port}\n")
     mission = sitl_mission_yaml(instance)  # the SITL runs free: no lockstep
     mission = mission.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
     (tmp_path / "mission.yaml").write_text(mission)
-    return SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
+    return start_camera_sitl(tmp_path, instance, seed, gcs_port)
 
 
 def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path, instance: int) -> None:

@@ -26,29 +26,20 @@ from companion.guidance.landing import LandingPhase
 from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 from sitl.config import SitlConfig
-from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import (
     GroundStation,
     free_udp_port,
     pilot_takes_off,
     sitl_mission_yaml,
+    start_camera_sitl,
     state_when,
     wait_until,
+    wait_until_async,
 )
 
 pytestmark = pytest.mark.sitl
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-
-
-def start_sitl(tmp_path: Path, instance: int, seed: int, gcs_port: int, lockstep: bool) -> SitlProcess:
-    """A SITL instance with its camera and its ground-station link on ``gcs_port``."""
-    config = tmp_path / "sitl.yaml"
-    lines = ["sitl:", "  camera:", "    enabled: true", f"  seed: {seed}", f"  gcs_port_remote: {gcs_port}"]
-    if lockstep:
-        lines += ["  lockstep: true", "  speed_factor: 0.0"]
-    config.write_text("\n".join(lines) + "\n")
-    return SitlProcess(["--config", str(config)], instance, tmp_path).start()
 
 
 class TripsInDescent:
@@ -64,20 +55,10 @@ class TripsInDescent:
         return time.monotonic() + (0.0 if self.tripped_at_s is None else 1e6)
 
 
-async def until(condition: Callable[[], Any], timeout_s: float, what: str) -> Any:
-    """Until ``condition()`` is truthy (checked every 50 ms of wall time), or fail after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while not (value := condition()):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        await asyncio.sleep(0.05)
-    return value
-
-
 def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_programs_watch(
     tmp_path: Path, instance: int
 ) -> None:
-    sitl = start_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
+    sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
     mission = tmp_path / "mission.yaml"
     mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
     config, pipeline = validate_for_flight(mission)  # as `slz fly` loads it
@@ -93,19 +74,19 @@ def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_p
         clock.app = app
         loop = asyncio.get_running_loop()
 
-        async def sitl_state() -> dict[str, Any]:
-            return await loop.run_in_executor(None, sitl.state)  # the flight's loop keeps acknowledging ticks
+        async def sitl_state_when(predicate: Callable[[dict[str, Any]], bool], what: str) -> dict[str, Any]:
+            # In a thread: the flight's loop keeps acknowledging ticks meanwhile.
+            return await loop.run_in_executor(None, state_when, sitl, predicate, 120.0, what)
 
         try:
             run = asyncio.create_task(app.run())
-            await until(lambda: app.guidance.phase is LandingPhase.FAILSAFE or run.done(), 150, "the wall limit")
+            await wait_until_async(
+                lambda: app.guidance.phase is LandingPhase.FAILSAFE or run.done(), 150, "the wall limit"
+            )
             assert not run.done(), run.exception() if run.done() else None
-            held = await sitl_state()
-            while held["mode"] != "AUTO.LOITER" or held["t_s"] < 1.0:
-                held = await sitl_state()
-            later = held
-            while later["t_s"] < held["t_s"] + 10.0:  # ten simulated seconds on: still holding, still watched
-                later = await sitl_state()
+            held = await sitl_state_when(lambda s: s["mode"] == "AUTO.LOITER" and s["t_s"] >= 1.0, "the hold")
+            # Ten simulated seconds on: still holding, still watched.
+            later = await sitl_state_when(lambda s: s["t_s"] >= held["t_s"] + 10.0, "ten simulated seconds more")
             assert not run.done()
             assert (await loop.run_in_executor(None, sitl.request, {"cmd": "pilot_mode", "mode": "POSCTL"}))[
                 "result"
@@ -148,7 +129,7 @@ def test_a_dry_run_started_on_the_ground_records_the_whole_flight_the_pilot_flie
     tmp_path: Path, instance: int
 ) -> None:
     gcs_port = free_udp_port()
-    sitl = start_sitl(tmp_path, instance, seed=3, gcs_port=gcs_port, lockstep=False)
+    sitl = start_camera_sitl(tmp_path, instance, seed=3, gcs_port=gcs_port, lockstep=False)
     mission = tmp_path / "mission.yaml"
     mission.write_text(sitl_mission_yaml(instance))
     log = tmp_path / "flight" / "flight.jsonl"
@@ -209,7 +190,7 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     from companion.app.replay import replay
     from sitl.geodesy import ned_to_geodetic
 
-    sitl = start_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
+    sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
     origin = SitlConfig()
     corners_ne = [(-25.0, -25.0), (-25.0, 25.0), (25.0, 25.0), (25.0, -25.0)]  # sitl.yaml's fence, as a surveyor
     lat0, lon0 = origin.origin_lat_deg, origin.origin_lon_deg
@@ -265,7 +246,7 @@ def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_f
 ) -> None:
     import signal
 
-    sitl = start_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
+    sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
     mission = tmp_path / "mission.yaml"
     mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
     log = tmp_path / "flight" / "flight.jsonl"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 import socket
 import threading
@@ -52,6 +53,29 @@ def wait_until(condition: Callable[[], T | None], timeout_s: float, what: str, p
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
         time.sleep(poll_s)
+
+
+async def wait_until_async(condition: Callable[[], T | None], timeout_s: float, what: str, poll_s: float = 0.05) -> T:
+    """:func:`wait_until` inside an event loop: the loop runs between polls (a flight under test keeps flying)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        await asyncio.sleep(poll_s)
+
+
+def start_camera_sitl(tmp_path: Path, instance: int, seed: int, gcs_port: int, lockstep: bool = False) -> SitlProcess:
+    """A SITL instance with its camera on, seeded, its ground-station link on ``gcs_port`` (``tmp_path/sitl.yaml``);
+    in lockstep (``speed_factor`` 0: the companion's acknowledgements pace it) or running free."""
+    lines = ["sitl:", "  camera:", "    enabled: true", f"  seed: {seed}", f"  gcs_port_remote: {gcs_port}"]
+    if lockstep:
+        lines += ["  lockstep: true", "  speed_factor: 0.0"]
+    config = tmp_path / "sitl.yaml"
+    config.write_text("\n".join(lines) + "\n")
+    return SitlProcess(["--config", str(config)], instance, tmp_path).start()
 
 
 def state_when(
