@@ -30,6 +30,7 @@ from sitl.render.bodies.figure import (
     WALK_PHASES,
     crowd_figures,
     figure_head_height_m,
+    figure_topology,
     figure_trimesh,
     walk_phase_at,
 )
@@ -356,29 +357,30 @@ class WorldRenderer:
         # Walking people: one mesh (and one of their shadows) built at the first frame from cached local vertices,
         # then moved by rewriting its vertex buffer in place each frame (one draw call, no new GL objects).
         self._mover_ids = [int(i) for i in np.nonzero(crowd.moving)[0]]
-        self._mover_parts = []
+        # (body vertices, shadow vertices) per walker; a MakeHuman walker's body is posed, turned and lit per frame.
+        self._mover_parts: list[tuple[F64Array | None, F64Array]] = []
         offset = 0
         faces, colours = [], []
-        self._walker_faces: dict[int, npt.NDArray[np.int64]] = {}
         for i in self._mover_ids:
-            body, shadow = self._person(i), self._shadow(i, 0.0, 0.0)
-            self._mover_parts.append((np.asarray(body.vertices), np.asarray(shadow.vertices)))
-            body_faces = np.asarray(body.faces)
-            body_colours = np.asarray(body.visual.vertex_colors)
-            if self.figures is not None:  # a walking body: its own mesh (the walk's topology), at its step
-                vertices, normals, rgb = self._walking_body(i)
-                body_colours = self._light_walkers(normals, rgb)
-                body_faces = figure_trimesh(self.figures[i], 0.0, walk_phase=0.0).faces
-                self._mover_parts[-1] = (vertices, np.asarray(shadow.vertices))
-            faces.append(np.asarray(body_faces) + offset)
-            colours.append(body_colours)
-            offset += len(self._mover_parts[-1][0])
+            shadow = np.asarray(self._shadow(i, 0.0, 0.0).vertices)
+            if self.figures is None:
+                body = self._person(i)
+                self._mover_parts.append((np.asarray(body.vertices), shadow))
+                faces.append(np.asarray(body.faces) + offset)
+                colours.append(np.asarray(body.visual.vertex_colors))
+                offset += len(body.vertices)
+            else:  # the walk's topology, the same at every step
+                body_faces, count = figure_topology(self.figures[i])
+                self._mover_parts.append((None, shadow))
+                faces.append(body_faces + offset)
+                offset += count
         self._mover_node: Any = None
         self._mover_shadow_node: Any = None
         if self._mover_ids:
             template = self._shadow(self._mover_ids[0], 0.0, 0.0)  # every shadow is the same 10-sided disc mesh
             self._mover_faces = np.concatenate(faces)
-            self._mover_colours = np.concatenate(colours)
+            if colours:  # MakeHuman walkers are lit at each frame (_update_movers)
+                self._mover_colours = np.concatenate(colours)
             shadow_counts = [len(s) for _, s in self._mover_parts]
             self._shadow_faces_all = np.concatenate(
                 [np.asarray(template.faces) + start for start in np.cumsum([0, *shadow_counts[:-1]])]
@@ -399,22 +401,23 @@ class WorldRenderer:
     def _update_movers(self) -> None:
         pr = self._pyrender
         bodies, shadows, walk_normals, walk_rgb = [], [], [], []
-        for i, (body, shadow) in zip(self._mover_ids, self._mover_parts, strict=True):
+        for i, (rest_body, shadow) in zip(self._mover_ids, self._mover_parts, strict=True):
             north, east = self.crowd.positions_ne_m[i]
             shift = np.array([east, north, 0.0])
-            if self.figures is not None:
+            if rest_body is None:  # a MakeHuman walker: at its step of the walk, facing its last step
                 body, normals, rgb = self._walking_body(i)
                 walk_normals.append(normals)
                 walk_rgb.append(rgb)
+            else:
+                body = rest_body
             bodies.append(body + shift)
             shadows.append(shadow + shift)
-        walk_colours = bool(walk_rgb)
-        if walk_colours:
+        if walk_rgb:
             self._mover_colours = self._light_walkers(np.concatenate(walk_normals), np.concatenate(walk_rgb))
         if self._mover_node is not None:
             # In place: rewrite the interleaved [x y z r g b a] float32 vertex buffers pyrender uploaded.
             body_primitive = self._mover_node.mesh.primitives[0]
-            if walk_colours:
+            if walk_rgb:
                 body_primitive.color_0 = self._mover_colours
             self._rewrite_positions(body_primitive, np.concatenate(bodies))
             self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], np.concatenate(shadows))

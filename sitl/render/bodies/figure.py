@@ -303,6 +303,12 @@ def _dressed(figure: Figure) -> _Dressed:
     )
 
 
+def figure_topology(figure: Figure) -> tuple[I64Array, int]:
+    """The triangles (F, 3) of the figure's mesh and its vertex count: the same in every pose and step of the walk."""
+    dressed = _dressed(figure)
+    return dressed.faces, len(dressed.vertices)
+
+
 def figure_mesh(figure: Figure, walk_phase: float | None = None, stride: float = 1.0) -> FigureMesh:
     """The person's mesh, posed (``walk_phase`` in [0, 1): a step of a walk on top of the figure's pose)."""
     lib = load_library()
