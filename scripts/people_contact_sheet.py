@@ -22,8 +22,6 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
-from companion.perception.config import ProjectionConfig
-from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
@@ -56,13 +54,9 @@ def rendered_tiles(model: PeopleModel, gsd_m_per_px: float, seed: int = 4) -> li
         image = renderer.render(pose, 0.0, with_mask=False, with_depth=False).image_bgr
         half = round(TILE_M / gsd_m_per_px / 2)
         found = []
-        for i in range(len(renderer.crowd)):
-            projector = HeadPlaneProjector(
-                camera, renderer.T_body_camera, ProjectionConfig(head_height_m=renderer.head_height_m(i))
-            )
-            pixel, ok = projector.plane_to_pixel(renderer.crowd.positions_ne_m[i : i + 1], pose)
-            u, v = (round(c) for c in pixel[0])
-            if ok[0] and half <= u < camera.width_px - half and half <= v < camera.height_px - half:
+        for (u_px, v_px), front in zip(*renderer.head_pixels(pose), strict=True):
+            u, v = round(u_px), round(v_px)
+            if front and half <= u < camera.width_px - half and half <= v < camera.height_px - half:
                 found.append((abs(u - camera.cx_px) + abs(v - camera.cy_px), u, v))
         tiles = [_tile(image[v - half : v + half, u - half : u + half]) for _, u, v in sorted(found)[:PER_ROW]]
     finally:

@@ -9,8 +9,6 @@ import numpy as np
 import pytest
 
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
-from companion.perception.config import ProjectionConfig
-from companion.perception.projection import HeadPlaneProjector
 from sitl.render import camera as camera_module
 from sitl.render.bodies.figure import (
     MUTED_RGB,
@@ -202,13 +200,9 @@ def test_makehuman_people_stand_where_procedural_people_stood_and_their_heads_ar
         view = makehuman.render(POSE, 0.0)
         assert 0.003 < view.person_mask.mean() < 0.2
         hits, checked = 0, 0
-        for i in range(len(makehuman.crowd)):
-            config = ProjectionConfig(head_height_m=makehuman.head_height_m(i))
-            pixel, ok = HeadPlaneProjector(CAMERA, NADIR, config).plane_to_pixel(
-                makehuman.crowd.positions_ne_m[i : i + 1], POSE
-            )
-            u, v = (round(c) for c in pixel[0])
-            if not ok[0] or not (3 <= u < 317 and 3 <= v < 237):
+        for (u_px, v_px), front in zip(*makehuman.head_pixels(POSE), strict=True):
+            u, v = round(u_px), round(v_px)
+            if not front or not (3 <= u < 317 and 3 <= v < 237):
                 continue
             checked += 1
             hits += bool(view.person_mask[v - 1 : v + 2, u - 1 : u + 2].any())

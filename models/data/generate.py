@@ -39,8 +39,6 @@ import cv2
 import numpy as np
 
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
-from companion.perception.config import ProjectionConfig
-from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
 from sitl.render.sensor import SensorConfig, optics, readout
 from sitl.world.crowd import Crowd
@@ -194,13 +192,9 @@ def _visible_heads(renderer: WorldRenderer, pose: Pose, mask: np.ndarray) -> tup
     heads: list[list[float]] = []
     in_view = 0
     h, w = mask.shape
-    crowd, camera = renderer.crowd, renderer.camera
-    for i in range(len(crowd)):
-        config = ProjectionConfig(head_height_m=renderer.head_height_m(i))
-        projector = HeadPlaneProjector(camera, renderer.T_body_camera, config)
-        pixel, ok = projector.plane_to_pixel(crowd.positions_ne_m[i : i + 1], pose)
-        u, v = (float(c) for c in pixel[0])
-        if not ok[0] or not (0.0 <= u < w and 0.0 <= v < h):
+    for (u, v), front in zip(*renderer.head_pixels(pose), strict=True):
+        u, v = float(u), float(v)
+        if not front or not (0.0 <= u < w and 0.0 <= v < h):
             continue
         in_view += 1
         ui, vi = int(u), int(v)

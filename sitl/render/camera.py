@@ -26,6 +26,8 @@ import trimesh
 from companion.cache import KeyedCache
 from companion.errors import SlzError
 from companion.geometry import F64Array, PinholeCamera, Pose
+from companion.perception.config import ProjectionConfig
+from companion.perception.projection import HeadPlaneProjector
 from sitl.render.bodies.figure import (
     WALK_PHASES,
     crowd_figures,
@@ -392,6 +394,25 @@ class WorldRenderer:
         if self.figures is not None:
             return figure_head_height_m(self.figures[index])
         return head_height_m(self.crowd.appearances[index])
+
+    def head_pixels(self, pose: Pose) -> tuple[F64Array, npt.NDArray[np.bool_]]:
+        """Where each person's head centre projects from ``pose``, with the companion's own head-plane projector.
+
+        Returns
+        -------
+        pixels : ndarray, shape (N, 2)
+            (u, v) per person, in pixels.
+        ok : ndarray, shape (N,), bool
+            Whether the head is in front of the camera (``pixels`` is meaningless where not).
+        """
+        pixels = np.zeros((len(self.crowd), 2))
+        ok = np.zeros(len(self.crowd), dtype=bool)
+        for i in range(len(self.crowd)):
+            config = ProjectionConfig(head_height_m=self.head_height_m(i))
+            projector = HeadPlaneProjector(self.camera, self.T_body_camera, config)
+            pixel, front = projector.plane_to_pixel(self.crowd.positions_ne_m[i : i + 1], pose)
+            pixels[i], ok[i] = pixel[0], front[0]
+        return pixels, ok
 
     def T_gl_camera(self, pose: Pose) -> F64Array:
         """The pyrender camera pose (ENU world, OpenGL camera axes) for a vehicle pose."""
