@@ -228,12 +228,12 @@ def _colours(part: BodyPart, figure: Figure) -> U8Array:
     elif part.kind is PartKind.SUIT:
         table = {Region.SKIN: figure.top_rgb, Region.TOP: figure.top_rgb, Region.BOTTOM: figure.bottom_rgb}
         table[Region.FEET] = figure.bottom_rgb
-    elif part.kind is PartKind.SHOES:
-        table = {r: figure.shoes_rgb for r in Region}
     elif part.kind is PartKind.HAIR:
         table = {r: figure.hair_rgb for r in Region}
-    else:
+    elif part.kind is PartKind.HAT:
         table = {r: figure.hat_rgb for r in Region}
+    else:
+        raise ValueError(f"{part.name}: {part.kind.value} parts are not drawn (shoes are painted on the feet)")
     lut = np.array([table[Region(k)] for k in range(len(Region))], dtype=np.float64)
     rgb = lut[part.region]
     # Folds and seams: a fixed +-7 % shade per vertex (a function of the vertex, not of the draw).

@@ -19,7 +19,6 @@ Units are MakeHuman's: decimetres, y up, the body facing +z, its left side towar
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.errors import SlzError
+from sitl.render.bodies.rig import axis_rotation
 
 F64Array = npt.NDArray[np.float64]
 I64Array = npt.NDArray[np.int64]
@@ -310,15 +310,6 @@ class BvhPose:
     root_position: F64Array = field(default_factory=lambda: np.zeros(3))
 
 
-def _axis_rotation(axis: str, angle_deg: float) -> F64Array:
-    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
-    if axis == "X":
-        return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-    if axis == "Y":
-        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def read_bvh(path: Path, frame: int = 0) -> BvhPose:
     """Read one frame of a ``.bvh`` file."""
     tokens = path.read_text(encoding="utf-8").split()
@@ -367,7 +358,7 @@ def read_bvh(path: Path, frame: int = 0) -> BvhPose:
             value = values[cursor]
             cursor += 1
             if channel.endswith("rotation"):
-                rotation = rotation @ _axis_rotation(channel[0], value)
+                rotation = rotation @ axis_rotation(channel[0].lower(), value)
             elif channel.endswith("position"):
                 position["XYZ".index(channel[0])] = value
         pose.rotations[name] = rotation

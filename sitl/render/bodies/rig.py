@@ -39,7 +39,7 @@ RIG_BONES: tuple[str, ...] = (
         for name in ("pelvis", "upperleg01", "upperleg02", "lowerleg01", "lowerleg02", "foot")
     ),
 )
-"""Kept bones, each after its parent in MakeHuman's default skeleton... (checked when a rig is built)."""
+"""Kept bones, each after its parent in MakeHuman's default skeleton (checked when a rig is built)."""
 
 T_BVH_MAKEHUMAN = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """MakeHuman's mesh axes (x left, y up, z forward) to its BVH axes (x left, y backwards, z up)."""
