@@ -270,7 +270,9 @@ def pack(asset_root: Path, out: Path = PACK_PATH, cell_dm: float = CELL_DM) -> P
     waist_dm = float(base.vertices[skeleton.head_groups[root]].mean(axis=0)[1]) + 0.3
 
     arrays: dict[str, np.ndarray] = {}
-    meta: dict[str, object] = {"cell_dm": cell_dm, "rig": list(rig.names), "parts": [], "poses": list(POSE_FILES)}
+    parts_meta: list[dict[str, object]] = []
+    meta: dict[str, object] = {"cell_dm": cell_dm, "rig": list(rig.names), "parts": parts_meta}
+    meta["poses"] = list(POSE_FILES)
     used: set[int] = set()
     parts_raw = []
     for kind, relative, sexes in PART_FILES:
@@ -329,7 +331,7 @@ def pack(asset_root: Path, out: Path = PACK_PATH, cell_dm: float = CELL_DM) -> P
         arrays[prefix + "region"] = region.astype(np.uint8)
         arrays[prefix + "bone_ids"] = ids.astype(np.uint8)
         arrays[prefix + "bone_weights"] = top.astype(np.float16)
-        meta["parts"].append({"name": name, "kind": kind.value, "sexes": list(sexes)})  # type: ignore[attr-defined]
+        parts_meta.append({"name": name, "kind": kind.value, "sexes": list(sexes)})
     for ancestry in ANCESTRIES:
         for sex in SEXES:
             for age in AGES:
