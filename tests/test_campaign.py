@@ -219,6 +219,14 @@ def processes() -> list[tuple[int, int, str]]:
     return out
 
 
+def command_line(pid: int) -> str:
+    """``pid``'s command line, for a failure message ("" once it is gone)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
+    except OSError:
+        return ""
+
+
 def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_flight(tmp_path: Path) -> None:
     out = tmp_path / "interrupted"
     # Started as a shell starts a background job: SIGINT ignored. The campaign must still stop on it.
@@ -243,10 +251,12 @@ def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_fli
         assert "interrupted" in stderr
 
         # Nothing of the campaign is left: no worker, SITL or companion in its process group.
-        def group_gone() -> bool:  # no live process (zombies aside) in the campaign's process group
-            return not [pid for pid, pgid, state in processes() if pgid == run.pid and state != "Z"]
+        def left() -> list[str]:  # every live process (zombies aside) in the campaign's process group
+            return [command_line(pid) for pid, pgid, state in processes() if pgid == run.pid and state != "Z"]
 
-        wait_until(group_gone, 30, "every process of the campaign to exit", poll_s=0.2)
+        with contextlib.suppress(AssertionError):
+            wait_until(lambda: not left(), 30, "every process of the campaign to exit", poll_s=0.2)
+        assert not left(), f"still running 30 s after the campaign ended: {left()}"
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(run.pid, signal.SIGKILL)

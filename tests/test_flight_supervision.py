@@ -457,3 +457,39 @@ def test_a_pilot_who_takes_over_as_the_wall_limit_passes_keeps_the_vehicle(
 
     asyncio.run(flight())
     assert app.outcome.phase == "yielded"
+
+
+def test_a_stop_in_flight_sends_the_last_resort_at_the_next_tick_and_ends(app_and_link: Any) -> None:
+    app, link = app_and_link
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        app.request_stop("SIGTERM received")
+        assert not app.done.is_set()  # the stop waits for a tick: the vehicle's state to decide at
+        await tick(app, link, 1.1)
+        assert link.commands[-1] == ("hold", None)  # the configured last resort, then the end (no watch)
+        assert app.done.is_set()
+
+    asyncio.run(flight())
+    assert app.outcome.phase == "failsafe"
+    assert "SIGTERM received: stopping: hold" in app.outcome.reason
+
+
+def test_a_stop_that_no_tick_takes_ends_without_the_last_resort_within_its_bound(
+    app_and_link: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The SITL stopped with us (a campaign interrupted) or the link is gone: no tick will ever come to act at.
+    app, link = app_and_link
+    monkeypatch.setattr("companion.app.flight.STOP_UNHEARD_S", 0.2)
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        sent = len(link.commands)
+        app.request_stop("SIGTERM received")
+        await asyncio.wait_for(app.done.wait(), timeout=10.0)
+        assert len(link.commands) == sent  # nothing sent without a state to decide it at
+
+    asyncio.run(flight())
+    assert app.outcome.reason == "SIGTERM received: no vehicle tick within 0.2 s, ending without the last resort"
+    events = [r for r in read_log(app.recorder.path) if r["kind"] == "supervision"]
+    assert [(r["event"], r["reason"]) for r in events] == [("stopped", app.outcome.reason)]

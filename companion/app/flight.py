@@ -64,6 +64,7 @@ TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAIL
 FRAMES_UNREAD = TERMINAL | {LandingPhase.LAND}
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
+STOP_UNHEARD_S = 3.0  # wall time a stop waits for a tick to send the last resort in; then it ends without one
 POSE_RECORD_PERIOD_S = 1.0  # vehicle time between two `pose` records: the flight's path in the log
 _OURS = (FlightMode.OFFBOARD, FlightMode.UNKNOWN)  # modes in which offboard setpoints are still the companion's
 # The modes a failsafe command leads to (PX4: a return ends in the autopilot's own landing, then its hold).
@@ -523,6 +524,18 @@ class FlightApp:
             return
         logger.warning("%s: the vehicle gets the last resort, then the program ends", why)
         self._stop_requested = why
+        # No tick may come again (a SITL stopped with us, a link gone): the stop must not wait on one.
+        asyncio.get_running_loop().call_later(STOP_UNHEARD_S, self._stop_unheard, why)
+
+    def _stop_unheard(self, why: str) -> None:
+        """``STOP_UNHEARD_S`` after a stop: if no tick has taken it yet, end without sending the last resort."""
+        if self._stop_requested is None or self.done.is_set():
+            return
+        self._stop_requested = None
+        self.outcome.reason = f"{why}: no vehicle tick within {STOP_UNHEARD_S:g} s, ending without the last resort"
+        self.recorder.write(RecordKind.SUPERVISION, None, event="stopped", reason=self.outcome.reason)
+        logger.error("%s", self.outcome.reason)
+        self.done.set()
 
     async def _stop(self, state: VehicleState, why: str) -> None:
         """A stop asked of the program: the last resort for a vehicle it flies, then the end (no watch: a stopping
