@@ -99,7 +99,8 @@ paper-table-roi: $(STAMP)
 
 # Real aerial frames (every set under ../shared/datasets, evaluation only): person recall, false-occupied ground and
 # count ratio at native and half scale, each shipped model beside the others on the same frames, in one run.
-# Writes models/eval/results/real.{json,md}; overlays under runs/eval/real/.
+# The real ground of every site in sitl/world/ground: all frames of a site a model never trained on (its metadata
+# names those it did). Writes models/eval/results/real.{json,md}; overlays under runs/eval/real/.
 EVAL_REAL_MODELS ?= --model slz-lite=models/density/slz_lite.onnx --model slz-lite-int8=models/density/slz_lite_int8.onnx \
 	--model slz-ccnn=models/density/slz_ccnn.onnx --model slz-lite-wide-real=models/density/slz_lite_wide_real.onnx
 eval-real: $(STAMP)

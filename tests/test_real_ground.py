@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,8 @@ from models.data.real_ground import (
     load_ground,
     split_of,
 )
+from models.data.real_sites import CROP_PX, GARFIELD, SITES, derive_frame, prepare
+from sitl.world.ground import GROUND_ROOT
 from sitl.world.park import Park
 from sitl.world.scenario import GroundKind, ScenarioConfig
 
@@ -114,3 +117,52 @@ def test_the_sitl_paints_real_ground_from_the_held_out_frames_with_the_same_obje
     # The real texture has a photograph's spread of colours, not a few flat paints.
     assert len(np.unique(real.ground_bgr.reshape(-1, 3)[::97], axis=0)) > 1000
     assert ScenarioConfig.model_validate({"ground": "real"}).ground is GroundKind.REAL
+
+
+@pytest.mark.parametrize(("site", "frames"), [("garfield", 28), ("boruszyn", 24)])
+def test_the_other_sites_are_derived_as_caliterra_with_their_credit_and_exclusions(site: str, frames: int) -> None:
+    root = GROUND_ROOT / site
+    index = json.loads((root / "index.json").read_text())
+    source = SITES[site]
+    assert (index["site"], index["licence"], index["credit"]) == (site, source.licence, source.credit)
+    assert index["gsd_m_per_px"] == STORED_GSD_M_PER_PX
+    names = [f["name"] for f in index["frames"]]
+    assert len(names) == len(set(names)) == frames
+    assert not set(index["excluded"]) & set(names)
+    assert set(source.excluded) <= set(index["excluded"])
+    for frame in index["frames"]:
+        assert frame["split"] == split_of(frame["name"])
+        assert (frame["width_px"], frame["height_px"]) == CROP_PX
+        assert (root / f"{frame['name']}.jpg").is_file()
+    sources_md = (root / "SOURCES.md").read_text()
+    assert source.credit.split(",")[0] in sources_md or source.licence in sources_md
+
+
+def test_a_source_frame_is_brought_to_the_stored_gsd_and_its_centre_kept() -> None:
+    # A 3456 x 4608 portrait frame at 0.033 m/px whose centre is marked: turned, scaled by 0.033 / 0.045, centre kept.
+    image = np.zeros((4608, 3456, 3), np.uint8)
+    image[2304 - 40 : 2304 + 40, 1728 - 40 : 1728 + 40] = 255  # 80 px = 2.64 m at the source's GSD
+    derived = derive_frame(GARFIELD, image)
+    assert derived.shape == (CROP_PX[1], CROP_PX[0], 3)
+    bright = np.argwhere(derived[:, :, 0] > 127)
+    side_px = bright[:, 0].max() - bright[:, 0].min() + 1
+    assert abs(side_px - 80 * 0.033 / STORED_GSD_M_PER_PX) <= 2  # 2.64 m at 0.045 m/px: 59 px
+    centre = bright.mean(axis=0)
+    assert np.allclose(centre, (CROP_PX[1] / 2, CROP_PX[0] / 2), atol=2)
+    assert GARFIELD.frame_name(Path("IMG_161122_164150_0091_RGB.JPG")) == "garfield_0091"
+
+
+DATASETS = Path(__file__).resolve().parents[2] / "shared" / "datasets"
+
+
+@pytest.mark.skipif(not (DATASETS / "boruszyn_kap").is_dir(), reason="../shared/datasets/boruszyn_kap is not here")
+def test_deriving_a_site_again_gives_the_shipped_files(tmp_path: Path) -> None:
+    people = {"img_4873": "a figure in red in the shade of a shed, beside a tractor"}
+    index = prepare(SITES["boruszyn"], DATASETS / "boruszyn_kap" / "images", tmp_path, people)
+    shipped = GROUND_ROOT / "boruszyn"
+    assert index == json.loads((shipped / "index.json").read_text())
+    frames = index["frames"]
+    assert isinstance(frames, list)
+    for frame in frames:
+        name = f"{frame['name']}.jpg"
+        assert (tmp_path / name).read_bytes() == (shipped / name).read_bytes(), name

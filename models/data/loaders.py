@@ -258,9 +258,9 @@ def load_yolo_people(image_dir: Path, label_dir: Path, person_classes: tuple[int
     return out
 
 
-def load_real_ground_heldout(root: Path) -> list[BoxedImage]:
-    """The held-out frames of a derived real-ground folder (``models/data/real_ground.py``: ``index.json`` with
-    ``gsd_m_per_px`` and ``frames``): nobody in them, so no boxes; never trained on."""
+def load_real_ground(root: Path, split: str | None = "heldout") -> list[BoxedImage]:
+    """The frames of ``split`` (None: every frame) of a derived real-ground folder (``sitl/world/ground/<site>``:
+    ``index.json`` with ``gsd_m_per_px`` and ``frames``): nobody in them, so no boxes."""
     path = root / "index.json"
     data = _read_json(path)
     frames = data.get("frames") if isinstance(data, dict) else None
@@ -270,14 +270,14 @@ def load_real_ground_heldout(root: Path) -> list[BoxedImage]:
     for entry in frames:
         if not isinstance(entry, dict) or "name" not in entry or "split" not in entry:
             raise DatasetError(path, "each frame needs 'name' and 'split'")
-        if entry["split"] != "heldout":
+        if split is not None and entry["split"] != split:
             continue
         image_path = root / f"{entry['name']}.jpg"
         if not image_path.is_file():
             raise DatasetError(image_path, "frame listed in index.json is missing")
         out.append(BoxedImage(image_path, np.zeros((0, 4), np.float64), None))
     if not out:
-        raise DatasetError(path, "no held-out frame")
+        raise DatasetError(path, f"no frame of split {split!r}" if split else "no frame")
     return out
 
 
@@ -288,7 +288,7 @@ def load_real_set(root: Path) -> list[BoxedImage]:
     if (root / "boxes.json").is_file():
         return load_sdd_reference(root)
     if (root / "index.json").is_file():
-        return load_real_ground_heldout(root)
+        return load_real_ground(root)
     annotation_files = sorted((root / "annotations").glob("*.json")) if (root / "annotations").is_dir() else []
     if annotation_files:
         out: list[BoxedImage] = []

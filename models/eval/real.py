@@ -1,8 +1,9 @@
 """How a density model does on real aerial frames with annotated people: safety, availability and counts.
 
 Every real set (a folder in any layout :func:`models.data.loaders.load_real_set` reads; by default every folder of
-``../shared/datasets`` and the Caliterra frames held out from training, ``sitl/world/ground/caliterra``, stored at
-0.045 m/px so that its scales 1 and 0.5 are 0.045 and 0.09 m/px) is scored at its native scale and at half scale,
+``../shared/datasets`` and the real ground of every site in ``sitl/world/ground`` (:func:`ground_sets`: all frames of a
+site the model never trained on, so that each real-ground figure is a held-out *site*), stored at 0.045 m/px so that
+scales 1 and 0.5 are 0.045 and 0.09 m/px) is scored at its native scale and at half scale,
 per altitude band when the set records the altitude. Frames larger than the model's input are covered by
 overlapping input-sized tiles at the scale being scored, their density averaged where tiles overlap. Occupancy is
 the companion's own :class:`~companion.perception.occupancy.OccupancyMapper` with the perception config's thresholds
@@ -46,8 +47,9 @@ from companion.perception.density import DensityMap, OnnxDensityModel
 from companion.perception.occupancy import OccupancyMapper
 from companion.perception.projection import OCCUPIED
 from models.data.images import read_bgr
-from models.data.loaders import BoxedImage, DatasetError, load_real_set
-from sitl.world.ground import GROUND_DIR
+from models.data.loaders import BoxedImage, DatasetError, load_real_ground, load_real_set
+from models.density.onnx_files import TRAINING_KEY, read_metadata
+from sitl.world.ground import GROUND_ROOT
 
 F64Array = npt.NDArray[np.float64]
 U8Image = npt.NDArray[np.uint8]
@@ -350,6 +352,30 @@ def default_sets(root: Path) -> dict[str, list[BoxedImage]]:
     return found
 
 
+def training_sites(model_path: Path) -> frozenset[str]:
+    """The real-ground sites a model trained on, from its ``slz.training`` metadata: ``real_ground_sites`` (names) or
+    ``real_ground`` (one site's folder); none for a model that trained on rendered frames only."""
+    training = json.loads(read_metadata(model_path).get(TRAINING_KEY, "{}"))
+    sites = set(training.get("real_ground_sites") or [])
+    if training.get("real_ground"):
+        sites.add(Path(str(training["real_ground"])).name)
+    return frozenset(str(site) for site in sites)
+
+
+def ground_sets(trained_on: frozenset[str], root: Path = GROUND_ROOT) -> dict[str, list[BoxedImage]]:
+    """The real ground of every derived site under ``root`` (``sitl/world/ground/<site>``), as a model that trained on
+    ``trained_on`` may be scored on it: every frame of a site it never saw (``"garfield (site held out)"``: transfer),
+    the held-out frames of a site it trained on (``"caliterra (trained-on site)"``: memory of that site, never
+    quoted as a real-ground figure)."""
+    out: dict[str, list[BoxedImage]] = {}
+    for folder in sorted(p for p in root.iterdir() if (p / "index.json").is_file()):
+        if folder.name in trained_on:
+            out[f"{folder.name} (trained-on site)"] = load_real_ground(folder, "heldout")
+        else:
+            out[f"{folder.name} (site held out)"] = load_real_ground(folder, None)
+    return out
+
+
 def add_real_set_arguments(parser: argparse.ArgumentParser, out: Path, data_help: str) -> None:
     """The arguments of every command that scores models on the real sets (this one, ``models.eval.tradeoff``): the
     models, the sets, the perception config, the scales and the report's path (default ``out``)."""
@@ -387,20 +413,22 @@ def main() -> int:
     parser = argparse.ArgumentParser(description="Density models on real aerial frames with annotated people.")
     add_real_set_arguments(parser, Path("models/eval/results/real"), "a real set's folder (repeatable)")
     parser.add_argument("--overlays", type=Path, default=Path("runs/eval/real"))
-    parser.add_argument(
-        "--no-real-ground", action="store_true", help="without --data: leave out the held-out real ground"
-    )
+    parser.add_argument("--no-real-ground", action="store_true", help="without --data: no real ground")
     args = parser.parse_args()
+    models = named_models(parser, args.model)
     try:
         loaded = {folder.name: load_real_set(folder) for folder in args.data or []}
-        if not loaded:  # every set under --datasets, and the real ground held out from training (in the repository)
+        given = bool(loaded)
+        if not given:  # every set under --datasets; each model adds the real ground of the sites (ground_sets)
             loaded = default_sets(args.datasets)
-            if not args.no_real_ground:
-                loaded[GROUND_DIR.name] = load_real_set(GROUND_DIR)
+        grounds = {
+            name: {} if given or args.no_real_ground else ground_sets(training_sites(Path(path)))
+            for name, path in models
+        }
     except DatasetError as exc:
         sys.stderr.write(f"error: {exc}\n")
         return 2
-    if not loaded:
+    if not loaded and not any(grounds.values()):
         sys.stderr.write(f"error: no real set found (give --data, or put sets under {args.datasets})\n")
         return 2
     occupancy = load_perception_config(args.config).occupancy
@@ -416,10 +444,10 @@ def main() -> int:
         },
         "models": {},
     }
-    for name, path in named_models(parser, args.model):
+    for name, path in models:
         model = OnnxDensityModel(path)
         per_set: dict[str, object] = {}
-        for dataset, frames in loaded.items():
+        for dataset, frames in (loaded | grounds[name]).items():
             start = time.monotonic()
             scores = evaluate_set(name, model, frames, occupancy, dataset, tuple(args.scales), args.overlays)
             found = summaries_for(name, dataset, scores)
@@ -432,9 +460,9 @@ def main() -> int:
                 ],
             }
             sys.stderr.write(f"{name} on {dataset}: {len(frames)} frames in {time.monotonic() - start:.1f} s\n")
-        models = payload["models"]
-        assert isinstance(models, dict)
-        models[name] = {"path": path, "sets": per_set}
+        scored = payload["models"]
+        assert isinstance(scored, dict)
+        scored[name] = {"path": path, "trained_on_sites": sorted(training_sites(Path(path))), "sets": per_set}
     write_report(args.out, payload, summary_table(summaries))
     return 0
 

@@ -23,7 +23,8 @@ import numpy.typing as npt
 
 U8Image = npt.NDArray[np.uint8]
 
-GROUND_DIR = Path(__file__).resolve().parent / "ground" / "caliterra"
+GROUND_ROOT = Path(__file__).resolve().parent / "ground"
+GROUND_DIR = GROUND_ROOT / "caliterra"
 STORED_GSD_M_PER_PX = 0.045
 TRAIN = "train"
 HELDOUT = "heldout"
