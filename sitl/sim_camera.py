@@ -27,7 +27,8 @@ PARKS: KeyedCache[Park] = KeyedCache("parks", capacity=2)
 
 
 def _park(config: SitlConfig) -> Park:
-    park = Park(config.seed, roi_side_m=config.scenario.roi_side_m, ground=config.scenario.ground)
+    scenario = config.scenario
+    park = Park(config.seed, roi_side_m=scenario.roi_side_m, ground=scenario.ground, ground_site=scenario.ground_site)
     park.ground_bgr.setflags(write=False)  # shared by the missions of one scene: nobody may paint on it
     return park
 
@@ -50,7 +51,8 @@ class SimCamera:
         cam = config.camera
         scenario = config.scenario
         self.light = scene_light(config)
-        self.park = PARKS.get((config.seed, scenario.roi_side_m, scenario.ground), lambda: _park(config))
+        park_key = (config.seed, scenario.roi_side_m, scenario.ground, scenario.ground_site)
+        self.park = PARKS.get(park_key, lambda: _park(config))
         self.crowd = Crowd(scenario, config.seed)
         self.weather = WeatherSchedule(scenario, config.seed)
         self.intrinsics = PinholeCamera.from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from models.data.real_ground import (
     EXCLUDED,
@@ -22,9 +23,9 @@ from models.data.real_ground import (
     split_of,
 )
 from models.data.real_sites import CROP_PX, GARFIELD, SITES, derive_frame, prepare
-from sitl.world.ground import GROUND_ROOT
+from sitl.world.ground import GROUND_ROOT, painted_frames
 from sitl.world.park import Park
-from sitl.world.scenario import GroundKind, ScenarioConfig
+from sitl.world.scenario import GroundKind, RealSite, ScenarioConfig
 
 pytestmark = pytest.mark.unit
 
@@ -117,6 +118,26 @@ def test_the_sitl_paints_real_ground_from_the_held_out_frames_with_the_same_obje
     # The real texture has a photograph's spread of colours, not a few flat paints.
     assert len(np.unique(real.ground_bgr.reshape(-1, 3)[::97], axis=0)) > 1000
     assert ScenarioConfig.model_validate({"ground": "real"}).ground is GroundKind.REAL
+
+
+def test_the_sitl_paints_a_park_from_the_site_the_scenario_names_and_from_no_frame_a_model_trained_on() -> None:
+    assert painted_frames("caliterra") == frame_names(HELDOUT)  # slz_lite_wide_real trained on the rest
+    assert len(painted_frames("garfield")) == 28  # no shipped model trained on Garfield: all of it
+    garfield = Park(11, ground=GroundKind.REAL, ground_site=RealSite.GARFIELD)
+    caliterra = Park(11, ground=GroundKind.REAL)
+    assert garfield.objects == caliterra.objects
+    assert garfield.key != caliterra.key  # two scene caches, not one
+    assert not np.array_equal(garfield.ground_bgr, caliterra.ground_bgr)
+    again = Park(11, ground=GroundKind.REAL, ground_site=RealSite.GARFIELD)
+    assert np.array_equal(again.ground_bgr, garfield.ground_bgr)
+    # Garfield in November is greener and browner than Caliterra's dirt: the texture's mean colour says which site.
+    assert np.abs(garfield.ground_bgr.mean(axis=(0, 1)) - caliterra.ground_bgr.mean(axis=(0, 1))).max() > 5.0
+    # A site only matters on real ground: the procedural park is one park whatever the site says.
+    assert Park(11, ground_site=RealSite.GARFIELD).key == Park(11).key
+    scenario = ScenarioConfig.model_validate({"ground": "real", "ground_site": "garfield"})
+    assert scenario.ground_site is RealSite.GARFIELD
+    with pytest.raises(ValidationError, match="ground_site"):
+        ScenarioConfig.model_validate({"ground": "real", "ground_site": "central_park"})
 
 
 @pytest.mark.parametrize(("site", "frames"), [("garfield", 28), ("boruszyn", 24)])

@@ -1,14 +1,14 @@
-"""Real ground for the SITL and for training: the CC0 Caliterra drone frames, derived into this package.
+"""Real ground for the SITL and for training: real drone frames of three sites, derived into this package.
 
-Source: ``OpenDroneMap/odm_data_caliterra`` on GitHub (CC0 1.0, its ``license.html``): nadir photographs of a
-construction site in Dripping Springs, Texas (dirt, gravel roads, grass, tree crowns, concrete pipes, machinery),
-nobody in them. ``ground/caliterra/`` holds them resampled to :data:`STORED_GSD_M_PER_PX` with ``index.json``
-(source, licence, GSD, split of each frame) and ``SOURCES.md``; ``models/data/real_ground.py`` derives them and
-explains the GSD estimate.
+``ground/caliterra/`` (CC0: a construction site in Texas, nobody in the frames; ``models/data/real_ground.py`` derives
+it and explains the GSD estimate), ``ground/garfield/`` (CC0: a park in Ohio) and ``ground/boruszyn/`` (CC BY 3.0: a
+village in Poland; ``models/data/real_sites.py`` derives both), each resampled to :data:`STORED_GSD_M_PER_PX` with
+``index.json`` (source, licence, GSD, split of each frame) and ``SOURCES.md``.
 
-**Split**: frames whose number ends in 4 or 9 (every fifth by name) are held out from training; the SITL paints its
-real ground from those (:func:`real_ground_texture`), so a mission over real ground never flies over ground the
-density model was trained on.
+**Split**: frames whose number ends in 4 or 9 (every fifth by name) are held out from training within a site. The
+SITL paints its real ground (:func:`real_ground_texture`) from frames no shipped model trained on
+(:func:`painted_frames`): Caliterra's held-out frames, every frame of the other two sites; so a mission over real ground
+never flies over ground a shipped density model was trained on.
 """
 
 from __future__ import annotations
@@ -76,11 +76,23 @@ def load_ground(split: str, root: Path = GROUND_DIR) -> list[RealGround]:
     return [RealGround(name, _read(root / f"{name}.jpg"), gsd) for name in frame_names(split, root)]
 
 
-def real_ground_texture(rng: np.random.Generator, size_px: int, texture_res_m: float) -> U8Image:
-    """A (size_px, size_px, 3) ground texture at ``texture_res_m`` metres per pixel from the held-out real frames:
-    a 2 x 2 mosaic of random crops of four of them, each turned by a random quarter and mirrored half the time,
-    blended over a short seam."""
-    frames = frame_names(HELDOUT)
+def painted_frames(site: str) -> list[str]:
+    """The frames of ``site`` the SITL paints its real ground from: frames no shipped model trained on. Caliterra's
+    held-out split (``slz_lite_wide_real`` trained on the rest); every frame of the other sites."""
+    root = GROUND_ROOT / site
+    if site == GROUND_DIR.name:
+        return frame_names(HELDOUT, root)
+    return frame_names(HELDOUT, root) + frame_names(TRAIN, root)
+
+
+def real_ground_texture(
+    rng: np.random.Generator, size_px: int, texture_res_m: float, site: str = GROUND_DIR.name
+) -> U8Image:
+    """A (size_px, size_px, 3) ground texture at ``texture_res_m`` metres per pixel from the real frames of ``site``
+    (:func:`painted_frames`): a 2 x 2 mosaic of random crops of four of them, each turned by a random quarter and
+    mirrored half the time, blended over a short seam."""
+    frames = sorted(painted_frames(site))
+    root = GROUND_ROOT / site
     chosen = rng.choice(len(frames), size=4, replace=False)
     half = size_px // 2
     seam = max(2, round(1.0 / texture_res_m))  # a metre of blending
@@ -92,7 +104,7 @@ def real_ground_texture(rng: np.random.Generator, size_px: int, texture_res_m: f
     taper = np.minimum(ramp, ramp[::-1])
     window = (taper[:, None] * taper[None, :])[:, :, None]
     for k, index in enumerate(chosen):
-        image = _read(GROUND_DIR / f"{frames[int(index)]}.jpg")
+        image = _read(root / f"{frames[int(index)]}.jpg")
         scaled = cv2.resize(
             image, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR
         )

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sitl.world.ground import real_ground_texture
-from sitl.world.scenario import GroundKind, Style
+from sitl.world.scenario import GroundKind, RealSite, Style
 
 U8Image = npt.NDArray[np.uint8]
 
@@ -124,6 +124,8 @@ class Park:
     ground : GroundKind
         The texture: painted from the seed, or real photographs (``sitl/world/ground.py``). The objects are the same
         for both (the procedural texture's random draws are made either way).
+    ground_site : RealSite
+        Real ground: the site whose photographs paint it.
     """
 
     def __init__(
@@ -135,9 +137,11 @@ class Park:
         style: Style = Style.ANY,
         paint: bool = True,
         ground: GroundKind = GroundKind.PROCEDURAL,
+        ground_site: RealSite = RealSite.CALITERRA,
     ) -> None:
         rng = np.random.default_rng([seed, 5])
-        self.key = (seed, roi_side_m, extent_m, texture_res_m, style, paint, ground)
+        site = ground_site if ground is GroundKind.REAL else None
+        self.key = (seed, roi_side_m, extent_m, texture_res_m, style, paint, ground, site)
         """Everything this park is made from (a cache key: two parks with one key are the same park)."""
         self.style = style
         self.extent_m = extent_m
@@ -147,7 +151,8 @@ class Park:
         self.ground_bgr = self._ground(rng, paint and ground is GroundKind.PROCEDURAL)
         if paint and ground is GroundKind.REAL:
             size = round(2 * extent_m / texture_res_m)
-            self.ground_bgr = real_ground_texture(np.random.default_rng([seed, 6]), size, texture_res_m)
+            rng_ground = np.random.default_rng([seed, 6])
+            self.ground_bgr = real_ground_texture(rng_ground, size, texture_res_m, ground_site.value)
         self.objects = self._objects(rng, roi_side_m / 2)
 
     def _ground(self, rng: np.random.Generator, paint: bool) -> U8Image:

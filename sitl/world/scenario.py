@@ -47,8 +47,22 @@ class GroundKind(str, enum.Enum):
     PROCEDURAL = "procedural"
     """Grass colours with noise, sand, a plaza, a court and paths, painted from the seed."""
     REAL = "real"
-    """Real drone photographs (CC0 Caliterra frames held out from training, ``sitl/world/ground.py``): dirt, gravel,
-    grass and machinery, the ground real cameras see and synthetic-only models misread."""
+    """Real drone photographs of the scenario's ``ground_site`` (``sitl/world/ground.py``; Caliterra by default): the
+    ground real cameras see and synthetic-only models misread."""
+
+
+class RealSite(str, enum.Enum):
+    """Which real site's photographs a real ground is painted from (``sitl/world/ground/<site>``)."""
+
+    CALITERRA = "caliterra"
+    """A construction site in Texas (CC0): dirt, gravel, grass, tree crowns, machinery. Painted from the frames held
+    out from ``slz_lite_wide_real``'s training."""
+    GARFIELD = "garfield"
+    """A park in Ohio in November (CC0): lawns, paths, roads, parking lots with cars, leafless forest. No shipped
+    model trained on it: painted from all its frames."""
+    BORUSZYN = "boruszyn"
+    """A village in Poland from a kite (CC BY 3.0, "Photos: Andrew Zaborowski, with attribution to
+    OpenStreetMap-PL"): roofs, farm yards, fields. No shipped model trained on it: painted from all its frames."""
 
 
 class WalkerKind(str, enum.Enum):
@@ -113,6 +127,7 @@ class ScenarioConfig(StrictModel):
     start_altitude_m: Range = Field(default_factory=lambda: _range(15.0, 40.0))
     style: Style = Field(default=Style.ANY, description="Appearance family (datasets: a train/held-out style split).")
     ground: GroundKind = Field(default=GroundKind.PROCEDURAL, description="The park's ground texture.")
+    ground_site: RealSite = Field(default=RealSite.CALITERRA, description="Real ground: the site it is painted from.")
     people: PeopleModel = Field(default=PeopleModel.PROCEDURAL, description="How people are drawn.")
     bright_clothing_share: float = Field(
         default=0.25, ge=0.0, le=1.0, description="MakeHuman people: share of tops in a bright colour (the rest muted)."
