@@ -204,3 +204,82 @@ def test_train_export_and_onnxruntime_parity(tiny_set: Path, tmp_path: Path) -> 
     half = fp16.predict(frames[0]).values
     assert half.dtype == np.float32
     assert float(np.abs(half - density.values).max()) <= 1e-2 * max(1.0, float(np.abs(density.values).max()))
+
+
+PRETRAINED = Path(__file__).resolve().parents[2] / "shared" / "pretrained"
+needs_pretrained = pytest.mark.skipif(
+    not (PRETRAINED / "yolox_nano_coco_416.onnx").is_file(), reason="../shared/pretrained is not here"
+)
+
+
+@needs_pretrained
+@pytest.mark.unit
+def test_the_pretrained_stages_compute_what_onnxruntime_computes_on_the_original_graph() -> None:
+    import onnx
+    import onnxruntime as ort
+
+    from models.density.preprocess import MEAN, STD, to_input
+    from models.density.pretrained import YOLOX_NANO, OnnxStages, PretrainedStages
+
+    graph = onnx.load(str(PRETRAINED / YOLOX_NANO.file))
+    for name in YOLOX_NANO.outputs:  # the stage outputs, exposed
+        graph.graph.output.append(onnx.helper.make_tensor_value_info(name, onnx.TensorProto.FLOAT, None))
+    session = ort.InferenceSession(graph.SerializeToString(), providers=["CPUExecutionProvider"])
+    image_bgr = np.random.default_rng(3).integers(0, 256, (416, 416, 3), dtype=np.uint8)
+    pixels = image_bgr.transpose(2, 0, 1)[None].astype(np.float32)  # YOLOX: BGR, 0-255
+    expected = session.run(list(YOLOX_NANO.outputs), {"images": pixels})
+    stages = OnnxStages(PRETRAINED / YOLOX_NANO.file, YOLOX_NANO.outputs)
+    assert len(stages.nodes) == 84  # of the graph's 369: the stem, dark2 and dark3
+    with torch.no_grad():
+        got = stages(torch.from_numpy(pixels))
+        # The same from the density network's own input (normalised RGB): the wrapper undoes the normalisation.
+        wrapped = PretrainedStages(YOLOX_NANO, MEAN, STD, PRETRAINED)(torch.from_numpy(to_input(image_bgr))[None])
+    for want, mine, theirs, channels, stride in zip(
+        expected, got, wrapped, YOLOX_NANO.channels, YOLOX_NANO.strides, strict=True
+    ):
+        assert want.shape == (1, channels, 416 // stride, 416 // stride)
+        assert float(np.abs(want - mine.numpy()).max()) < 1e-4
+        assert float(np.abs(want - theirs.numpy()).max()) < 1e-3  # float round trip of the normalisation
+    # A weight is a parameter: fine-tuning moves the pretrained layers.
+    assert all(p.requires_grad for p in stages.parameters())
+    assert sum(p.numel() for p in stages.parameters()) > 20_000
+
+
+@needs_pretrained
+def test_a_pretrained_network_trains_on_two_sites_exports_and_names_them(tiny_set: Path, tmp_path: Path) -> None:
+    from sitl.world.ground import GROUND_ROOT
+
+    sites = (GROUND_ROOT / "caliterra", GROUND_ROOT / "garfield")
+    log = train(
+        Architecture.YOLOX_LITE,
+        LossKind.MSE,
+        tiny_set,
+        tmp_path / "run",
+        steps=4,
+        batch=2,
+        crop_px=96,
+        workers=0,
+        val_frames=1,
+        validate_every=4,
+        device_name="cpu",
+        real_ground_dirs=sites,
+        real_negative_fraction=0.3,
+        composite_fraction=0.3,
+        backbone_lr_scale=0.0,
+    )
+    assert log["real_ground_sites"] == ["caliterra", "garfield"]
+    assert log["real_ground"] is None  # several sites: named in real_ground_sites
+    assert {name.split("_")[0] for name in log["real_ground_frames"]} == {"IMG", "garfield"}
+    model, _ = load_checkpoint(tmp_path / "run" / "model.pt")
+    start = build(Architecture.YOLOX_LITE).state_dict()
+    frozen = [k for k in start if k.startswith("backbone.")]
+    assert frozen
+    assert all(torch.equal(start[k], model.state_dict()[k]) for k in frozen)  # scale 0: frozen
+    onnx_path = tmp_path / "yolox.onnx"
+    export(model, log, onnx_path, "slz-yolox-test", "0")
+    frames = [f.image_bgr for f in load_frames(tiny_set / "train")[:2]]
+    assert parity(model, onnx_path, frames) <= 1e-4
+    assert OnnxDensityModel(onnx_path).predict(frames[0]).values.shape == (120, 160)
+    from models.eval.real import training_sites
+
+    assert training_sites(onnx_path) == {"caliterra", "garfield"}

@@ -1,6 +1,7 @@
-"""Density-map networks (PyTorch, training only): the paper's MCNN-like CCNN and our cheaper embedded network.
+"""Density-map networks (PyTorch, training only): the paper's MCNN-like CCNN, our cheaper embedded networks, and one
+whose early layers come from a network trained on real photographs (issue 52).
 
-Both map a normalised RGB image of shape (N, 3, H, W), H and W multiples of 4, to a density map of shape
+Each maps a normalised RGB image of shape (N, 3, H, W), H and W multiples of 4, to a density map of shape
 (N, 1, H/4, W/4) whose cells hold people per cell (its sum is the count). Batch normalisation is used for training
 and folded into the convolutions by onnxruntime at load.
 """
@@ -25,6 +26,9 @@ class Architecture(str, enum.Enum):
     LITE_WIDE = "lite-wide"
     """The same design, wider and deeper (64 channels, six blocks, receptive field about 110 px): twice the
     operations of ``lite``, for real ground (issue 32)."""
+    YOLOX_LITE = "yolox-lite"
+    """YOLOX-nano's stride-4 and stride-8 stages (COCO-trained, ``models/density/pretrained.py``), then ``lite``'s
+    separable blocks on both at stride 4 (issue 52: features learned on real photographs)."""
 
 
 def _conv_bn_relu(
@@ -136,10 +140,43 @@ class LiteWide(Lite):
     BLOCKS = ((32, 64, 1), (64, 64, 2), (64, 64, 3), (64, 64, 4), (64, 64, 2), (64, 32, 1))
 
 
+class YoloxLite(nn.Module):
+    """Pretrained early layers, a density head of our own.
+
+    YOLOX-nano's stages up to stride 8 (``dark2``: 32 channels at stride 4; ``dark3``: 64 at stride 8, upsampled by
+    2) are concatenated (96 channels), reduced by a 1x1 conv to 48, then depthwise-separable blocks at stride 4 with
+    dilations 1, 2, 3, 1 (48, 48, 48, 32 channels) and a 1x1 head made non-negative (see ``_density_head``). The
+    pretrained part is ``self.backbone`` (train it with a lower learning rate, or freeze it: ``train.py
+    --backbone-lr-scale``). H and W must be multiples of 8.
+    """
+
+    BLOCKS = ((48, 48, 1), (48, 48, 2), (48, 48, 3), (48, 32, 1))
+
+    def __init__(self) -> None:
+        super().__init__()
+        from models.density.preprocess import MEAN, STD
+        from models.density.pretrained import YOLOX_NANO, PretrainedStages
+
+        self.backbone = PretrainedStages(YOLOX_NANO, MEAN, STD)
+        self.reduce = _conv_bn_relu(sum(YOLOX_NANO.channels), 48, 1)
+        self.head = nn.Sequential(
+            *(_SeparableBlock(c_in, c_out, dilation) for c_in, c_out, dilation in self.BLOCKS),
+            _density_head(32),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 3, H, W) -> (N, 1, H/4, W/4)."""
+        stride4, stride8 = self.backbone(x)
+        up = nn.functional.interpolate(stride8, size=stride4.shape[-2:], mode="nearest")
+        return self.head(self.reduce(torch.cat([stride4, up], dim=1)))
+
+
 def build(architecture: Architecture) -> nn.Module:
-    """A freshly initialised network."""
+    """A freshly initialised network (the pretrained part of ``yolox-lite`` from its graph)."""
     if architecture is Architecture.CCNN:
         return Ccnn()
+    if architecture is Architecture.YOLOX_LITE:
+        return YoloxLite()
     return LiteWide() if architecture is Architecture.LITE_WIDE else Lite()
 
 

@@ -134,18 +134,22 @@ def train(
     validate_every: int = 500,
     distractors: bool = True,
     scale_range: tuple[float, float] = (0.7, 1.4),
-    real_ground_dir: Path | None = None,
+    real_ground_dirs: tuple[Path, ...] = (),
     real_negative_fraction: float = 0.0,
     composite_fraction: float = 0.0,
     real_gsd_m_per_px: tuple[float, float] = WORKING_GSD_M_PER_PX,
     real_detail_fraction: float = 0.0,
+    backbone_lr_scale: float = 1.0,
 ) -> dict[str, Any]:
     """Train and save; returns the training log (also written to ``out_dir/training.json``).
 
     ``out_dir/model.pt`` is the checkpoint with the best validation score, ``out_dir/last.pt`` the last one.
 
-    With ``real_ground_dir`` (``models/data/real_ground.py``), its *training* frames give the real negatives and the
-    composites' backgrounds; the held-out frames are never read here.
+    With ``real_ground_dirs`` (sites of ``sitl/world/ground``), their *training* frames give the real negatives and the
+    composites' backgrounds; their held-out frames are never read here, and a site not named is never read at all
+    (``models/eval/real.py`` scores a model on all frames of the sites it did not train on: the metadata names them).
+    ``backbone_lr_scale``: the learning rate of a pretrained backbone (``yolox-lite``) relative to the rest; 0
+    freezes it.
     """
     start = time.monotonic()
     torch.manual_seed(seed)
@@ -153,9 +157,13 @@ def train(
     frames = load_frames(data_dir / "train", limit_frames)
     n_val = min(val_frames, max(1, len(frames) // 10))
     train_frames, val_set = frames[:-n_val], frames[-n_val:]
-    ground = load_ground(TRAIN, real_ground_dir) if real_ground_dir is not None else []
-    # Every tenth real frame (number ending in 2) is validation: never trained on, watched during training.
-    ground, real_val = split_validation(ground)
+    ground: list[RealGround] = []
+    real_val: list[RealGround] = []
+    for site_dir in real_ground_dirs:
+        # Every tenth real frame (number ending in 2) is validation: never trained on, watched during training.
+        site_train, site_val = split_validation(load_ground(TRAIN, site_dir))
+        ground += site_train
+        real_val += site_val
     dataset = CrowdCrops(
         train_frames,
         crop_px,
@@ -179,9 +187,18 @@ def train(
         persistent_workers=False,
     )
     model = build(arch).to(device)
-    optimiser = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    backbone = getattr(model, "backbone", None)
+    pretrained = list(backbone.parameters()) if isinstance(backbone, torch.nn.Module) else []
+    if backbone_lr_scale == 0.0:
+        for parameter in pretrained:
+            parameter.requires_grad_(False)
+    held = {id(p) for p in pretrained}
+    groups = [{"params": [p for p in model.parameters() if id(p) not in held], "lr": lr}]
+    if pretrained and backbone_lr_scale > 0.0:
+        groups.append({"params": pretrained, "lr": lr * backbone_lr_scale})
+    optimiser = torch.optim.AdamW(groups, lr=lr, weight_decay=1e-4)
     schedule = torch.optim.lr_scheduler.OneCycleLR(
-        optimiser, max_lr=lr, total_steps=steps, pct_start=max(0.05, 3 / steps)
+        optimiser, max_lr=[g["lr"] for g in groups], total_steps=steps, pct_start=max(0.05, 3 / steps)
     )
     log: dict[str, Any] = {
         "architecture": arch.value,
@@ -194,7 +211,9 @@ def train(
         "sigma_px": sigma_px,
         "distractors": distractors,
         "scale_range": list(scale_range),
-        "real_ground": None if real_ground_dir is None else str(real_ground_dir),
+        "real_ground": str(real_ground_dirs[0]) if len(real_ground_dirs) == 1 else None,
+        "real_ground_sites": [d.name for d in real_ground_dirs],
+        "backbone_lr_scale": backbone_lr_scale if pretrained else None,
         "real_ground_frames": [g.name for g in ground],
         "real_ground_validation_frames": [g.name for g in real_val],
         "real_negative_fraction": real_negative_fraction,
@@ -280,7 +299,9 @@ def main() -> int:
     parser.add_argument(
         "--scale-range", type=float, nargs=2, default=(0.7, 1.4), metavar=("LOW", "HIGH"), help="crop rescale range"
     )
-    parser.add_argument("--real-ground", type=Path, default=None, help="a real-ground folder (its training frames)")
+    parser.add_argument(
+        "--real-ground", type=Path, action="append", default=[], help="a real site's folder (its training frames)"
+    )
     parser.add_argument("--real-negatives", type=float, default=0.0, help="share of samples that are real ground")
     parser.add_argument("--composites", type=float, default=0.0, help="share of synthetic people on real ground")
     parser.add_argument(
@@ -296,6 +317,9 @@ def main() -> int:
         type=float,
         default=0.0,
         help="share of the composites whose people carry the real crop's fine texture",
+    )
+    parser.add_argument(
+        "--backbone-lr-scale", type=float, default=1.0, help="pretrained layers' relative learning rate (0: frozen)"
     )
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     args = parser.parse_args()
@@ -317,11 +341,12 @@ def main() -> int:
         validate_every=args.validate_every,
         distractors=not args.no_distractors,
         scale_range=tuple(args.scale_range),
-        real_ground_dir=args.real_ground,
+        real_ground_dirs=tuple(args.real_ground),
         real_negative_fraction=args.real_negatives,
         composite_fraction=args.composites,
         real_gsd_m_per_px=tuple(args.real_gsd),
         real_detail_fraction=args.real_detail,
+        backbone_lr_scale=args.backbone_lr_scale,
     )
     sys.stdout.write(
         f"{args.arch}: {log['parameters']} parameters, {args.steps} steps in {log['wall_s']:.0f} s on {log['device']}, "
