@@ -7,12 +7,19 @@ from pathlib import Path
 
 import onnx
 
+from companion.errors import SlzError
+
 CONTRACT_KEY = "slz.contract"
 """JSON input contract read by ``companion.perception.density.OnnxDensityModel``."""
 TRAINING_KEY = "slz.training"
 """JSON summary of how the weights were trained."""
 QUANTIZATION_KEY = "slz.quantization"
 """JSON summary of the INT8 quantization (for the quantized variant)."""
+
+
+class OnnxGraphError(SlzError):
+    """An ONNX graph cannot be read as asked (which file, which tensor or operation): a pretrained backbone
+    (``models/density/pretrained.py``)."""
 
 
 def read_metadata(model_path: Path) -> dict[str, str]:

@@ -26,6 +26,8 @@ from onnx import numpy_helper
 from torch import nn
 from torch.nn import functional as F  # noqa: N812
 
+from models.density.onnx_files import OnnxGraphError
+
 PRETRAINED_DIR = Path(__file__).resolve().parents[3] / "shared" / "pretrained"
 
 
@@ -51,10 +53,6 @@ YOLOX_NANO = BackboneSpec(
     input_scale=1.0,
     licence="Apache-2.0 (Megvii-BaseDetection/YOLOX; COCO train2017 weights)",
 )
-
-
-class PretrainedError(ValueError):
-    """A pretrained graph cannot be read as asked (which file, which tensor or operation)."""
 
 
 def _attributes(node: onnx.NodeProto) -> dict[str, object]:
@@ -91,7 +89,7 @@ class OnnxStages(nn.Module):
     def __init__(self, path: Path, outputs: tuple[str, ...]) -> None:
         super().__init__()
         if not path.is_file():
-            raise PretrainedError(f"{path}: no such pretrained graph (../shared/pretrained, see ../shared/SOURCES.md)")
+            raise OnnxGraphError(f"{path}: no such pretrained graph (../shared/pretrained, see ../shared/SOURCES.md)")
         graph = onnx.load(str(path)).graph
         constants = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
         producer = {out: node for node in graph.node for out in node.output}
@@ -109,7 +107,7 @@ class OnnxStages(nn.Module):
 
         for name in outputs:
             if name not in producer:
-                raise PretrainedError(f"{path}: no tensor named {name!r}")
+                raise OnnxGraphError(f"{path}: no tensor named {name!r}")
             visit(name)
         self.inputs = [i.name for i in graph.input]
         self.outputs = outputs
@@ -118,7 +116,7 @@ class OnnxStages(nn.Module):
         self.constants: dict[str, np.ndarray] = {}
         for node in needed:
             if node.op_type not in self.SUPPORTED:
-                raise PretrainedError(f"{path}: node {node.name} is a {node.op_type}, which is not supported")
+                raise OnnxGraphError(f"{path}: node {node.name} is a {node.op_type}, which is not supported")
             attributes = _attributes(node)
             if node.op_type == "Conv":
                 for role, name in zip(("weight", "bias"), node.input[1:], strict=False):
@@ -143,7 +141,7 @@ class OnnxStages(nn.Module):
         if op == "Conv":
             pads = _ints(attributes, "pads", [0, 0, 0, 0])
             if pads[:2] != pads[2:]:
-                raise PretrainedError(f"node {name}: asymmetric padding {pads}")
+                raise OnnxGraphError(f"node {name}: asymmetric padding {pads}")
             bias = self.weights.get(f"{name}_bias")
             return F.conv2d(
                 values[inputs[0]],
