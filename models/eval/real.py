@@ -421,10 +421,8 @@ def main() -> int:
         given = bool(loaded)
         if not given:  # every set under --datasets; each model adds the real ground of the sites (ground_sets)
             loaded = default_sets(args.datasets)
-        grounds = {
-            name: {} if given or args.no_real_ground else ground_sets(training_sites(Path(path)))
-            for name, path in models
-        }
+        trained_on = {name: training_sites(Path(path)) for name, path in models}
+        grounds = {name: {} if given or args.no_real_ground else ground_sets(trained_on[name]) for name, _ in models}
     except DatasetError as exc:
         sys.stderr.write(f"error: {exc}\n")
         return 2
@@ -462,7 +460,7 @@ def main() -> int:
             sys.stderr.write(f"{name} on {dataset}: {len(frames)} frames in {time.monotonic() - start:.1f} s\n")
         scored = payload["models"]
         assert isinstance(scored, dict)
-        scored[name] = {"path": path, "trained_on_sites": sorted(training_sites(Path(path))), "sets": per_set}
+        scored[name] = {"path": path, "trained_on_sites": sorted(trained_on[name]), "sets": per_set}
     write_report(args.out, payload, summary_table(summaries))
     return 0
 

@@ -82,7 +82,9 @@ def painted_frames(site: str) -> list[str]:
     root = GROUND_ROOT / site
     if site == GROUND_DIR.name:
         return frame_names(HELDOUT, root)
-    return frame_names(HELDOUT, root) + frame_names(TRAIN, root)
+    frames = read_index(root)["frames"]
+    assert isinstance(frames, list)
+    return sorted(str(f["name"]) for f in frames)
 
 
 def real_ground_texture(
@@ -91,7 +93,7 @@ def real_ground_texture(
     """A (size_px, size_px, 3) ground texture at ``texture_res_m`` metres per pixel from the real frames of ``site``
     (:func:`painted_frames`): a 2 x 2 mosaic of random crops of four of them, each turned by a random quarter and
     mirrored half the time, blended over a short seam."""
-    frames = sorted(painted_frames(site))
+    frames = painted_frames(site)  # sorted
     root = GROUND_ROOT / site
     chosen = rng.choice(len(frames), size=4, replace=False)
     half = size_px // 2
