@@ -3,7 +3,8 @@
 Run: ``.venv/bin/python bench/render.py``. pyrender offscreen through EGL (Mesa llvmpipe on a CPU-only machine).
 Measures the colour frame alone, with depth, and with depth and the person-mask pass, then the weather effect; writes
 ``bench/results/render.json`` with the machine's context. Then procedural against MakeHuman people at 640x480 on the
-same scene (same places, same walkers), in alternating rounds so that both see the machine at the same moment.
+same scene (same places, same walkers), in alternating rounds so that both see the machine at the same moment, from
+20 m (as above; MakeHuman people at their coarse level of detail there) and from 10 m (their fine level).
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ def main() -> int:
         finally:
             renderer.close()
         rows[f"{width}x{height}"] = row
-    people = _people_ab(args.frames, args.rounds)
+    people = _people_ab(args.frames, args.rounds, 20.0)
+    people_low = _people_ab(args.frames, args.rounds, 10.0)
     report = {
         "benchmark": "render",
         "people": 120,
@@ -72,18 +74,22 @@ def main() -> int:
         "machine": machine_context(),
         "sizes": rows,
         "people_ab_640x480": people,
+        "people_ab_640x480_10m": people_low,
     }
     sys.stdout.write(f"SITL camera, median ms per frame, {report['machine']}\n")
     for size, row in rows.items():
         sys.stdout.write(f"{size:<9} " + "  ".join(f"{k} {v:.1f}" for k, v in row.items()) + "\n")
-    for model, row in people.items():
-        sys.stdout.write(f"640x480 {model:<11} " + "  ".join(f"{k} {v:.2f}" for k, v in row.items()) + "\n")
+    for altitude, ab in (("20 m", people), ("10 m", people_low)):
+        for model, row in ab.items():
+            line = "  ".join(f"{k} {v:.2f}" for k, v in row.items())
+            sys.stdout.write(f"640x480 from {altitude} {model:<26} {line}\n")
     save_report(report, args.out)
     return 0
 
 
-def _people_ab(frames: int, rounds: int) -> dict[str, dict[str, float]]:
-    """Procedural against MakeHuman people, 640x480, 120 people, 20 % walking pedestrians, alternating rounds."""
+def _people_ab(frames: int, rounds: int, altitude_m: float) -> dict[str, dict[str, float]]:
+    """Procedural against MakeHuman people, 640x480, 120 people, 20 % walking pedestrians, alternating rounds, the
+    camera ``altitude_m`` over the ground."""
     camera = PinholeCamera.from_hfov(640, 480, 90.0)
     times: dict[str, dict[str, list[float]]] = {
         m.value: {"colour_ms": [], "colour_depth_and_mask_ms": []} for m in PeopleModel
@@ -99,7 +105,7 @@ def _people_ab(frames: int, rounds: int) -> dict[str, dict[str, float]]:
             try:
                 for label, with_mask in (("colour_ms", False), ("colour_depth_and_mask_ms", True)):
                     for k in range(frames + 10):
-                        pose = Pose.from_ned_euler(0.05 * k, 0.0, -20.0, 0.03 * np.sin(k), 0.0, 0.4)
+                        pose = Pose.from_ned_euler(0.05 * k, 0.0, -altitude_m, 0.03 * np.sin(k), 0.0, 0.4)
                         t_s = 0.1 * k + 100.0 * round_ + (50.0 if with_mask else 0.0)
                         start = time.perf_counter()
                         renderer.render(pose, t_s, with_mask=with_mask, with_depth=with_mask)

@@ -159,3 +159,32 @@ SITES=()
 for tag in cg cb gb; do SITES+=(--model "yolox-$tag=$RUNS/yolox_$tag/yolox_$tag.onnx" --model "wide-$tag=$RUNS/wide_$tag/wide_$tag.onnx"); done
 "$PY" -m models.eval.real --out models/eval/results/real_by_site --model slz-lite=models/density/slz_lite.onnx "${SITES[@]}"
 "$PY" bench/density.py --model yolox-cg="$RUNS/yolox_cg/yolox_cg.onnx"
+
+# 6. Issue 51 (model card, "What each choice bought", the new people): round cg's yolox-lite on MakeHuman people with
+#    the camera model against the same recipe on the procedural people ($DATA), seeds 0 and 1, thresholds by the same
+#    rule on the same MakeHuman validation frames; SDD's trade-off curve as a diagnostic.
+PEOPLE=()
+for seed in 0 1; do
+    for kind in mh procedural; do
+        data=$MH; [ "$kind" = procedural ] && data=$DATA
+        run="people_${kind}_s$seed"
+        "$PY" -m models.density.train --arch yolox-lite --loss mse --no-distractors --data "$data" --steps 2000 \
+            --batch 8 --crop 192 --workers 0 --validate-every 500 --real-ground sitl/world/ground/caliterra \
+            --real-ground sitl/world/ground/garfield --real-negatives 0.3 --composites 0.4 --backbone-lr-scale 0.1 \
+            --seed "$seed" --out "$RUNS/$run"
+        "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" \
+            --name "$run-raw" --version 0 --check-frames "$data/train"
+        "$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
+            --reference slz-lite=models/density/slz_lite.onnx@0.01 --synthetic "$VAL_MH/train" \
+            --real-ground sitl/world/ground/caliterra --out "$RUNS/$run/threshold"
+        chosen=$("$PY" -c "import json, sys; print(json.load(open(sys.argv[1]))['chosen_threshold'])" \
+            "$RUNS/$run/threshold.json")
+        "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/$run.onnx" --name "$run" \
+            --version 0 --check-frames "$data/train" --operating-threshold "$chosen" --calibrate "$data/train"
+        PEOPLE+=(--model "$run=$RUNS/$run/$run.onnx")
+    done
+done
+"$PY" -m models.eval.real --out "$RUNS/people_real" "${PEOPLE[@]}"
+"$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/people_heldout" "${PEOPLE[@]}"
+"$PY" -m models.eval.tradeoff --out models/eval/results/tradeoff_people --model slz-lite=models/density/slz_lite.onnx \
+    "${PEOPLE[@]}"

@@ -11,9 +11,13 @@ import pytest
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from sitl.render import camera as camera_module
 from sitl.render.bodies.figure import (
+    DETAIL_CELLS_M,
+    MAX_CELL_PX,
     MUTED_RGB,
     Figure,
+    FigureMesh,
     crowd_figures,
+    detail_level,
     draw_figure,
     figure_mesh,
     walk_phase_at,
@@ -151,6 +155,55 @@ def test_a_sitting_person_keeps_their_head_low() -> None:
 
 
 @pytest.mark.unit
+def test_a_coarser_level_is_drawn_only_where_its_cell_is_at_most_two_pixels() -> None:
+    assert detail_level(0.03) == 0  # the lowest a mission looks from
+    assert detail_level(DETAIL_CELLS_M[1] / MAX_CELL_PX - 1e-6) == 0
+    assert detail_level(DETAIL_CELLS_M[1] / MAX_CELL_PX) == 1
+    for m_per_px in (0.01, 0.045, 0.0625, 0.09, 0.5):
+        level = detail_level(m_per_px)
+        assert level == 0 or DETAIL_CELLS_M[level] <= MAX_CELL_PX * m_per_px
+        assert level == len(DETAIL_CELLS_M) - 1 or DETAIL_CELLS_M[level + 1] > MAX_CELL_PX * m_per_px
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(("seed", "sitting", "walk_phase"), [(4, False, None), (5, True, None), (6, False, 0.375)])
+def test_the_coarse_level_is_the_same_person_in_fewer_triangles(
+    seed: int, sitting: bool, walk_phase: float | None
+) -> None:
+    figure = _figure(seed, sitting=sitting)
+    fine = figure_mesh(figure, walk_phase=walk_phase)
+    coarse = figure_mesh(figure, walk_phase=walk_phase, detail=1)
+    assert len(coarse.faces) < 0.7 * len(fine.faces)
+    assert coarse.faces.max() < len(coarse.vertices_m)
+    # The same head over the same floor; the body within a cell of where the fine one reaches.
+    assert coarse.head_height_m == pytest.approx(fine.head_height_m, abs=1e-9)
+    cell_m = DETAIL_CELLS_M[1]
+    assert coarse.vertices_m[:, 2].min() >= -1e-9
+    assert coarse.vertices_m[:, 2].min() < cell_m
+    np.testing.assert_array_less(fine.vertices_m.min(axis=0) - 1e-9, coarse.vertices_m.min(axis=0))
+    np.testing.assert_array_less(coarse.vertices_m.max(axis=0), fine.vertices_m.max(axis=0) + 1e-9)
+    np.testing.assert_array_less(coarse.vertices_m.min(axis=0), fine.vertices_m.min(axis=0) + cell_m)
+    # Each kept vertex is one of the fine mesh's with its own colour: a garment's colour is never the skin under it.
+    fine_rows = {tuple(np.round(v, 9)) + tuple(c) for v, c in zip(fine.vertices_m, fine.colours_rgba, strict=True)}
+    for v, c in zip(coarse.vertices_m, coarse.colours_rgba, strict=True):
+        assert tuple(np.round(v, 9)) + tuple(c) in fine_rows
+    # The clothes stay the clothes: each colour covers about the share of the body seen from above it covered.
+    for rgb in {figure.top_rgb, figure.bottom_rgb, figure.skin_rgb}:
+        assert abs(_share_from_above(coarse, rgb) - _share_from_above(fine, rgb)) < 0.1
+
+
+def _share_from_above(mesh: FigureMesh, rgb: tuple[int, int, int]) -> float:
+    """Share of the mesh's area seen from straight above (triangles' ground-projected areas) coloured ``rgb``
+    within the shading jitter (a triangle takes its first corner's colour)."""
+    corners = mesh.vertices_m[mesh.faces][:, :, :2]
+    edges = corners[:, 1:] - corners[:, :1]
+    area = 0.5 * np.abs(edges[:, 0, 0] * edges[:, 1, 1] - edges[:, 0, 1] * edges[:, 1, 0])
+    colour = mesh.colours_rgba[mesh.faces[:, 0], :3].astype(float)
+    near = np.abs(colour - np.array(rgb)).max(axis=1) < 0.1 * max(rgb) + 3
+    return float(area[near].sum() / area.sum())
+
+
+@pytest.mark.unit
 def test_a_walk_steps_its_legs_through_the_cycle_on_one_topology() -> None:
     figure = _figure(2)
     a = figure_mesh(figure, walk_phase=0.25)
@@ -182,7 +235,8 @@ def test_clothing_from_above_is_mostly_muted() -> None:
 # -- rendering -----------------------------------------------------------------------------------------------------
 CAMERA = PinholeCamera.from_hfov(320, 240, 90.0)
 NADIR = T_body_camera_from_mount()
-POSE = Pose.from_ned_euler(1.0, -2.0, -14.0, 0.04, -0.03, 0.6)
+POSE = Pose.from_ned_euler(1.0, -2.0, -14.0, 0.04, -0.03, 0.6)  # 8.8 cm per pixel below: the coarse level
+LOW_POSE = Pose.from_ned_euler(1.0, -2.0, -6.0, 0.04, -0.03, 0.6)  # 3.8 cm per pixel: the fine level
 
 
 def _world(seed: int, moving_fraction: float = 0.0, people: PeopleModel = PeopleModel.MAKEHUMAN) -> WorldRenderer:
@@ -216,8 +270,10 @@ def test_makehuman_people_stand_where_procedural_people_stood_and_their_heads_ar
 @pytest.mark.integration
 def test_the_same_seed_draws_the_same_pixels_cached_or_not() -> None:
     first = _world(32, moving_fraction=0.3)
+    poses = (POSE, LOW_POSE, POSE)  # people at the coarse level, the fine one, the coarse one again
+    assert [first.detail_at(p) for p in poses] == [1, 0, 1]
     try:
-        frames_first = [first.render(POSE, t) for t in (0.0, 1.0, 2.5)]
+        frames_first = [first.render(pose, t) for pose, t in zip(poses, (0.0, 1.0, 2.5), strict=True)]
     finally:
         first.close()
     for cache in (
@@ -231,9 +287,9 @@ def test_the_same_seed_draws_the_same_pixels_cached_or_not() -> None:
     again = _world(32, moving_fraction=0.3)
     warm = _world(32, moving_fraction=0.3)  # built from the caches the second world filled
     try:
-        for t, expected in zip((0.0, 1.0, 2.5), frames_first, strict=True):
+        for pose, t, expected in zip(poses, (0.0, 1.0, 2.5), frames_first, strict=True):
             for world in (again, warm):
-                view = world.render(POSE, t)
+                view = world.render(pose, t)
                 np.testing.assert_array_equal(view.image_bgr, expected.image_bgr)
                 np.testing.assert_array_equal(view.person_mask, expected.person_mask)
         # Walkers walked: the frames differ in time.

@@ -1,9 +1,10 @@
 """The SITL's down-looking camera: pyrender, offscreen, on the fast path.
 
 Fast path (the naive scene costs over 100 ms a frame on a 2-core CPU): static geometry merged into two meshes (the
-textured ground, every park object), people who stand still merged into one mesh, the walking people into one mesh
-rebuilt each frame from cached vertices, indexed low-poly geometry, FLAT shading with the sun baked into vertex
-colours and blob shadows, a nearest-texel ground texture, no MSAA, no depth read-back unless asked for.
+textured ground, every park object), people who stand still merged into one mesh (one per level of detail of
+MakeHuman people, the frame's drawn, the others hidden), the walking people into one mesh rewritten each frame from
+cached vertices, indexed low-poly geometry, FLAT shading with the sun baked into vertex colours and blob shadows, a
+nearest-texel ground texture, no MSAA, no depth read-back unless asked for.
 A segmentation pass (people white, everything else black, depth-tested) gives the visible person mask.
 
 Frames: the world is ENU inside the renderer (x east, y north, z up); poses come in as the companion's
@@ -12,6 +13,7 @@ Frames: the world is ENU inside the renderer (x east, y north, z up); poses come
 
 from __future__ import annotations
 
+import enum
 import math
 import os
 import weakref
@@ -29,8 +31,10 @@ from companion.geometry import F64Array, PinholeCamera, Pose
 from companion.perception.config import ProjectionConfig
 from companion.perception.projection import HeadPlaneProjector
 from sitl.render.bodies.figure import (
+    DETAIL_CELLS_M,
     WALK_PHASES,
     crowd_figures,
+    detail_level,
     figure_head_height_m,
     figure_topology,
     figure_trimesh,
@@ -102,6 +106,17 @@ class RenderedView:
 _OFFSCREEN: dict[tuple[int, int], Any] = {}
 
 
+class DrawSlot(enum.Enum):
+    """Where a mesh of the scene is drawn among the others when pyrender's order ties (see :func:`_patch_pyrender`)."""
+
+    GROUND = 0
+    OBJECTS = 1
+    STILL_PEOPLE = 2
+    STILL_SHADOWS = 3
+    WALKERS = 4
+    WALKER_SHADOWS = 5
+
+
 class _Bgr:
     """A colour image already in BGR order (the lean read-back), told apart from pyrender's RGB arrays."""
 
@@ -120,12 +135,12 @@ DRAW_ORDER: weakref.WeakKeyDictionary[Any, dict[Any, int]] = weakref.WeakKeyDict
 # light): the same mission draws the same pixels, cached or not.
 LIT_GROUNDS: KeyedCache[npt.NDArray[np.uint8]] = KeyedCache("lit grounds", capacity=2)
 OBJECT_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("park objects", capacity=2)
-PERSON_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("person meshes", capacity=512)
+PERSON_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("person meshes", capacity=1024)
 SHADOW_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("shadow meshes", capacity=512)
 SHADOW_SCALE_MAKEHUMAN = 0.6
 WALK_MESHES: KeyedCache[tuple[F64Array, F64Array, F64Array]] = KeyedCache("walking bodies", capacity=4096)
-"""MakeHuman walkers: per figure and step of the walk cycle, the body facing north (vertices, vertex normals, RGB
-colours before light); each frame turns it to the walker's heading and lights it."""
+"""MakeHuman walkers: per figure, step of the walk cycle and level of detail, the body facing north (vertices, vertex
+normals, RGB colours before light); each frame turns it to the walker's heading and lights it."""
 
 
 def _patch_pyrender(pyrender: Any, GL: Any) -> None:
@@ -239,11 +254,11 @@ class WorldRenderer:
         )
         self._camera_node = self.scene.add(cam, pose=np.eye(4))
 
-    def _add(self, mesh: Any) -> Any:
-        """Add a mesh at the origin; it is drawn after the meshes added before it (ties of pyrender's order)."""
+    def _add(self, mesh: Any, slot: DrawSlot, detail: int = 0) -> Any:
+        """Add a mesh at the origin; at a tie of pyrender's order it is drawn by its slot, then its level of detail
+        (the order does not depend on when a mesh was built: levels are built when first drawn)."""
         node = self.scene.add(mesh)
-        order = DRAW_ORDER.setdefault(self.scene, {})
-        order[node] = len(order)
+        DRAW_ORDER.setdefault(self.scene, {})[node] = slot.value * len(DETAIL_CELLS_M) + detail
         return node
 
     def _build_static(self) -> None:
@@ -263,10 +278,10 @@ class WorldRenderer:
         primitive = pr.Primitive(
             positions=ground.vertices, indices=ground.faces, texcoord_0=uv, material=material, mode=4
         )
-        self._black[self._add(pr.Mesh([primitive]))] = (0, 0, 0)
+        self._black[self._add(pr.Mesh([primitive]), DrawSlot.GROUND)] = (0, 0, 0)
         if self.park.objects:
             objects = OBJECT_MESHES.get((self.park.key, self.light.key), self._objects_mesh).copy()
-            self._black[self._add(pr.Mesh.from_trimesh(objects, smooth=True))] = (0, 0, 0)
+            self._black[self._add(pr.Mesh.from_trimesh(objects, smooth=True), DrawSlot.OBJECTS)] = (0, 0, 0)
 
     def _lit_ground(self) -> npt.NDArray[np.uint8]:
         """The ground texture under this light, RGB (read-only: it is shared through LIT_GROUNDS)."""
@@ -282,20 +297,28 @@ class WorldRenderer:
         bake_lighting(objects, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
         return objects
 
-    def _person(self, index: int) -> trimesh.Trimesh:
-        """Person ``index`` at the origin, lit (a copy: the caller moves it)."""
+    def _person(self, index: int, detail: int = 0) -> trimesh.Trimesh:
+        """Person ``index`` at the origin, lit (a copy: the caller moves it); MakeHuman people at a level of detail."""
         a = self.crowd.appearances[index]
         figure = self.figures[index] if self.figures is not None else None
 
         def build() -> trimesh.Trimesh:
             heading = float(np.random.default_rng([index, 6]).uniform(-math.pi, math.pi))
-            mesh = person_mesh(a, heading) if figure is None else figure_trimesh(figure, heading)
+            mesh = person_mesh(a, heading) if figure is None else figure_trimesh(figure, heading, detail=detail)
             return bake_lighting(mesh, self.light.sun_dir_enu, self.light.ambient, self.light.sun_rgb)
 
-        key = (a, index, self.light.key) if figure is None else (figure, index, self.light.key)
+        key = (a, index, self.light.key) if figure is None else (figure, index, self.light.key, detail)
         return PERSON_MESHES.get(key, build).copy()
 
-    def _walking_body(self, index: int) -> tuple[F64Array, F64Array, F64Array]:
+    def detail_at(self, pose: Pose) -> int:
+        """The level of detail people are drawn at from ``pose`` (:func:`detail_level` of the ground pixel footprint
+        below the camera, metres per pixel; always 0 for procedural people, who have one)."""
+        if self.figures is None:
+            return 0
+        height_m = -float((pose.T_world_body @ self.T_body_camera)[2, 3])  # NED: the camera's height over z = 0
+        return detail_level(max(height_m, 0.0) / self.camera.fx_px)
+
+    def _walking_body(self, index: int, detail: int) -> tuple[F64Array, F64Array, F64Array]:
         """MakeHuman walker ``index`` at the origin now: vertices, vertex normals and RGB before light, each (N, 3).
 
         The step of the walk cycle follows the distance walked and the body faces its last step; each step of the
@@ -306,11 +329,11 @@ class WorldRenderer:
         phase = walk_phase_at(float(self.crowd.walked_m[index]), figure.height_m)
 
         def build() -> tuple[F64Array, F64Array, F64Array]:
-            mesh = figure_trimesh(figure, 0.0, walk_phase=phase)
+            mesh = figure_trimesh(figure, 0.0, walk_phase=phase, detail=detail)
             rgb = np.asarray(mesh.visual.vertex_colors[:, :3], dtype=np.float64)
             return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.vertex_normals, dtype=np.float64), rgb
 
-        vertices, normals, rgb = WALK_MESHES.get((figure, round(phase * WALK_PHASES)), build)
+        vertices, normals, rgb = WALK_MESHES.get((figure, round(phase * WALK_PHASES), detail), build)
         heading = float(self.crowd.step_heading_rad[index])
         c, s = math.cos(heading), math.sin(heading)
         turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # (row vectors) about z by -heading, ENU
@@ -338,56 +361,59 @@ class WorldRenderer:
         return SHADOW_MESHES.get((a, index, north_m, east_m, self.light.key, self.figures is not None), build)
 
     def _build_people(self) -> None:
-        pr = self._pyrender
         crowd = self.crowd
-        still = [i for i in range(len(crowd)) if not crowd.moving[i]]
-        if still:
-            parts, shadows = [], []
-            for i in still:
-                north, east = crowd.positions_ne_m[i]
-                m = self._person(i)
-                m.apply_translation([east, north, 0.0])
-                parts.append(m)
-                shadows.append(self._shadow(i, float(north), float(east)))
-            node = self._add(pr.Mesh.from_trimesh(trimesh.util.concatenate(parts), smooth=True))
-            self._people_nodes.append(node)
-            self._black[self._add(pr.Mesh.from_trimesh(trimesh.util.concatenate(shadows), smooth=True))] = (
-                0,
-                0,
-                0,
-            )
-        # Walking people: one mesh (and one of their shadows) built at the first frame from cached local vertices,
-        # then moved by rewriting its vertex buffer in place each frame (one draw call, no new GL objects).
+        # People who stand still: one mesh per level of detail, built the first time a frame draws that level
+        # (_still_people), and one mesh of their shadows.
+        self._still_ids = [i for i in range(len(crowd)) if not crowd.moving[i]]
+        self._still_nodes: dict[int, Any] = {}
+        if self._still_ids:
+            shadows = [self._shadow(i, *map(float, crowd.positions_ne_m[i])) for i in self._still_ids]
+            shadows_mesh = self._pyrender.Mesh.from_trimesh(trimesh.util.concatenate(shadows), smooth=True)
+            shadow_node = self._add(shadows_mesh, DrawSlot.STILL_SHADOWS)
+            self._black[shadow_node] = (0, 0, 0)
+        # Walking people: one mesh per level of detail (and one of their shadows) built at the first frame from
+        # cached local vertices, then moved by rewriting its vertex buffer in place each frame (one draw call, no new
+        # GL objects).
         self._mover_ids = [int(i) for i in np.nonzero(crowd.moving)[0]]
-        # (body vertices, shadow vertices) per walker; a MakeHuman walker's body is posed, turned and lit per frame.
-        self._mover_parts: list[tuple[F64Array | None, F64Array]] = []
-        offset = 0
-        faces, colours = [], []
-        for i in self._mover_ids:
-            shadow = np.asarray(self._shadow(i, 0.0, 0.0).vertices)
-            if self.figures is None:
-                body = self._person(i)
-                self._mover_parts.append((np.asarray(body.vertices), shadow))
-                faces.append(np.asarray(body.faces) + offset)
-                colours.append(np.asarray(body.visual.vertex_colors))
-                offset += len(body.vertices)
-            else:  # the walk's topology, the same at every step
-                body_faces, count = figure_topology(self.figures[i])
-                self._mover_parts.append((None, shadow))
-                faces.append(body_faces + offset)
-                offset += count
-        self._mover_node: Any = None
+        self._mover_shadows = [np.asarray(self._shadow(i, 0.0, 0.0).vertices) for i in self._mover_ids]
+        # A procedural walker's body never changes shape: its vertices at the origin, and the colours of them all.
+        self._mover_rest: list[F64Array] = []
+        self._mover_rest_colours: npt.NDArray[np.uint8] | None = None
+        if self.figures is None and self._mover_ids:
+            bodies = [self._person(i) for i in self._mover_ids]
+            self._mover_rest = [np.asarray(b.vertices) for b in bodies]
+            self._mover_rest_colours = np.concatenate([np.asarray(b.visual.vertex_colors) for b in bodies])
+            self._procedural_mover_faces = self._stacked_faces([(np.asarray(b.faces), len(b.vertices)) for b in bodies])
+        self._mover_nodes: dict[int, Any] = {}
         self._mover_shadow_node: Any = None
         if self._mover_ids:
             template = self._shadow(self._mover_ids[0], 0.0, 0.0)  # every shadow is the same 10-sided disc mesh
-            self._mover_faces = np.concatenate(faces)
-            if colours:  # MakeHuman walkers are lit at each frame (_update_movers)
-                self._mover_colours = np.concatenate(colours)
-            shadow_counts = [len(s) for _, s in self._mover_parts]
-            self._shadow_faces_all = np.concatenate(
-                [np.asarray(template.faces) + start for start in np.cumsum([0, *shadow_counts[:-1]])]
+            self._shadow_faces_all = self._stacked_faces(
+                [(np.asarray(template.faces), len(s)) for s in self._mover_shadows]
             )
-            self._shadow_colours_all = np.tile(np.asarray(template.visual.vertex_colors[:1]), (sum(shadow_counts), 1))
+            shadow_count = sum(len(s) for s in self._mover_shadows)
+            self._shadow_colours_all = np.tile(np.asarray(template.visual.vertex_colors[:1]), (shadow_count, 1))
+
+    @staticmethod
+    def _stacked_faces(parts: list[tuple[npt.NDArray[np.int64], int]]) -> npt.NDArray[np.int64]:
+        """The faces of meshes concatenated in order: each (faces (F, 3), vertex count) offset by those before it."""
+        starts = np.cumsum([0, *[count for _, count in parts[:-1]]])
+        return np.concatenate([faces + start for (faces, _), start in zip(parts, starts, strict=True)])
+
+    def _still_people(self, detail: int) -> Any:
+        """The node of every person who stands still at level of ``detail`` (built the first time it is asked)."""
+        node = self._still_nodes.get(detail)
+        if node is None:
+            parts = []
+            for i in self._still_ids:
+                north, east = self.crowd.positions_ne_m[i]
+                m = self._person(i, detail)
+                m.apply_translation([east, north, 0.0])
+                parts.append(m)
+            mesh = self._pyrender.Mesh.from_trimesh(trimesh.util.concatenate(parts), smooth=True)
+            node = self._add(mesh, DrawSlot.STILL_PEOPLE, detail)
+            self._still_nodes[detail] = node
+        return node
 
     def head_height_m(self, index: int) -> float:
         """Height above the ground of the centre of person ``index``'s head (the point a density model finds)."""
@@ -419,50 +445,58 @@ class WorldRenderer:
         T_ned_camera = pose.T_world_body @ self.T_body_camera
         return np.asarray(T_ENU_NED @ T_ned_camera @ T_CV_GL, dtype=np.float64)
 
-    def _update_movers(self) -> None:
+    def _update_movers(self, detail: int) -> Any:
+        """Move the walkers to their places now, drawn at level of ``detail``; returns the node of their bodies."""
         pr = self._pyrender
         bodies, shadows, walk_normals, walk_rgb = [], [], [], []
-        for i, (rest_body, shadow) in zip(self._mover_ids, self._mover_parts, strict=True):
+        for k, i in enumerate(self._mover_ids):
             north, east = self.crowd.positions_ne_m[i]
             shift = np.array([east, north, 0.0])
-            if rest_body is None:  # a MakeHuman walker: at its step of the walk, facing its last step
-                body, normals, rgb = self._walking_body(i)
+            if self.figures is not None:  # a MakeHuman walker: at its step of the walk, facing its last step
+                body, normals, rgb = self._walking_body(i, detail)
                 walk_normals.append(normals)
                 walk_rgb.append(rgb)
             else:
-                body = rest_body
+                body = self._mover_rest[k]
             bodies.append(body + shift)
-            shadows.append(shadow + shift)
+            shadows.append(self._mover_shadows[k] + shift)
         if walk_rgb:
-            self._mover_colours = self._light_walkers(np.concatenate(walk_normals), np.concatenate(walk_rgb))
-        if self._mover_node is not None:
+            colours = self._light_walkers(np.concatenate(walk_normals), np.concatenate(walk_rgb))
+        else:
+            assert self._mover_rest_colours is not None
+            colours = self._mover_rest_colours
+        node = self._mover_nodes.get(detail)
+        if node is not None:
             # In place: rewrite the interleaved [x y z r g b a] float32 vertex buffers pyrender uploaded.
-            body_primitive = self._mover_node.mesh.primitives[0]
-            if walk_rgb:
-                body_primitive.color_0 = self._mover_colours
+            body_primitive = node.mesh.primitives[0]
+            if walk_rgb:  # MakeHuman walkers are lit anew each frame; a procedural walker's colours never change
+                body_primitive.color_0 = colours
             self._rewrite_positions(body_primitive, np.concatenate(bodies))
             self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], np.concatenate(shadows))
-            return
-        body_mesh = pr.Mesh(
-            [
-                pr.Primitive(
-                    positions=np.concatenate(bodies), indices=self._mover_faces, color_0=self._mover_colours, mode=4
-                )
-            ]
-        )
-        shadow_mesh_ = pr.Mesh(
-            [
-                pr.Primitive(
-                    positions=np.concatenate(shadows),
-                    indices=self._shadow_faces_all,
-                    color_0=self._shadow_colours_all,
-                    mode=4,
-                )
-            ]
-        )
-        self._mover_node = self._add(body_mesh)
-        self._mover_shadow_node = self._add(shadow_mesh_)
-        self._black[self._mover_shadow_node] = (0, 0, 0)
+            return node
+        if self.figures is not None:  # the walk's topology at this level, the same at every step
+            faces = self._stacked_faces([figure_topology(self.figures[i], detail) for i in self._mover_ids])
+        else:
+            faces = self._procedural_mover_faces
+        primitive = pr.Primitive(positions=np.concatenate(bodies), indices=faces, color_0=colours, mode=4)
+        node = self._add(pr.Mesh([primitive]), DrawSlot.WALKERS, detail)
+        self._mover_nodes[detail] = node
+        if self._mover_shadow_node is None:
+            shadow_mesh_ = pr.Mesh(
+                [
+                    pr.Primitive(
+                        positions=np.concatenate(shadows),
+                        indices=self._shadow_faces_all,
+                        color_0=self._shadow_colours_all,
+                        mode=4,
+                    )
+                ]
+            )
+            self._mover_shadow_node = self._add(shadow_mesh_, DrawSlot.WALKER_SHADOWS)
+            self._black[self._mover_shadow_node] = (0, 0, 0)
+        else:
+            self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], np.concatenate(shadows))
+        return node
 
     def _rewrite_positions(self, primitive: Any, positions: F64Array) -> None:
         if primitive._vaid is None:  # not uploaded yet: pyrender will upload these on the next draw
@@ -484,8 +518,14 @@ class WorldRenderer:
         """
         pr = self._pyrender
         self.crowd.advance_to(t_s)
+        detail = self.detail_at(pose)
+        people = []  # the nodes drawn at this level; the other levels' stay hidden
+        if self._still_ids:
+            people.append(self._still_people(detail))
         if self._mover_ids:
-            self._update_movers()
+            people.append(self._update_movers(detail))
+        for node in [*self._still_nodes.values(), *self._mover_nodes.values()]:
+            node.mesh.is_visible = node in people
         self.scene.set_pose(self._camera_node, self.T_gl_camera(pose))
         try:
             self._renderer._renderer.slz_skip_depth = not with_depth
@@ -495,7 +535,6 @@ class WorldRenderer:
             if depth is None:
                 depth = np.zeros(image_bgr.shape[:2], dtype=np.float32)
             if with_mask:
-                people = [*self._people_nodes, *([self._mover_node] if self._mover_node is not None else [])]
                 seg_map = {**self._black, **{node: (255, 255, 255) for node in people}}
                 seg, _ = self._renderer.render(self.scene, flags=pr.RenderFlags.SEG, seg_node_map=seg_map)
                 seg_image = seg.image if isinstance(seg, _Bgr) else seg  # people are white in any channel order

@@ -22,10 +22,12 @@ import trimesh
 from sitl.render.bodies.library import (
     AGES,
     ANCESTRIES,
+    CELL_DM,
     BodyLibrary,
     BodyPart,
     PartKind,
     Region,
+    cluster_vertices,
     load_library,
     to_bvh_axes,
 )
@@ -44,6 +46,13 @@ STANDING_POSES = ("standing01", "standing02", "standing03", "standing04", "stand
 WALK_BASE_POSE = "standing02"
 WALK_PHASES = 8
 """A walking person's cycle is drawn in this many poses (built once each, then reused)."""
+DETAIL_CELLS_M = (CELL_DM / 10.0, 0.105)
+"""Levels of detail: the vertex-clustering cell of each, metres (level 0 is the pack's own mesh; level 1 clusters
+it again at run time, about half its triangles). A frame draws the coarsest level whose cell is at most
+:data:`MAX_CELL_PX` of its pixels (:func:`detail_level`)."""
+MAX_CELL_PX = 2.0
+"""A level's cell may cover at most this many pixels on the ground: a representative vertex then lies within about a
+pixel of the surface it stands for, and the software rasterizer does not pay for triangles far below a pixel."""
 
 MUTED_RGB: tuple[RGB, ...] = (
     (40, 40, 45), (70, 70, 75), (110, 110, 115), (160, 160, 160), (215, 215, 210), (235, 235, 230),
@@ -256,10 +265,42 @@ class _Dressed:
     bone_weights: F64Array  # (N, 4)
     faces: I64Array  # (F, 3)
     colours_rgba: U8Array  # (N, 4)
+    surface: I64Array  # (N,) which surface a vertex is on: 0 skin, 1 shoes (the feet), 2... each garment
 
 
-@functools.lru_cache(maxsize=1024)
-def _dressed(figure: Figure) -> _Dressed:
+def detail_level(ground_m_per_px: float) -> int:
+    """The level of detail (index into :data:`DETAIL_CELLS_M`) to draw people at this ground pixel footprint."""
+    level = 0
+    for k, cell_m in enumerate(DETAIL_CELLS_M):
+        if cell_m <= MAX_CELL_PX * ground_m_per_px:
+            level = k
+    return level
+
+
+@functools.lru_cache(maxsize=2048)
+def _dressed(figure: Figure, detail: int = 0) -> _Dressed:
+    if detail:
+        # The pack's mesh clustered again in rest pose, each surface on its own (a garment's cell never takes the
+        # skin under it): every kept vertex keeps its own weights and colour. Vertices no triangle uses (skin under
+        # a garment) take no part.
+        fine = _dressed(figure, 0)
+        used, used_faces = np.unique(fine.faces, return_inverse=True)
+        cell_rest = DETAIL_CELLS_M[detail] * fine.rest_height_dm / figure.height_m  # metres -> this body's rest units
+        keep, kept_faces = cluster_vertices(
+            fine.vertices[used], used_faces.reshape(-1, 3), np.full(len(used), cell_rest), fine.surface[used]
+        )
+        keep = used[keep]
+        return _Dressed(
+            heads_rest=fine.heads_rest,
+            crown_rest=fine.crown_rest,
+            rest_height_dm=fine.rest_height_dm,
+            vertices=fine.vertices[keep],
+            bone_ids=fine.bone_ids[keep],
+            bone_weights=fine.bone_weights[keep],
+            faces=kept_faces,
+            colours_rgba=fine.colours_rgba[keep],
+            surface=fine.surface[keep],
+        )
     lib = load_library()
     base = _shaped_base(lib, figure)
     heads_rest = to_bvh_axes(np.array([base[g].mean(axis=0) for g in lib.head_groups]))
@@ -275,9 +316,10 @@ def _dressed(figure: Figure) -> _Dressed:
         hidden[garment.fitting.delete_verts] = True
     shod = np.zeros(len(lib.base_vertices), dtype=bool)
     shod[shoes.fitting.delete_verts] = True
-    vertices, faces, colours, ids, weights = [], [], [], [], []
+    vertices, faces, colours, ids, weights, surfaces = [], [], [], [], [], []
     offset = 0
-    for part in (body, *worn):
+    for n, part in enumerate((body, *worn)):
+        surface = np.full(len(part.fitting.refs), n + 1)
         rest = to_bvh_axes(part.fitting.fit(base))
         part_faces = part.faces
         part_colours = _colours(part, figure)
@@ -285,11 +327,13 @@ def _dressed(figure: Figure) -> _Dressed:
             covered = hidden[part.fitting.refs[:, 0]]
             part_faces = part_faces[~covered[part_faces].any(axis=1)]  # skin under a garment: not drawn
             part_colours[shod[part.fitting.refs[:, 0]], :3] = figure.shoes_rgb
+            surface = shod[part.fitting.refs[:, 0]].astype(np.int64)
         vertices.append(rest)
         faces.append(part_faces + offset)
         colours.append(part_colours)
         ids.append(part.bone_ids)
         weights.append(part.bone_weights)
+        surfaces.append(surface)
         offset += len(rest)
     return _Dressed(
         heads_rest=heads_rest,
@@ -300,19 +344,24 @@ def _dressed(figure: Figure) -> _Dressed:
         bone_weights=np.concatenate(weights),
         faces=np.concatenate(faces),
         colours_rgba=np.concatenate(colours),
+        surface=np.concatenate(surfaces),
     )
 
 
-def figure_topology(figure: Figure) -> tuple[I64Array, int]:
+def figure_topology(figure: Figure, detail: int = 0) -> tuple[I64Array, int]:
     """The triangles (F, 3) of the figure's mesh and its vertex count: the same in every pose and step of the walk."""
-    dressed = _dressed(figure)
+    dressed = _dressed(figure, detail)
     return dressed.faces, len(dressed.vertices)
 
 
-def figure_mesh(figure: Figure, walk_phase: float | None = None, stride: float = 1.0) -> FigureMesh:
-    """The person's mesh, posed (``walk_phase`` in [0, 1): a step of a walk on top of the figure's pose)."""
+def figure_mesh(figure: Figure, walk_phase: float | None = None, stride: float = 1.0, detail: int = 0) -> FigureMesh:
+    """The person's mesh, posed (``walk_phase`` in [0, 1): a step of a walk on top of the figure's pose).
+
+    ``detail`` is a level of :data:`DETAIL_CELLS_M`; every level stands on the same floor (level 0's lowest point in
+    this pose) under the same head.
+    """
     lib = load_library()
-    dressed = _dressed(figure)
+    dressed = _dressed(figure, detail)
     pose_array = lib.poses[WALK_BASE_POSE if walk_phase is not None else figure.pose]
     rotations = {name: pose_array[i] for i, name in enumerate(lib.rig.names)}
     if walk_phase is not None:
@@ -325,7 +374,10 @@ def figure_mesh(figure: Figure, walk_phase: float | None = None, stride: float =
     k = lib.rig.names.index("head")
     crown = head[k] + rot[k] @ (dressed.crown_rest - dressed.heads_rest[k])
     head_centre = (0.5 * (head[k] + crown) @ T_ENU_BVH.T) * scale
-    floor = float(v[:, 2].min())
+    if detail:
+        floor = float(head_centre[2]) - figure_mesh(figure, walk_phase, stride).head_height_m
+    else:
+        floor = float(v[:, 2].min())
     v = v - np.array([head_centre[0], head_centre[1], floor])
     return FigureMesh(
         vertices_m=np.asarray(v, dtype=np.float64),
@@ -371,9 +423,11 @@ def figure_head_height_m(figure: Figure) -> float:
     return figure_mesh(figure).head_height_m
 
 
-def figure_trimesh(figure: Figure, heading_rad: float, walk_phase: float | None = None) -> trimesh.Trimesh:
+def figure_trimesh(
+    figure: Figure, heading_rad: float, walk_phase: float | None = None, detail: int = 0
+) -> trimesh.Trimesh:
     """The figure as a vertex-coloured mesh facing ``heading_rad`` (from north towards east), head above the origin."""
-    built = figure_mesh(figure, walk_phase=walk_phase)
+    built = figure_mesh(figure, walk_phase=walk_phase, detail=detail)
     mesh = trimesh.Trimesh(vertices=built.vertices_m, faces=built.faces, process=False)
     mesh.visual.vertex_colors = built.colours_rgba
     mesh.apply_transform(trimesh.transformations.rotation_matrix(-heading_rad, [0, 0, 1]))

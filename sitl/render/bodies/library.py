@@ -48,7 +48,8 @@ PACK_PATH = Path(__file__).resolve().parent / "data" / "bodies.npz"
 CELL_DM = 0.75
 """Vertex-clustering cell (decimetres): 7.5 cm, a pixel at the SITL camera's 6 cm/px from 20 m, 2.5 at 3 cm/px (the
 lowest a mission looks from). Finer cells cost the software rasterizer its frame budget (bench/render.py): a person
-is ~880 triangles at 7.5 cm, 1,600 at 5.5 cm, 6,100 at 3 cm."""
+is ~880 triangles at 7.5 cm, 1,600 at 5.5 cm, 6,100 at 3 cm. From higher up a coarser level is clustered from the
+pack at run time (:data:`sitl.render.bodies.figure.DETAIL_CELLS_M`)."""
 BONES_PER_VERTEX = 4
 LEG_CELL_FACTOR = 1.5
 """Garments below the waist are clustered in cells this much larger."""
@@ -176,13 +177,17 @@ class BodyLibrary:
         return tuple(p for p in self.parts if p.kind is kind and sex in p.sexes)
 
 
-def _cluster(positions: F64Array, faces: I64Array, cell: F64Array) -> tuple[I64Array, I64Array]:
+def cluster_vertices(
+    positions: F64Array, faces: I64Array, cell: F64Array, group: I64Array | None = None
+) -> tuple[I64Array, I64Array]:
     """Vertex clustering: (representative vertex per kept vertex (K,), faces (F', 3) over kept vertices).
 
-    ``cell`` (N,) is each vertex's cell size; vertices of different cell sizes never share a cell.
+    ``cell`` (N,) is each vertex's cell size; vertices of different cell sizes, or of different ``group`` (N,) (the
+    parts of a dressed body: skin, a garment, hair), never share a cell.
     """
+    groups = np.zeros(len(positions), dtype=np.int64) if group is None else group
     keys = np.column_stack(
-        [np.floor(positions / cell[:, None]).astype(np.int64), np.round(cell * 1000).astype(np.int64)]
+        [np.floor(positions / cell[:, None]).astype(np.int64), np.round(cell * 1000).astype(np.int64), groups]
     )
     _, cluster, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     cluster = cluster.ravel()
@@ -289,7 +294,7 @@ def pack(asset_root: Path, out: Path = PACK_PATH, cell_dm: float = CELL_DM) -> P
         cells = np.where(regions == int(Region.BOTTOM), cell_dm * LEG_CELL_FACTOR, cell_dm)
         if kind is not PartKind.SUIT:
             cells = np.full(len(rest), cell_dm)
-        keep, faces = _cluster(rest, obj.faces, cells)
+        keep, faces = cluster_vertices(rest, obj.faces, cells)
         refs = fitting.refs[keep]
         w = fitting.weights[keep]
         vertex_weights = np.einsum("nk,nkb->nb", w, dense[refs])  # (N, B)
