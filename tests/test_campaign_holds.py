@@ -8,6 +8,7 @@ from typing import Any
 import pytest
 
 from companion.app.flight_log import DecisionRecord
+from companion.guidance.vocabulary import DecisionEvent, RefusalCause, ZoneChange
 from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, hold_cause, zones_chosen
 from sitl.campaign.report import against_previous, build_report, hold_kind
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
@@ -18,30 +19,67 @@ USED_UP = "person seen inside the footprint; 6 re-selections used up: hold"
 TIME_LIMIT = "no landing within 300 s of the start: hold"
 
 
-def _decision(t_s: float, phase: str, reason: str, target: bool) -> DecisionRecord:
-    return DecisionRecord(t_s, "setpoint", phase, {"track_id": 1} if target else None, None, reason, "frame", None)
+def _decision(t_s: float, phase: str, reason: str, target: bool, source: str = "frame") -> DecisionRecord:
+    """A decision as a log from before decisions carried their event holds it: read through the legacy reader."""
+    zone = {"track_id": 1, "north_m": 0.0, "east_m": 0.0, "radius_m": 2.0} if target else None
+    decision = {"kind": "setpoint", "phase": phase, "target": zone, "setpoint": None, "reason": reason}
+    return DecisionRecord.from_record({"t_s": t_s, "decision": decision, "source": source, "state": None})
 
 
-def test_each_hold_is_explained_by_kind_from_the_flight_log() -> None:
+def _end(reason: str, phase: str = "failsafe") -> DecisionRecord:
+    return _decision(300.0, phase, reason, False, source="time")
+
+
+def test_each_hold_is_explained_by_kind_from_an_old_flight_logs_words() -> None:
     searching = [_decision(float(t), "search", "no target: search pattern", False) for t in range(300)]
-    assert hold_cause(searching, TIME_LIMIT) == "nothing free"
+    assert hold_cause([*searching, _end(TIME_LIMIT)]) == "nothing free"
     chosen_late = [*searching[:-10], _decision(295.0, "approach", "approach target 1; committed to zone 1", True)]
-    assert hold_cause(chosen_late, TIME_LIMIT) == "time limit while approaching"
+    assert hold_cause([*chosen_late, _end(TIME_LIMIT)]) == "time limit while approaching"
     descending = [*chosen_late, _decision(299.0, "descent", "descend over zone 1", True)]
-    assert hold_cause(descending, TIME_LIMIT) == "time limit while descending"
+    assert hold_cause([*descending, _end(TIME_LIMIT)]) == "time limit while descending"
     between = [*chosen_late, _decision(299.0, "search", "no target yet: hold; released: zone 1 not seen", False)]
-    assert hold_cause(between, TIME_LIMIT) == "time limit while searching"
+    assert hold_cause([*between, _end(TIME_LIMIT)]) == "time limit while searching"
     climbing = [*descending, _decision(299.5, "search", "climbing back to 20.0 m before choosing again", False)]
-    assert hold_cause(climbing, TIME_LIMIT) == "time limit while climbing back"
-    assert hold_cause(searching, USED_UP) == "person in the footprint"
+    assert hold_cause([*climbing, _end(TIME_LIMIT)]) == "time limit while climbing back"
+    assert hold_cause([*searching, _end(USED_UP)]) == "person in the footprint"
     no_map = "no map saw the footprint free in the last 12 s; 6 re-selections used up: hold"
-    assert hold_cause([], no_map) == "no fresh free map"
-    assert hold_cause([], "zone 3 shrank to 0.80 m; 6 re-selections used up: hold") == "zone shrank"
+    assert hold_cause([_end(no_map)]) == "no fresh free map"
+    assert hold_cause([_end("zone 3 shrank to 0.80 m; 6 re-selections used up: hold")]) == "zone shrank"
     walker = "a person kept walking towards the footprint for 20 s; 6 re-selections used up: hold"
-    assert hold_cause([], walker) == "walker kept coming"
-    assert hold_cause([], "perception silent 5.0 s: land") == "perception silent"
-    assert hold_cause([], "something new") == "other"
-    assert {hold_cause(searching, r) for r in (TIME_LIMIT, USED_UP, "x")} <= set(HOLD_CAUSES)
+    assert hold_cause([_end(walker)]) == "walker kept coming"
+    gate = "person seen inside the footprint at the gate for 20 s; 6 re-selections used up: hold"
+    assert hold_cause([_end(gate)]) == "person in the footprint"
+    assert hold_cause([_end("perception silent 5.0 s: land")]) == "perception silent"
+    assert hold_cause([_end("perception silent 1.0 s: hold", phase="hold")]) == "perception silent"
+    assert hold_cause([_end("pilot took over (mode POSCTL)", phase="yielded")]) == "pilot took over"
+    assert hold_cause([_end("something new", phase="search")]) == "other"
+    assert hold_cause([]) == "other"
+    assert {hold_cause([*searching, _end(r)]) for r in (TIME_LIMIT, USED_UP, "x")} <= set(HOLD_CAUSES)
+
+
+def test_each_hold_is_explained_by_its_events_whatever_the_words() -> None:
+    def typed(t_s: float, phase: str, event: DecisionEvent, cause: RefusalCause | None = None) -> DecisionRecord:
+        target = {"track_id": 1} if phase in ("approach", "descent") else None
+        source = "time" if event is DecisionEvent.TIME_LIMIT else "frame"
+        return DecisionRecord(t_s, "setpoint", phase, target, None, "words", source, None, event, cause)
+
+    searching = [typed(float(t), "search", DecisionEvent.SEARCH_PATTERN) for t in range(300)]
+    limit = typed(300.0, "failsafe", DecisionEvent.TIME_LIMIT)
+    assert hold_cause([*searching, limit]) == "nothing free"
+    approaching = [*searching[:-10], typed(295.0, "approach", DecisionEvent.APPROACH)]
+    assert hold_cause([*approaching, limit]) == "time limit while approaching"
+    climbing = [*approaching, typed(299.0, "search", DecisionEvent.CLIMB_BACK)]
+    assert hold_cause([*climbing, limit]) == "time limit while climbing back"
+    for cause, kind in (
+        (RefusalCause.PERSON_IN_FOOTPRINT, "person in the footprint"),
+        (RefusalCause.PERSON_AT_GATE, "person in the footprint"),
+        (RefusalCause.NO_FREE_MAP, "no fresh free map"),
+        (RefusalCause.ZONE_SHRANK, "zone shrank"),
+        (RefusalCause.WALKER_KEPT_COMING, "walker kept coming"),
+    ):
+        assert hold_cause([typed(1.0, "failsafe", DecisionEvent.RESELECTIONS_USED_UP, cause)]) == kind
+    assert hold_cause([typed(1.0, "failsafe", DecisionEvent.PERCEPTION_FAILSAFE)]) == "perception silent"
+    assert hold_cause([typed(1.0, "failsafe", DecisionEvent.LIMIT)]) == "other"
 
 
 def test_choices_are_counted_from_the_reasons_not_from_the_trackers_ids() -> None:
@@ -49,9 +87,16 @@ def test_choices_are_counted_from_the_reasons_not_from_the_trackers_ids() -> Non
         _decision(1.0, "approach", "approach target 1; committed to zone 1 (biggest, r=4.0 m)", True),
         _decision(2.0, "approach", "approach target 7; zone 1 seen again as zone 7 (IoU 0.70)", True),
         _decision(9.0, "approach", "approach target 9; switched from zone 7 to zone 9: biggest better", True),
-        _decision(12.0, "search", "released: zone 9 not seen for 3 s; committed to zone 12 (biggest)", True),
+        _decision(12.0, "search", "no target yet: hold; released: zone 9 not seen for 3 s; committed to zone 12", True),
     ]
     assert zones_chosen(log) == 3
+    assert [c.change for d in log for c in d.zone_changes] == [
+        ZoneChange.COMMIT,
+        ZoneChange.REACQUIRE,
+        ZoneChange.SWITCH,
+        ZoneChange.RELEASE,
+        ZoneChange.COMMIT,
+    ]
 
 
 def _spec(tmp_path: Path) -> CampaignSpec:

@@ -12,6 +12,7 @@ import pytest
 
 from companion.guidance.commitment import CommitmentConfig, TargetCommitment
 from companion.guidance.geofence import Geofence, GeofenceConfig
+from companion.guidance.vocabulary import RefusalCause, ZoneChange
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
 from companion.perception.selection import BiggestPolicy, NearestPolicy, OldestPolicy, SelectionContext
 from companion.perception.tracking import TrackedZone
@@ -59,7 +60,7 @@ def _choose(c: TargetCommitment, t_s: float, tracks: list[TrackedZone], **kw: ob
         descent_rate_mps=1.0,
     )
     assert not kw
-    return (choice.target.track_id if choice.target else None), choice.event
+    return (choice.target.track_id if choice.target else None), choice.text
 
 
 def test_biggest_is_chosen_once_and_a_slightly_bigger_rival_never_takes_over() -> None:
@@ -120,13 +121,13 @@ def test_an_unreachable_rival_does_not_take_over() -> None:
 
 
 @pytest.mark.parametrize(
-    ("tracks", "why"),
+    ("tracks", "why", "cause"),
     [
-        ([_track(1, 5, 0, 0.8)], "zone 1 shrank to 0.80 m"),
-        ([_track(1, 24.5, 0, 3.0)], "zone 1's footprint left the geofence"),
+        ([_track(1, 5, 0, 0.8)], "zone 1 shrank to 0.80 m", RefusalCause.ZONE_SHRANK),
+        ([_track(1, 24.5, 0, 3.0)], "zone 1's footprint left the geofence", RefusalCause.LEFT_GEOFENCE),
     ],
 )
-def test_a_failed_check_releases_the_zone(tracks: list[TrackedZone], why: str) -> None:
+def test_a_failed_check_releases_the_zone(tracks: list[TrackedZone], why: str, cause: RefusalCause) -> None:
     c = _commitment()
     _choose(c, 0.0, [_track(1, 5, 0, 3.0)])
     chosen, event = _choose(c, 0.1, [*tracks, _track(2, -5, 0, 2.0)])
@@ -134,6 +135,19 @@ def test_a_failed_check_releases_the_zone(tracks: list[TrackedZone], why: str) -
     assert f"released: {why}" in event
     assert "committed to zone 2" in event
     assert chosen == 2
+    # The same, as data: a release with its cause, then a commitment.
+    again = _commitment()
+    _choose(again, 0.0, [_track(1, 5, 0, 3.0)])
+    choice = again.choose(
+        [*tracks, _track(2, -5, 0, 2.0)],
+        _free_map(),
+        SelectionContext(0.1, 0.0, 0.0),
+        altitude_m=15.0,
+        trusted=True,
+        time_left_s=300.0,
+        descent_rate_mps=1.0,
+    )
+    assert [(e.change, e.cause) for e in choice.events] == [(ZoneChange.RELEASE, cause), (ZoneChange.COMMIT, None)]
 
 
 def test_a_person_in_the_footprint_releases_and_refuses_the_point() -> None:

@@ -9,12 +9,18 @@ real companion process, it commits to one zone and lands; the paper's per-frame 
 from __future__ import annotations
 
 import itertools
+import json
+import shutil
+from collections import Counter
+from dataclasses import asdict
 from pathlib import Path
 
 import pytest
 
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.guidance.commitment import CommitmentConfig
+from companion.guidance.vocabulary import DecisionEvent, ZoneChange
+from sitl.campaign.hold_explain import explain_run
 from sitl.campaign.metrics import mission_metrics
 from sitl.campaign.spec import load_campaign_spec
 from sitl.campaign.worker import mission_spec
@@ -43,11 +49,39 @@ def test_the_mission_that_chased_commits_and_lands(tmp_path: Path) -> None:
     paper_changes = sum(1 for a, b in itertools.pairwise(per_frame) if a != b)
     assert paper_changes >= 10  # what the paper's loop would have chased in this very flight
     # Every change of zone is explained in the log: after a release or an aborted descent, or a bounded switch.
-    reasons = [r["decision"]["reason"] for r in flight if r["kind"] == RecordKind.DECISION]
-    commitments = sum(reason.count("committed to zone") for reason in reasons)
-    releases = sum(reason.count("released: ") + reason.count("climb back") for reason in reasons)
-    switches = sum(reason.count("switched from zone") for reason in reasons)
+    decisions = FlightLog.read(tmp_path / "flight").decisions()
+    changes = Counter(c.change for d in decisions for c in d.zone_changes)
+    aborts = sum(1 for d in decisions if d.event is DecisionEvent.ABORT)
+    commitments, switches = changes[ZoneChange.COMMIT], changes[ZoneChange.SWITCH]
     assert metrics.zones_chosen == commitments + switches >= 1
-    assert commitments <= 1 + releases
+    assert commitments <= 1 + changes[ZoneChange.RELEASE] + aborts
     assert switches <= CommitmentConfig().max_switches  # the spec keeps the defaults
     assert commitments + switches < paper_changes
+    assert all("event" in r["decision"] for r in flight if r["kind"] == RecordKind.DECISION)  # written as data
+
+    # Decisions are data: with every reason of the log reworded, no metric and no hold explanation moves.
+    reworded = tmp_path.parent / f"{tmp_path.name}_reworded"
+    shutil.copytree(tmp_path, reworded)
+    _reword(reworded / "flight" / "flight.jsonl")
+    assert FlightLog.read(reworded / "flight").decisions()[0].reason != decisions[0].reason
+    again = mission_metrics(reworded, plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
+    assert asdict(again) == asdict(metrics) | {"reason": again.reason}
+    assert explain_run(reworded).to_json() == explain_run(tmp_path).to_json()
+
+
+def _reword(log: Path) -> None:
+    """Every text a person reads in a flight log, replaced by other words (each decision's reason and the commitment
+    changes it reports, phase, failsafe and supervision reasons, the outcome's)."""
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    for k, record in enumerate(records):
+        if "decision" in record:
+            record["decision"]["reason"] = f"reworded decision {k}"
+            for change in record["decision"].get("zone_changes") or ():
+                change["text"] = f"reworded change {k}"
+        if "reason" in record:
+            record["reason"] = f"reworded {record['kind']} {k}"
+        if "outcome" in record:
+            record["outcome"]["reason"] = "reworded outcome"
+            failsafes = record["outcome"].get("failsafes", [])
+            record["outcome"]["failsafes"] = [f"reworded failsafe {n}" for n in range(len(failsafes))]
+    log.write_text("".join(json.dumps(r) + "\n" for r in records))

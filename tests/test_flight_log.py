@@ -61,7 +61,9 @@ def test_every_kind_the_recorder_writes_itself_is_in_the_schema() -> None:
 
 
 def test_decisions_read_typed_and_kinds_in_log_order_from_the_recorders_own_records(tmp_path: Path) -> None:
-    from companion.guidance.landing import CommandKind, Decision, LandingPhase, VehicleState
+    from companion.guidance.landing import CommandKind, Decision, LandingPhase
+    from companion.guidance.vehicle_state import VehicleState
+    from companion.guidance.vocabulary import DecisionEvent
     from companion.perception.selection import Target
     from companion.vehicle.link import Setpoint
 
@@ -70,12 +72,14 @@ def test_decisions_read_typed_and_kinds_in_log_order_from_the_recorders_own_reco
     state = VehicleState(3.0, 1.0, 2.0, -20.0, 90.0)
     target = Target(4.0, 5.0, 2.5, 7)
     setpoint = Setpoint(4.0, 5.0, -20.0, 90.0)
-    decision = Decision(3.0, LandingPhase.APPROACH, CommandKind.SETPOINT, setpoint, target, "approach target 7")
+    decision = Decision(
+        3.0, LandingPhase.APPROACH, CommandKind.SETPOINT, setpoint, target, "approach target 7", DecisionEvent.APPROACH
+    )
     recorder.write(RecordKind.DECISION, 3.0, decision=decision, source="frame", state=state, inputs={"seq": 30})
     recorder.write(RecordKind.COMMAND, 3.0, command=CommandKind.SETPOINT, setpoint=setpoint)
     recorder.write("a_newer_kind", 3.5, value=1)  # a newer writer's record
-    recorder.write(RecordKind.DECISION, 4.0, decision=Decision(4.0, LandingPhase.LAND, CommandKind.LAND, None, target,
-                   "land on zone 7"), source="frame", state=state, inputs={"seq": 40})  # fmt: skip
+    land = Decision(4.0, LandingPhase.LAND, CommandKind.LAND, None, target, "land on zone 7", DecisionEvent.LAND)
+    recorder.write(RecordKind.DECISION, 4.0, decision=land, source="frame", state=state, inputs={"seq": 40})
     recorder.close()
     log = FlightLog.read(tmp_path)
     first, landing = log.decisions()
@@ -85,6 +89,7 @@ def test_decisions_read_typed_and_kinds_in_log_order_from_the_recorders_own_reco
     assert first.state is not None
     assert first.state["north_m"] == 1.0
     assert (landing.kind, landing.setpoint, landing.reason) == ("land", None, "land on zone 7")
+    assert (first.event, landing.event) == (DecisionEvent.APPROACH, DecisionEvent.LAND)
     kinds = [kind for kind, _ in log.tagged()]
     assert kinds == [RecordKind.HEADER, RecordKind.DECISION, RecordKind.COMMAND, RecordKind.DECISION]  # not the new one
     assert [kind for kind, _ in log.tagged(RecordKind.COMMAND, RecordKind.DECISION)] == kinds[1:]

@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 
 from companion.app.ground_report import GroundReport, landing_target_fields
-from companion.guidance.landing import LandingPhase, VehicleState
+from companion.guidance.landing import LandingPhase
+from companion.guidance.vehicle_state import VehicleState
 from companion.perception.selection import Target
 from companion.vehicle.link import VehicleError
 from companion.vehicle.statustext import statustext_chunks

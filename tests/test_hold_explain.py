@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from companion.app.flight_log import DecisionRecord
+from companion.app.legacy_decisions import vocabulary_of, zone_changes_of
 from sitl.campaign.hold_explain import TruthAt, abort_kind, explain_hold, explain_run, release_kind
 from sitl.truth import TruthHeader, TruthRecord
 
@@ -20,8 +21,10 @@ MARGIN_M = 0.5
 
 
 def _decision(t_s: float, phase: str, reason: str, target: tuple[float, float] | None) -> DecisionRecord:
+    """A decision in the words of a log from before decisions carried their event (read by the legacy reader)."""
     zone = None if target is None else {"north_m": target[0], "east_m": target[1], "radius_m": 1.2, "track_id": 1}
-    return DecisionRecord(t_s, "setpoint", phase, zone, None, reason, "frame", None)
+    decision = {"kind": "setpoint", "phase": phase, "target": zone, "setpoint": None, "reason": reason}
+    return DecisionRecord.from_record({"t_s": t_s, "decision": decision, "source": "frame", "state": None})
 
 
 def _truth(people_at_s: dict[float, list[tuple[float, float]]]) -> TruthAt:
@@ -36,15 +39,24 @@ def _truth(people_at_s: dict[float, list[tuple[float, float]]]) -> TruthAt:
 
 
 def test_the_causes_lose_their_zone_numbers() -> None:
-    assert release_kind("person seen inside zone 12's footprint") == "person in the footprint"
-    assert release_kind("zone 3 shrank to 0.98 m") == "zone shrank"
-    assert release_kind("zone 3 not seen for 3 s") == "zone lost"
-    assert release_kind("zone 3's footprint left the geofence") == "footprint left the geofence"
-    assert abort_kind("person seen inside the footprint: climb back and re-select") == "person in the footprint"
+    def release(text: str) -> str:
+        (change,) = zone_changes_of(f"no target yet: hold; released: {text}")
+        return release_kind(change.cause)
+
+    def abort(reason: str) -> str:
+        return abort_kind(vocabulary_of(reason, "search")[1])
+
+    assert release("person seen inside zone 12's footprint") == "person in the footprint"
+    assert release("zone 3 shrank to 0.98 m") == "zone shrank"
+    assert release("zone 3 not seen for 3 s") == "zone lost"
+    assert release("zone 3's footprint left the geofence") == "footprint left the geofence"
+    assert abort("person seen inside the footprint: climb back and re-select") == "person in the footprint"
     gate = "person seen inside the footprint at the gate for 20 s; 6 re-selections used up: hold"
-    assert abort_kind(gate) == "person in the footprint at the gate, wait limit"
-    assert abort_kind("no map saw the footprint free in the last 12 s: climb back") == "no fresh free map"
-    assert abort_kind("a person kept walking towards the footprint for 20 s: climb") == "walker kept coming"
+    assert abort(gate) == "person in the footprint at the gate, wait limit"
+    assert abort("no map saw the footprint free in the last 12 s: climb back and re-select") == "no fresh free map"
+    walker = "a person kept walking towards the footprint for 20 s: climb back and re-select"
+    assert abort(walker) == "walker kept coming"
+    assert release_kind(None) == abort_kind(None) == "other"
 
 
 def test_a_hold_over_a_wide_berth_reads_as_such() -> None:

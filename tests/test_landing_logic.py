@@ -13,17 +13,11 @@ import pytest
 
 from companion.config import ConfigError, validate_config
 from companion.geometry import Pose
+from companion.guidance.config import FailsafeAction, GuidanceConfig
 from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence, GeofenceConfig
-from companion.guidance.landing import (
-    CommandKind,
-    Decision,
-    FailsafeAction,
-    GuidanceConfig,
-    LandingGuidance,
-    LandingPhase,
-    VehicleState,
-)
+from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
+from companion.guidance.vehicle_state import VehicleState
 from companion.perception.density import DensityMap
 from companion.perception.occupancy import OccupancyImage
 from companion.perception.pipeline import FrameResult

@@ -12,7 +12,9 @@ import pytest
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.app.recorder import FlightRecorder
 from companion.app.report import summarize
-from companion.guidance.landing import CommandKind, Decision, LandingPhase, VehicleState
+from companion.guidance.landing import CommandKind, Decision, LandingPhase
+from companion.guidance.vehicle_state import VehicleState
+from companion.guidance.vocabulary import DecisionEvent
 from companion.perception.selection import Target
 
 pytestmark = pytest.mark.unit
@@ -30,7 +32,8 @@ def test_the_report_lists_each_switch_of_target_with_its_reason(tmp_path: Path) 
         (LandingPhase.APPROACH, Target(6.0, 6.0, 2.2, 3), "approach target 3"),
     ]
     for k, (phase, target, reason) in enumerate(plan):
-        decision = Decision(float(k), phase, CommandKind.SETPOINT, None, target, reason)
+        event = DecisionEvent.APPROACH if target is not None else DecisionEvent.HOLD_NO_TARGET
+        decision = Decision(float(k), phase, CommandKind.SETPOINT, None, target, reason, event)
         recorder.write(RecordKind.DECISION, float(k), decision=decision, source="frame", state=state, inputs={})
     recorder.close()
     events = [(e["t_s"], e["event"], e["reason"]) for e in summarize(FlightLog.read(tmp_path))["events"]]
@@ -57,7 +60,10 @@ def test_the_landing_report_names_the_site_the_zone_and_the_nearest_occupied_gro
         (low, LandingPhase.LAND, CommandKind.LAND, zone_low, None),
     ]
     for state, phase, kind, target, nearest in plan:
-        decision = Decision(state.t_s, phase, kind, None, target, f"{phase.value} over zone 7")
+        event = {LandingPhase.APPROACH: DecisionEvent.APPROACH, LandingPhase.DESCENT: DecisionEvent.DESCEND}.get(
+            phase, DecisionEvent.LAND
+        )
+        decision = Decision(state.t_s, phase, kind, None, target, f"{phase.value} over zone 7", event)
         observed = {} if nearest is None else {"observed": {"nearest_occupied_m": nearest}}
         recorder.write(
             RecordKind.DECISION, state.t_s, decision=decision, source="frame", state=state, inputs={}, **observed

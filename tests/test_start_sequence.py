@@ -17,7 +17,7 @@ from companion.app.start_sequence import (
     StartSequence,
     StartStage,
 )
-from companion.guidance.landing import VehicleState
+from companion.guidance.vehicle_state import VehicleState
 from companion.vehicle.link import FlightMode, VehicleStatus
 
 pytestmark = pytest.mark.unit

@@ -14,7 +14,7 @@ from collections.abc import AsyncIterator
 from typing import Protocol
 
 from companion.camera.frames import CameraError, Frame
-from companion.guidance.landing import VehicleState
+from companion.guidance.vehicle_state import VehicleState
 from companion.vehicle.link import VehicleError
 from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.sim_control import SetpointNedYaw, Tick

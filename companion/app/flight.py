@@ -48,7 +48,9 @@ from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import GeometryError, Pose, polygon_centroid_ne_m
 from companion.guidance.footprint import nearest_occupied_m
 from companion.guidance.geofence import Geofence, latlon_to_ne_m
-from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase, VehicleState
+from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
+from companion.guidance.vehicle_state import VehicleState
+from companion.guidance.vocabulary import DecisionEvent
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.zones import ZoneFinder
@@ -610,7 +612,10 @@ class FlightApp:
         elif step.action is StartAction.TRANSIT:
             # Fly to the start pose first (SITL campaigns): through the same safety filter as every setpoint.
             setpoint = self.guidance.safe_setpoint(state, step.north_m, step.east_m, step.altitude_m, step.yaw_deg)
-            await self._send(Decision(state.t_s, LandingPhase.IDLE, CommandKind.SETPOINT, setpoint, None, "transit"))
+            transit = Decision(
+                state.t_s, LandingPhase.IDLE, CommandKind.SETPOINT, setpoint, None, "transit", DecisionEvent.TRANSIT
+            )
+            await self._send(transit)
         elif step.action is StartAction.START:
             self._last_frame_t_s = state.t_s  # perception silence counts from here
             await self.apply(self.guidance.start(state), "start", state)

@@ -16,8 +16,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from companion.app.legacy_decisions import vocabulary_of
 from companion.app.recorder import RecorderError, read_log
 from companion.errors import SlzError
+from companion.guidance.vocabulary import (
+    ZONE_CHOICES,
+    CommitmentEvent,
+    DecisionEvent,
+    RefusalCause,
+    ZoneChange,
+)
 
 SCHEMA_VERSION = 2
 """1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version."""
@@ -106,8 +114,10 @@ def kind_of(record: dict[str, Any]) -> RecordKind | None:
 class DecisionRecord:
     """A ``decision`` record, typed: the command decided (``kind``: none, setpoint, land, hold, return) at vehicle
     time ``t_s`` in ``phase``, toward ``target`` (a zone: ``north_m``, ``east_m``, ``radius_m``, ``track_id``) with
-    ``setpoint`` (local NED, m; yaw, deg), why, what produced it (``source``: start, frame, silence, time, landed,
-    takeover) and the vehicle ``state`` it was taken in (``north_m``, ``east_m``, ``down_m``, ``yaw_deg``)."""
+    ``setpoint`` (local NED, m; yaw, deg), why in words (``reason``, for people) and as data (``event``, ``cause``,
+    ``zone_changes``: :mod:`companion.guidance.vocabulary`; None where an old log's words name no event), what
+    produced it (``source``: start, frame, silence, time, landed, takeover) and the vehicle ``state`` it was taken in
+    (``north_m``, ``east_m``, ``down_m``, ``yaw_deg``)."""
 
     t_s: float
     kind: str
@@ -117,22 +127,46 @@ class DecisionRecord:
     reason: str
     source: str
     state: dict[str, Any] | None
+    event: DecisionEvent | None = None
+    cause: RefusalCause | None = None
+    zone_changes: tuple[CommitmentEvent, ...] = ()
 
     @classmethod
     def from_record(cls, record: dict[str, Any]) -> DecisionRecord:
         """From a checked ``decision`` record (see :data:`REQUIRED_FIELDS`); a decision without a target, setpoint
-        or reason has none."""
+        or reason has none. A log from before decisions carried their event is read through the one legacy reader
+        of their words (:func:`companion.app.legacy_decisions.vocabulary_of`)."""
         decision = record["decision"]
+        reason = str(decision.get("reason", ""))
+        phase = str(decision["phase"])
+        if "event" in decision:
+            event: DecisionEvent | None = DecisionEvent(decision["event"])
+            cause = None if decision.get("cause") is None else RefusalCause(decision["cause"])
+            changes = tuple(
+                CommitmentEvent(
+                    ZoneChange(c["change"]), None if c.get("cause") is None else RefusalCause(c["cause"]), c["text"]
+                )
+                for c in decision.get("zone_changes") or ()
+            )
+        else:
+            event, cause, changes = vocabulary_of(reason, phase)
         return cls(
             float(record["t_s"]),
             str(decision["kind"]),
-            str(decision["phase"]),
+            phase,
             decision.get("target"),
             decision.get("setpoint"),
-            str(decision.get("reason", "")),
+            reason,
             str(record["source"]),
             record["state"],
+            event,
+            cause,
+            changes,
         )
+
+    def chose_zones(self) -> int:
+        """How many times this decision reports a landing zone chosen (commitments and switches)."""
+        return sum(1 for c in self.zone_changes if c.change in ZONE_CHOICES)
 
 
 class FlightLogError(SlzError):

@@ -25,7 +25,8 @@ import logging
 import math
 from typing import Any
 
-from companion.guidance.landing import LandingPhase, VehicleState
+from companion.guidance.landing import LandingPhase
+from companion.guidance.vehicle_state import VehicleState
 from companion.perception.selection import Target
 from companion.vehicle.link import VehicleLink
 from companion.vehicle.statustext import statustext_chunks

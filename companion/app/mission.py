@@ -14,8 +14,8 @@ from urllib.parse import urlparse
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from companion.config import ConfigError, StrictModel, format_validation_error, load_yaml_config
+from companion.guidance.config import GuidanceConfig
 from companion.guidance.geofence import Geofence, GeofenceConfig
-from companion.guidance.landing import GuidanceConfig
 from companion.perception.config import MODEL_PATH_FIELDS, PerceptionConfig
 from companion.vehicle.link import FlightMode
 

@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 
 from companion.app.mission import StartConfig
-from companion.guidance.landing import VehicleState
+from companion.guidance.vehicle_state import VehicleState
 from companion.vehicle.link import FlightMode, VehicleStatus
 
 TAKEOFF_RETRY_S = 1.0  # vehicle time between takeoff requests while the autopilot refuses

@@ -37,6 +37,7 @@ from pydantic import Field
 from companion.config import StrictModel
 from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence
+from companion.guidance.vocabulary import CommitmentEvent, RefusalCause, ZoneChange
 from companion.perception.projection import HeadPlaneOccupancy
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target, target_of
 from companion.perception.tracking import TrackedZone
@@ -121,10 +122,15 @@ class RefusedPoint:
 
 @dataclass(frozen=True)
 class Choice:
-    """The committed target after a frame, and what changed (None: nothing)."""
+    """The committed target after a frame, and what changed in the commitment (in order; empty: nothing)."""
 
     target: Target | None
-    event: str | None
+    events: tuple[CommitmentEvent, ...] = ()
+
+    @property
+    def text(self) -> str | None:
+        """What changed, in words (None: nothing)."""
+        return "; ".join(e.text for e in self.events) or None
 
 
 class TargetCommitment:
@@ -232,41 +238,45 @@ class TargetCommitment:
             Vertical speed of a descent, for the reachability check.
         """
         t_s = context.t_s
-        events: list[str] = []
+        events: list[CommitmentEvent] = []
         committed = self._follow(tracks, t_s, events)
         if committed is not None:
-            failed: str | None = None
+            failed: tuple[RefusalCause, str] | None = None
             if committed.radius_m < self.min_zone_radius_m:
-                failed = f"zone {committed.track_id} shrank to {committed.radius_m:.2f} m"
+                failed = RefusalCause.ZONE_SHRANK, f"zone {committed.track_id} shrank to {committed.radius_m:.2f} m"
             elif not self.inside_fence(committed.north_m, committed.east_m):
-                failed = f"zone {committed.track_id}'s footprint left the geofence"
+                failed = RefusalCause.LEFT_GEOFENCE, f"zone {committed.track_id}'s footprint left the geofence"
             else:
                 view = footprint_view(head_plane, committed.north_m, committed.east_m, self.footprint_radius_m)
                 seen = trusted and view.occupied_seen
                 self._occupied_frames = self._occupied_frames + 1 if seen else 0
                 if self._occupied_frames >= self.config.occupied_frames_to_release:
-                    failed = f"person seen inside zone {committed.track_id}'s footprint"
-                    self.refused.append(RefusedPoint(committed.north_m, committed.east_m, t_s, failed))
+                    failed = (
+                        RefusalCause.PERSON_IN_FOOTPRINT,
+                        f"person seen inside zone {committed.track_id}'s footprint",
+                    )
+                    self.refused.append(RefusedPoint(committed.north_m, committed.east_m, t_s, failed[1]))
             if failed is not None:
-                events.append(f"released: {failed}")
+                events.append(CommitmentEvent(ZoneChange.RELEASE, failed[0], f"released: {failed[1]}"))
                 self._release()
                 committed = None
         candidates = [t for t in tracks if t.track_id != self.committed_id and self.eligible(t, t_s)]
         if committed is None:
             best = next((t for t in candidates if t.track_id == self._best_id(candidates, context)), None)
             if best is None:
-                return Choice(None, "; ".join(events) or None)
+                return Choice(None, tuple(events))
             self._commit(best, t_s)
-            events.append(f"committed to zone {best.track_id} ({self.policy.name}, r={best.radius_m:.1f} m)")
-            return Choice(target_of(best), "; ".join(events))
+            text = f"committed to zone {best.track_id} ({self.policy.name}, r={best.radius_m:.1f} m)"
+            events.append(CommitmentEvent(ZoneChange.COMMIT, None, text))
+            return Choice(target_of(best), tuple(events))
         switched_to = self._rival(committed, candidates, context, altitude_m, time_left_s, descent_rate_mps)
         if switched_to is not None:
-            rival, event = switched_to
-            events.append(event)
+            rival, text = switched_to
+            events.append(CommitmentEvent(ZoneChange.SWITCH, None, text))
             committed = rival
-        return Choice(target_of(committed), "; ".join(events) or None)
+        return Choice(target_of(committed), tuple(events))
 
-    def _follow(self, tracks: Sequence[TrackedZone], t_s: float, events: list[str]) -> TrackedZone | None:
+    def _follow(self, tracks: Sequence[TrackedZone], t_s: float, events: list[CommitmentEvent]) -> TrackedZone | None:
         """The committed zone in this frame's tracks: its own track, else a track seen now that overlaps its last
         circle (the tracker lost it and started another), else its last circle for ``lost_after_s``; None when
         nothing is committed or it was not seen for that long (released)."""
@@ -285,13 +295,15 @@ class TargetCommitment:
             k = int(np.argmax(iou))
             if iou[k] >= self.config.reacquire_iou:
                 again = seen_now[k]
-                events.append(f"zone {last.track_id} seen again as zone {again.track_id} (IoU {iou[k]:.2f})")
+                text = f"zone {last.track_id} seen again as zone {again.track_id} (IoU {iou[k]:.2f})"
+                events.append(CommitmentEvent(ZoneChange.REACQUIRE, None, text))
                 self._zone, self._seen_s = again, t_s
                 self.committed_id = again.track_id
                 self._rival_id = None if self._rival_id == again.track_id else self._rival_id
                 return again
         if t_s - self._seen_s > self.config.lost_after_s:
-            events.append(f"released: zone {last.track_id} not seen for {self.config.lost_after_s:g} s")
+            text = f"released: zone {last.track_id} not seen for {self.config.lost_after_s:g} s"
+            events.append(CommitmentEvent(ZoneChange.RELEASE, RefusalCause.ZONE_LOST, text))
             self._release()
             return None
         return own if own is not None else last  # coasting: the track's prediction, else where it was last seen

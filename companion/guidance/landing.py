@@ -48,148 +48,21 @@ import enum
 import math
 from dataclasses import dataclass
 
-from pydantic import Field, model_validator
-
-from companion.config import StrictModel
-from companion.guidance.commitment import CommitmentConfig, TargetCommitment
-from companion.guidance.footprint import footprint_view
+from companion.guidance.commitment import TargetCommitment
+from companion.guidance.config import FailsafeAction, GuidanceConfig
+from companion.guidance.descent import Descent, StepKind
 from companion.guidance.geofence import Geofence
-from companion.guidance.walker_watch import WalkerWatch, WalkerWatchConfig
+from companion.guidance.search_pattern import ExpandingSquare
+from companion.guidance.vehicle_state import VehicleState
+from companion.guidance.vocabulary import CommitmentEvent, DecisionEvent, RefusalCause
+from companion.guidance.walker_watch import WalkerWatch
 from companion.perception.pipeline import FrameResult
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target
 from companion.vehicle.link import Setpoint
 
 CLIMBING_BACK = "climbing back to"
-"""How the reason of a frame spent climbing back after an aborted descent begins (campaign hold causes read it)."""
-
-WAITING_AT_GATE = "wait at"
-"""How the reason of a frame spent at the walker gate begins: hovering there, watching or waiting out a person in the
-footprint (campaign metrics read it: the landing descent starts when the gate lets the vehicle go)."""
-
-GATE_SLACK_M = 0.5
-"""The walker gate's maps are those taken within this of its altitude (the vehicle settles onto it from above)."""
-
-
-class FailsafeAction(str, enum.Enum):
-    """What the companion asks of the autopilot when perception stays silent for T2."""
-
-    HOLD = "hold"
-    """Autopilot hold (loiter) where it is."""
-    LAND = "land"
-    """Land in place (the autopilot's own landing)."""
-    RETURN = "return"
-    """Return to launch."""
-
-
-class GuidanceConfig(StrictModel):
-    """Landing logic parameters (metres, seconds, vehicle clock)."""
-
-    search_altitude_m: float = Field(default=20.0, gt=2.0, le=120.0, description="Minimum altitude while searching.")
-    search_timeout_s: float = Field(default=6.0, gt=0.0, le=600.0, description="No target this long: search pattern.")
-    search_leg_m: float = Field(default=5.0, gt=0.0, le=100.0, description="First leg of the expanding square.")
-    approach_height_m: float = Field(default=2.0, gt=0.0, le=20.0, description="Descent goal above ground (paper).")
-    land_altitude_m: float = Field(default=2.0, gt=0.0, le=20.0, description="At or below: command the landing.")
-    land_tolerance_m: float = Field(
-        default=0.3, ge=0.0, le=5.0, description="Slack above land_altitude_m (position control converges slowly)."
-    )
-    capture_radius_m: float = Field(default=0.75, gt=0.0, le=10.0, description="Horizontal error to start descending.")
-    max_step_m: float = Field(
-        default=4.0, gt=0.0, le=50.0, description="Farthest horizontal setpoint from the vehicle."
-    )
-    descent_rate_limit_mps: float = Field(default=1.0, gt=0.0, le=5.0)
-    autopilot_z_time_constant_s: float = Field(
-        default=1.0, gt=0.0, le=10.0, description="1 / the autopilot's vertical position gain (PX4 MPC_Z_P = 1/s)."
-    )
-    climb_back_m: float | None = Field(
-        default=4.0,
-        ge=0.0,
-        le=120.0,
-        description="Climb after an aborted descent before choosing again (metres, at most back to the altitude the "
-        "search started from). None: all the way back there, where the policy sees the whole search area (issue "
-        "33: it rescued holds but lost landings that a choice from low down had made; not the default).",
-    )
-    blind_altitude_m: float = Field(
-        default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
-    )
-    perception_min_altitude_m: float = Field(
-        default=4.5,
-        ge=0.0,
-        le=50.0,
-        description="Below this, maps do not decide: the descent continues on the last map from above it, and a "
-        "person who walks into the footprint later is not seen. The model read magnified grass as people below "
-        "about 10 m until frames were shrunk to its training scale (perception.model.min_gsd_m_per_px), and the "
-        "floor was 12 m; now it is blind_altitude_m: lower, the whole view lies within the footprint and its "
-        "margin, so a shadow at the frame's edge aborted descents (models/density/MODEL_CARD.md).",
-    )
-    landing_map_max_age_s: float = Field(
-        default=12.0,
-        gt=0.0,
-        le=60.0,
-        description="The landing needs a map this recent that saw the footprint free (the descent from "
-        "perception_min_altitude_m to land_altitude_m must fit in it).",
-    )
-    footprint_known_fraction: float = Field(default=0.95, gt=0.0, le=1.0)
-    unsafe_frames_to_abort: int = Field(
-        default=4,
-        ge=1,
-        le=100,
-        description="Consecutive frames with a person seen inside the footprint (or the zone shrunk below the "
-        "minimum) to abort the descent. A person stays in the map from frame to frame; the model's false positives "
-        "flicker (runs of 1-2 frames measured in SITL descents).",
-    )
-    max_reselections: int = Field(
-        default=12,
-        ge=0,
-        le=100,
-        description="Aborted descents before the failsafe (hold). The mission's time limit is the budget that "
-        "bounds the attempts; this only stops a vehicle that keeps being refused from trying for ever.",
-    )
-    hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
-    failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
-    failsafe_action: FailsafeAction = Field(
-        default=FailsafeAction.HOLD,
-        description="T2's action. Hold by default: a landing in place lands on whatever is below, where the map "
-        "may just have refused to land (deploy/README.md, 'If the companion dies over a crowd'); return is the next "
-        "best. Land only where nobody can be below (the SITL's campaigns fly the paper's land).",
-    )
-    mission_time_limit_s: float = Field(
-        default=600.0,
-        gt=0.0,
-        le=7200.0,
-        description="Vehicle time from the start of the search to a landing decision; used up: last_resort (the "
-        "pilot or the operator decides). On the vehicle clock, so a lockstep mission ends the same way on any machine.",
-    )
-    last_resort: FailsafeAction = Field(
-        default=FailsafeAction.HOLD,
-        description="What the companion asks of the autopilot when a limit ends the mission before a landing (the "
-        "mission_time_limit_s, the wall limit of `slz fly --timeout`, max_reselections): hold or return, never land "
-        "(a landing the map has not chosen lands on whatever is below).",
-    )
-    commitment: CommitmentConfig = Field(
-        default_factory=CommitmentConfig, description="How firmly a chosen zone is kept (issue 33)."
-    )
-    walkers: WalkerWatchConfig = Field(
-        default_factory=WalkerWatchConfig,
-        description="A descent waits above the blind last metres while someone walks towards its landing point.",
-    )
-    blind_landing: bool = Field(
-        default=False,
-        description="Evaluation baseline only (the paper's 'random landing', with the random selection policy): "
-        "descend and land on the target without checking the map. Never on a vehicle near people.",
-    )
-
-    @model_validator(mode="after")
-    def _order(self) -> GuidanceConfig:
-        if self.failsafe_after_silence_s <= self.hold_after_silence_s:
-            raise ValueError("failsafe_after_silence_s (T2) must exceed hold_after_silence_s (T1)")
-        if self.land_altitude_m < self.approach_height_m:
-            raise ValueError("land_altitude_m must be at least approach_height_m, or the descent never reaches it")
-        if self.last_resort is FailsafeAction.LAND:
-            raise ValueError(
-                "last_resort: must be hold or return (got land): a landing the map has not chosen lands on whatever "
-                "is below"
-            )
-        return self
+"""How the reason of a frame spent climbing back after an aborted descent begins (for people: what counts reads
+the decision's event)."""
 
 
 class LandingPhase(str, enum.Enum):
@@ -220,24 +93,13 @@ class CommandKind(str, enum.Enum):
 
 
 @dataclass(frozen=True)
-class VehicleState:
-    """The vehicle at a decision: vehicle-clock time (s), local NED position (m), yaw (deg)."""
-
-    t_s: float
-    north_m: float
-    east_m: float
-    down_m: float
-    yaw_deg: float
-
-    @property
-    def altitude_m(self) -> float:
-        """Height above the local origin (-down)."""
-        return -self.down_m
-
-
-@dataclass(frozen=True)
 class Decision:
-    """One decision: the phase after it, the command, and why."""
+    """One decision: the phase after it, the command, and why.
+
+    ``reason`` says it in words, for people; ``event``, ``cause`` (a refused or waited-on landing point's) and
+    ``zone_changes`` (the commitment's changes that this decision reports) say it as data
+    (:mod:`companion.guidance.vocabulary`), for everything that counts.
+    """
 
     t_s: float
     phase: LandingPhase
@@ -245,6 +107,9 @@ class Decision:
     setpoint: Setpoint | None
     target: Target | None
     reason: str
+    event: DecisionEvent
+    cause: RefusalCause | None = None
+    zone_changes: tuple[CommitmentEvent, ...] = ()
 
 
 class LandingGuidance:
@@ -274,7 +139,7 @@ class LandingGuidance:
     ) -> None:
         self.config = config
         self.commitment = TargetCommitment(config.commitment, policy, geofence, footprint_radius_m, min_zone_radius_m)
-        self.walkers = WalkerWatch(config.walkers, footprint_radius_m)
+        self.descent = Descent(config, footprint_radius_m, min_zone_radius_m, self.commitment.inside_fence)
         self.geofence = geofence
         self.footprint_radius_m = footprint_radius_m
         self.min_zone_radius_m = min_zone_radius_m
@@ -282,12 +147,8 @@ class LandingGuidance:
         self.reselections = 0
         self._phase_since_s = 0.0
         self._last_target_s: float | None = None
-        self._locked: Target | None = None
-        self._unsafe_frames = 0
-        self._landing_map_s: float | None = None  # last frame that saw the whole footprint free
         self._hold: Setpoint | None = None
-        self._search_origin: tuple[float, float] | None = None
-        self._search_started_s = 0.0
+        self.search = ExpandingSquare(config.search_leg_m, config.search_timeout_s, geofence)
         self._search_altitude_m = config.search_altitude_m
         self._start_altitude_m = config.search_altitude_m  # the altitude the search started from
         self._reclimb_m: float | None = None  # after an aborted descent: climbing back to it, no choice below it
@@ -295,6 +156,11 @@ class LandingGuidance:
         self._resume_phase = LandingPhase.SEARCH
         self._heading_deg: float | None = None
         self._started_s: float | None = None
+
+    @property
+    def walkers(self) -> WalkerWatch:
+        """The descent's walker watch (its waits and whether its gate was passed)."""
+        return self.descent.walkers
 
     # -- helpers -------------------------------------------------------------------------------------------------
     def _enter(self, phase: LandingPhase, t_s: float) -> None:
@@ -331,23 +197,27 @@ class LandingGuidance:
         n: float,
         e: float,
         alt: float,
+        event: DecisionEvent,
+        cause: RefusalCause | None = None,
+        zone_changes: tuple[CommitmentEvent, ...] = (),
     ) -> Decision:
         self._enter(phase, state.t_s)
-        return Decision(state.t_s, phase, CommandKind.SETPOINT, self.safe_setpoint(state, n, e, alt), target, reason)
+        setpoint = self.safe_setpoint(state, n, e, alt)
+        return Decision(state.t_s, phase, CommandKind.SETPOINT, setpoint, target, reason, event, cause, zone_changes)
 
-    def _abort_descent(self, state: VehicleState, reason: str) -> Decision:
+    def _abort_descent(self, state: VehicleState, reason: str, cause: RefusalCause) -> Decision:
         self.reselections += 1
-        if self._locked is not None:
-            self.commitment.refuse(self._locked.north_m, self._locked.east_m, state.t_s, reason)
-        self._locked = None
-        self._landing_map_s = None
+        locked = self.descent.locked
+        if locked is not None:
+            self.commitment.refuse(locked.north_m, locked.east_m, state.t_s, reason)
+        self.descent.refuse()
         self._last_target_s = state.t_s
-        self._search_origin = None
+        self.search.reset()
         if self.reselections > self.config.max_reselections:
             # Never the configured "land": the map has just refused a landing here. The last resort (hold or
             # return), and the pilot decides.
             used = f"{reason}; {self.reselections - 1} re-selections used up"
-            return self._failsafe(state, used, self.config.last_resort)
+            return self._failsafe(state, used, DecisionEvent.RESELECTIONS_USED_UP, self.config.last_resort, cause)
         climb_back_m = self.config.climb_back_m
         if climb_back_m is None:
             climb_to = self._start_altitude_m
@@ -366,9 +236,18 @@ class LandingGuidance:
             state.north_m,
             state.east_m,
             climb_to,
+            DecisionEvent.ABORT,
+            cause,
         )
 
-    def _failsafe(self, state: VehicleState, reason: str, action: FailsafeAction | None = None) -> Decision:
+    def _failsafe(
+        self,
+        state: VehicleState,
+        reason: str,
+        event: DecisionEvent,
+        action: FailsafeAction | None = None,
+        cause: RefusalCause | None = None,
+    ) -> Decision:
         """Enter the failsafe phase with ``action`` (the configured one when None)."""
         action = action or self.config.failsafe_action
         self._enter(LandingPhase.FAILSAFE, state.t_s)
@@ -377,7 +256,7 @@ class LandingGuidance:
             FailsafeAction.LAND: CommandKind.LAND,
             FailsafeAction.RETURN: CommandKind.RETURN,
         }[action]
-        return Decision(state.t_s, LandingPhase.FAILSAFE, kind, None, None, f"{reason}: {action.value}")
+        return Decision(state.t_s, LandingPhase.FAILSAFE, kind, None, None, f"{reason}: {action.value}", event, cause)
 
     # -- events ----------------------------------------------------------------------------------------------------
     def start(self, state: VehicleState) -> Decision:
@@ -390,7 +269,16 @@ class LandingGuidance:
         altitude = max(state.altitude_m, self.config.search_altitude_m)
         self._search_altitude_m = altitude
         self._start_altitude_m = altitude
-        return self._setpoint(state, LandingPhase.SEARCH, None, "mission start", state.north_m, state.east_m, altitude)
+        return self._setpoint(
+            state,
+            LandingPhase.SEARCH,
+            None,
+            "mission start",
+            state.north_m,
+            state.east_m,
+            altitude,
+            DecisionEvent.MISSION_START,
+        )
 
     def on_frame(self, result: FrameResult, state: VehicleState) -> Decision:
         """Decide after one processed frame (``state`` at the frame's decision time)."""
@@ -402,7 +290,8 @@ class LandingGuidance:
             LandingPhase.FAILSAFE,
             LandingPhase.YIELDED,
         ):
-            return Decision(state.t_s, self.phase, CommandKind.NONE, None, None, f"frame ignored in {self.phase.value}")
+            ignored = f"frame ignored in {self.phase.value}"
+            return Decision(state.t_s, self.phase, CommandKind.NONE, None, None, ignored, DecisionEvent.FRAME_IGNORED)
         if self.phase is LandingPhase.HOLD:  # perception is back
             self._enter(self._resume_phase, state.t_s)
         if self.phase is LandingPhase.DESCENT:
@@ -420,10 +309,11 @@ class LandingGuidance:
                     north_m,
                     east_m,
                     self._reclimb_m,
+                    DecisionEvent.CLIMB_BACK,
                 )
             self._reclimb_m = None  # climbed back (within the slack position control leaves)
-        target, event = self._choose(result, state)
-        note = "" if event is None else f"; {event}"
+        target, said, changes = self._choose(result, state)
+        note = "" if said is None else f"; {said}"
         if target is None:
             since = state.t_s - (self._last_target_s if self._last_target_s is not None else state.t_s)
             if since < c.search_timeout_s:
@@ -435,13 +325,23 @@ class LandingGuidance:
                     state.north_m,
                     state.east_m,
                     self._search_altitude_m,
+                    DecisionEvent.HOLD_NO_TARGET,
+                    zone_changes=changes,
                 )
-            n, e = self._search_waypoint(state)
+            n, e = self.search.waypoint(state.t_s, state.north_m, state.east_m, self._search_altitude_m)
             return self._setpoint(
-                state, LandingPhase.SEARCH, None, "no target: search pattern" + note, n, e, self._search_altitude_m
+                state,
+                LandingPhase.SEARCH,
+                None,
+                "no target: search pattern" + note,
+                n,
+                e,
+                self._search_altitude_m,
+                DecisionEvent.SEARCH_PATTERN,
+                zone_changes=changes,
             )
         self._last_target_s = state.t_s
-        self._search_origin = None
+        self.search.reset()
         if self._reclimb_m is not None and state.altitude_m >= self._reclimb_m - c.land_tolerance_m:
             self._reclimb_m = None  # climbed back (within the slack position control leaves)
         offset = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
@@ -450,9 +350,7 @@ class LandingGuidance:
             and (target.radius_m >= self.min_zone_radius_m or c.blind_landing)
             and self._reclimb_m is None
         ):
-            self._locked = target
-            self._unsafe_frames = 0
-            self.walkers.reset()
+            self.descent.lock(target)
             self._enter(LandingPhase.DESCENT, state.t_s)
             return self._descent(result, state)
         return self._setpoint(
@@ -465,15 +363,20 @@ class LandingGuidance:
             target.north_m,
             target.east_m,
             max(state.altitude_m, c.land_altitude_m, self._reclimb_m or 0.0),
+            DecisionEvent.APPROACH,
+            zone_changes=changes,
         )
 
-    def _choose(self, result: FrameResult, state: VehicleState) -> tuple[Target | None, str | None]:
-        """The committed target after this frame, and what changed in the commitment (for the log)."""
+    def _choose(
+        self, result: FrameResult, state: VehicleState
+    ) -> tuple[Target | None, str | None, tuple[CommitmentEvent, ...]]:
+        """The committed target after this frame, and what changed in the commitment: in words (for the log) and
+        as events."""
         c = self.config
         proposed = result.target
         if proposed is not None and proposed.track_id is None:  # the blind baseline's point: drawn once, kept
             inside = self.geofence.contains_ne(proposed.north_m, proposed.east_m)
-            return (proposed, None) if inside else (None, "the point lies outside the geofence")
+            return (proposed, None, ()) if inside else (None, "the point lies outside the geofence", ())
         elapsed_s = state.t_s - (self._started_s if self._started_s is not None else state.t_s)
         choice = self.commitment.choose(
             result.tracks,
@@ -484,142 +387,21 @@ class LandingGuidance:
             time_left_s=c.mission_time_limit_s - elapsed_s,
             descent_rate_mps=c.descent_rate_limit_mps,
         )
-        return choice.target, choice.event
+        return choice.target, choice.text, choice.events
 
     def _descent(self, result: FrameResult, state: VehicleState) -> Decision:
-        c = self.config
-        locked = self._locked
+        """One frame of the descent (:class:`~companion.guidance.descent.Descent` decides): go on, land, or abort."""
+        step = self.descent.step(result, state)
+        if step.kind is StepKind.ABORT:
+            assert step.cause is not None
+            return self._abort_descent(state, step.reason, step.cause)
+        locked = self.descent.locked
         assert locked is not None
-        trusted = state.altitude_m >= c.perception_min_altitude_m
-        blind = state.altitude_m < c.blind_altitude_m
-        # The landing point is a point on the ground. The locked track refines it while it is seen near it; a
-        # missing track (the zones of a noisy map come and go) leaves it where it was.
-        track = next((t for t in result.tracks if t.track_id == locked.track_id), None)
-        shrunk = False
-        seen = (
-            track is not None
-            and track.misses == 0
-            and trusted
-            and not blind
-            and math.hypot(track.north_m - locked.north_m, track.east_m - locked.east_m) <= c.capture_radius_m
-            and self.commitment.inside_fence(track.north_m, track.east_m)  # never refined to beyond the fence
-        )
-        if seen:
-            assert track is not None
-            shrunk = track.radius_m < self.min_zone_radius_m
-            if not shrunk:
-                self._locked = locked = Target(track.north_m, track.east_m, track.radius_m, track.track_id)
-        # The footprint is where the vehicle will touch down: around the landing point, not under the vehicle now.
-        footprint = footprint_view(result.head_plane, locked.north_m, locked.east_m, self.footprint_radius_m)
-        unsafe = trusted and (footprint.occupied_seen or shrunk) and not c.blind_landing
-        # At the walker gate the vehicle hovers 3 m above the heads and descends no further until the footprint is
-        # seen free: there a person (or a false positive that flickers) in the footprint is waited out, up to the
-        # gate's limit, instead of refusing the point at once (the maps at 4.5-5 m are the model's least sure).
-        # Between the gate and the floor the same holds after the gate was passed: the descent goes back to the gate
-        # and watches again, its wait still counted from when it began (so a presence that comes and goes cannot
-        # hold the vehicle there past the gate's limit).
-        blocked = None
-        if unsafe and self._in_gate_band(state):
-            blocked = "a person seen inside the footprint" if footprint.occupied_seen else "the zone shrank"
-            unsafe = False
-            if self.walkers.passed:
-                self.walkers.rearm()
-        self._unsafe_frames = self._unsafe_frames + 1 if unsafe else 0
-        if self._unsafe_frames >= c.unsafe_frames_to_abort:
-            self._unsafe_frames = 0
-            if footprint.occupied_seen:
-                return self._abort_descent(state, "person seen inside the footprint")
-            assert track is not None
-            return self._abort_descent(state, f"zone {locked.track_id} shrank to {track.radius_m:.2f} m")
-        if c.blind_landing or (trusted and footprint.known_fraction >= c.footprint_known_fraction and footprint.clear):
-            self._landing_map_s = state.t_s
-        offset = math.hypot(locked.north_m - state.north_m, locked.east_m - state.east_m)
-        gate = self._walker_gate(result, state, locked, trusted, blocked)
-        if isinstance(gate, Decision):
-            return gate
-        low = state.altitude_m <= c.land_altitude_m + c.land_tolerance_m and offset <= c.capture_radius_m
-        if low and gate is None:
-            age = math.inf if self._landing_map_s is None else state.t_s - self._landing_map_s
-            if age > c.landing_map_max_age_s:
-                return self._abort_descent(
-                    state, f"no map saw the footprint free in the last {c.landing_map_max_age_s:g} s"
-                )
+        if step.kind is StepKind.LAND:
             self._enter(LandingPhase.LAND, state.t_s)
-            return Decision(
-                state.t_s,
-                LandingPhase.LAND,
-                CommandKind.LAND,
-                None,
-                locked,
-                f"land on zone {locked.track_id} (map {age:.1f} s old)",
-            )
-        goal_alt = c.approach_height_m if offset <= c.capture_radius_m else state.altitude_m
-        reason = f"descend over zone {locked.track_id} (offset {offset:.2f} m)"
-        if gate is not None:
-            gate_m, watch_says = gate
-            goal_alt = max(goal_alt, gate_m)
-            if watch_says:
-                reason = f"{WAITING_AT_GATE} {gate_m:.1f} m over zone {locked.track_id}: {watch_says}"
-        return self._setpoint(state, LandingPhase.DESCENT, locked, reason, locked.north_m, locked.east_m, goal_alt)
-
-    def _gate_m(self) -> float:
-        """The walker gate's altitude (m above ground): just above the floor below which no map decides."""
-        return self.config.perception_min_altitude_m + self.config.land_tolerance_m
-
-    def _in_gate_band(self, state: VehicleState) -> bool:
-        """Whether the vehicle is between the walker gate (with its slack) and the floor, with a watch to keep."""
-        c = self.config
-        if not c.walkers.enabled or c.blind_landing:
-            return False
-        return c.perception_min_altitude_m <= state.altitude_m <= self._gate_m() + GATE_SLACK_M
-
-    def _walker_gate(
-        self, result: FrameResult, state: VehicleState, locked: Target, trusted: bool, blocked: str | None
-    ) -> Decision | tuple[float, str] | None:
-        """The gate above the blind last metres (:mod:`companion.guidance.walker_watch`): None once passed (or
-        without a watch), else the lowest altitude allowed now and what the watch sees, or an abort when someone
-        kept walking in, or stayed in the footprint (``blocked``: what this map saw there), for too long."""
-        c = self.config
-        watch = self.walkers
-        if not c.walkers.enabled or c.blind_landing or watch.passed:
-            return None
-        gate_m = self._gate_m()
-        if not trusted:  # sank past the floor while stopping at the gate: back up, where the maps see
-            return gate_m, "back up to the gate"
-        if state.altitude_m > gate_m + GATE_SLACK_M:
-            watch.reset()  # only maps taken at the gate count: higher up, standing people drift in (parallax)
-            return gate_m, ""
-        approach = watch.observe(result.head_plane, locked.north_m, locked.east_m, state.t_s)
-        if watch.ready(approach, state.t_s, blocked=blocked is not None):
-            return None
-        if watch.waited_too_long(state.t_s):
-            watch.reset()
-            if blocked is not None and approach is None:
-                reason = f"person seen inside the footprint at the gate for {c.walkers.max_wait_s:g} s"
-            else:
-                reason = f"a person kept walking towards the footprint for {c.walkers.max_wait_s:g} s"
-            return self._abort_descent(state, reason)
-        if blocked is not None:
-            return gate_m, blocked
-        return gate_m, approach.describe() if approach is not None else "watching"
-
-    def _search_waypoint(self, state: VehicleState) -> tuple[float, float]:
-        """Expanding square around where the search began, one leg per ``search_timeout_s``, inside the fence."""
-        c = self.config
-        if self._search_origin is None:
-            self._search_origin = (state.north_m, state.east_m)
-            self._search_started_s = state.t_s
-        elapsed = state.t_s - self._search_started_s
-        k = int(elapsed // c.search_timeout_s)
-        # Legs: N, E, S, S, W, W, N, N, N, ... lengths 1, 1, 2, 2, 3, 3, ... times the leg.
-        n, e = self._search_origin
-        directions = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)]
-        for leg in range(k + 1):
-            dn, de = directions[leg % 4]
-            length = c.search_leg_m * (leg // 2 + 1)
-            n, e = n + dn * length, e + de * length
-        n, e, _ = self.geofence.clamp(n, e, self._search_altitude_m)
-        return n, e
+            return Decision(state.t_s, LandingPhase.LAND, CommandKind.LAND, None, locked, step.reason, step.event)
+        n, e, alt = locked.north_m, locked.east_m, step.goal_altitude_m
+        return self._setpoint(state, LandingPhase.DESCENT, locked, step.reason, n, e, alt, step.event, step.cause)
 
     def time_used_up(self, state: VehicleState) -> Decision | None:
         """The failsafe (hold) once ``mission_time_limit_s`` has passed since :meth:`start` without a landing."""
@@ -627,12 +409,14 @@ class LandingGuidance:
             return None
         if state.t_s - self._started_s < self.config.mission_time_limit_s:
             return None
-        return self.give_up(state, f"no landing within {self.config.mission_time_limit_s:g} s of the start")
+        limit = f"no landing within {self.config.mission_time_limit_s:g} s of the start"
+        return self.give_up(state, limit, DecisionEvent.TIME_LIMIT)
 
-    def give_up(self, state: VehicleState, reason: str) -> Decision:
-        """End the mission before a landing, for a limit that ``reason`` names: the failsafe phase with
-        ``last_resort`` (hold or return; never land where the map has not chosen)."""
-        return self._failsafe(state, reason, self.config.last_resort)
+    def give_up(self, state: VehicleState, reason: str, event: DecisionEvent = DecisionEvent.LIMIT) -> Decision:
+        """End the mission before a landing, for a limit that ``reason`` names (``event``: the mission's own time
+        limit, or a limit of the program): the failsafe phase with ``last_resort`` (hold or return; never land where
+        the map has not chosen)."""
+        return self._failsafe(state, reason, event, self.config.last_resort)
 
     def perception_silent(self, state: VehicleState, silent_s: float) -> Decision | None:
         """No processed frame for ``silent_s`` (wall or vehicle time, the caller's watchdog): T1 hold, T2 failsafe."""
@@ -640,7 +424,7 @@ class LandingGuidance:
         if self.phase in ACTIVE_PHASES and silent_s >= c.hold_after_silence_s:
             self._resume_phase = LandingPhase.SEARCH if self.phase is LandingPhase.DESCENT else self.phase
             if self.phase is LandingPhase.DESCENT:
-                self._locked = None
+                self.descent.drop()
             self._hold = self.safe_setpoint(state, state.north_m, state.east_m, state.altitude_m)
             self._enter(LandingPhase.HOLD, state.t_s)
             return Decision(
@@ -650,20 +434,25 @@ class LandingGuidance:
                 self._hold,
                 None,
                 f"perception silent {silent_s:.1f} s: hold",
+                DecisionEvent.PERCEPTION_HOLD,
             )
         if self.phase is LandingPhase.HOLD and silent_s >= c.failsafe_after_silence_s:
-            return self._failsafe(state, f"perception silent {silent_s:.1f} s")
+            return self._failsafe(state, f"perception silent {silent_s:.1f} s", DecisionEvent.PERCEPTION_FAILSAFE)
         return None
 
     def landed(self, t_s: float) -> Decision:
         """The autopilot reports the vehicle on the ground."""
         self._enter(LandingPhase.DONE, t_s)
-        return Decision(t_s, LandingPhase.DONE, CommandKind.NONE, None, self._locked, "landed")
+        locked = self.descent.locked
+        return Decision(t_s, LandingPhase.DONE, CommandKind.NONE, None, locked, "landed", DecisionEvent.LANDED)
 
     def pilot_took_over(self, t_s: float, mode: str) -> Decision:
         """The flight mode left OFFBOARD without us: yield at once, for the rest of the flight."""
         self._enter(LandingPhase.YIELDED, t_s)
-        return Decision(t_s, LandingPhase.YIELDED, CommandKind.NONE, None, None, f"pilot took over (mode {mode})")
+        took_over = f"pilot took over (mode {mode})"
+        return Decision(
+            t_s, LandingPhase.YIELDED, CommandKind.NONE, None, None, took_over, DecisionEvent.PILOT_TOOK_OVER
+        )
 
     @property
     def commanding(self) -> bool:

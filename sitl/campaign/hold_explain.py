@@ -25,7 +25,6 @@ records already read.
 from __future__ import annotations
 
 import bisect
-import re
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,43 +35,38 @@ import numpy.typing as npt
 
 from companion.app.flight_log import DecisionRecord, FlightLog
 from companion.geometry import inside_polygon
-from companion.guidance.landing import WAITING_AT_GATE
+from companion.guidance.vocabulary import DecisionEvent, RefusalCause, ZoneChange
 from sitl.truth import TruthHeader, TruthRecord, body_edges_m, clearance_m, people_at, read_truth
 
-RELEASE = re.compile(r"released: ([^;]+)")
-ABORT_MARKERS = (": climb back and re-select", " re-selections used up")
 FREE_SAMPLE_S = 5.0
 """How often (vehicle seconds) the truth's largest free disc is measured over a flight."""
-GATE_BLOCKED = re.compile(re.escape(WAITING_AT_GATE) + r" [0-9.]+ m over zone \d+: a person seen inside the footprint")
+
+RELEASE_KINDS = {
+    RefusalCause.PERSON_IN_FOOTPRINT: "person in the footprint",
+    RefusalCause.ZONE_SHRANK: "zone shrank",
+    RefusalCause.ZONE_LOST: "zone lost",
+    RefusalCause.LEFT_GEOFENCE: "footprint left the geofence",
+}
+ABORT_KINDS = {
+    RefusalCause.PERSON_AT_GATE: "person in the footprint at the gate, wait limit",
+    RefusalCause.WALKER_KEPT_COMING: "walker kept coming",
+    RefusalCause.PERSON_IN_FOOTPRINT: "person in the footprint",
+    RefusalCause.ZONE_SHRANK: "zone shrank",
+    RefusalCause.NO_FREE_MAP: "no fresh free map",
+}
+PERSON_CAUSES = (RefusalCause.PERSON_IN_FOOTPRINT, RefusalCause.PERSON_AT_GATE)
+"""The refusals that name a person in the footprint (the truth says how far the nearest body really was)."""
 
 
-def release_kind(text: str) -> str:
-    """A release's cause, without zone numbers: 'person in the footprint', 'zone shrank', 'zone lost',
+def release_kind(cause: RefusalCause | None) -> str:
+    """A release's kind, as the report counts it: 'person in the footprint', 'zone shrank', 'zone lost',
     'footprint left the geofence' or 'other'."""
-    if "person seen inside" in text:
-        return "person in the footprint"
-    if "shrank" in text:
-        return "zone shrank"
-    if "not seen for" in text:
-        return "zone lost"
-    if "left the geofence" in text:
-        return "footprint left the geofence"
-    return "other"
+    return "other" if cause is None else RELEASE_KINDS.get(cause, "other")
 
 
-def abort_kind(text: str) -> str:
-    """An aborted descent's cause (the text before ``: climb back`` or ``; N re-selections used up``)."""
-    if "at the gate for" in text:
-        return "person in the footprint at the gate, wait limit"
-    if "kept walking towards the footprint" in text:
-        return "walker kept coming"
-    if "person seen inside the footprint" in text:
-        return "person in the footprint"
-    if "shrank" in text:
-        return "zone shrank"
-    if "no map saw the footprint free" in text:
-        return "no fresh free map"
-    return "other"
+def abort_kind(cause: RefusalCause | None) -> str:
+    """An aborted descent's kind, as the report counts it (:data:`ABORT_KINDS`, else 'other')."""
+    return "other" if cause is None else ABORT_KINDS.get(cause, "other")
 
 
 @dataclass(frozen=True)
@@ -281,19 +275,17 @@ def explain_hold(
             out.refusals.append(Refusal(t_s, event, n, e, truth.nearest_edge_m(t_s, n, e)))
 
     for d in decisions:
-        reason = d.reason
-        out.zones_chosen += reason.count("committed to zone") + reason.count("switched from zone")
-        for text in RELEASE.findall(reason):
-            kind = release_kind(text)
-            out.releases[kind] += 1
-            if kind == "person in the footprint":
-                refuse(d.t_s, "release")
-        if any(marker in reason for marker in ABORT_MARKERS):
-            kind = abort_kind(reason)
-            out.aborts[kind] += 1
-            if "person" in kind:
+        out.zones_chosen += d.chose_zones()
+        for change in d.zone_changes:
+            if change.change is ZoneChange.RELEASE:
+                out.releases[release_kind(change.cause)] += 1
+                if change.cause is RefusalCause.PERSON_IN_FOOTPRINT:
+                    refuse(d.t_s, "release")
+        if d.event in (DecisionEvent.ABORT, DecisionEvent.RESELECTIONS_USED_UP):
+            out.aborts[abort_kind(d.cause)] += 1
+            if d.cause in PERSON_CAUSES:
                 refuse(d.t_s, "abort")
-        elif GATE_BLOCKED.search(reason):
+        elif d.event is DecisionEvent.WAIT_AT_GATE and d.cause is RefusalCause.PERSON_IN_FOOTPRINT:
             refuse(d.t_s, "gate")
         if d.target is not None:
             target = d.target

@@ -26,7 +26,7 @@ import numpy as np
 
 from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
-from companion.guidance.landing import CLIMBING_BACK, WAITING_AT_GATE
+from companion.guidance.vocabulary import DecisionEvent, RefusalCause
 from sitl.config import SitlConfig
 from sitl.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
@@ -160,7 +160,7 @@ def _final_descent(flight: FlightLog) -> tuple[float | None, float | None, dict[
             target = decision.target
             waiting = False
         previous = decision.phase
-        at_gate = decision.phase == "descent" and decision.reason.startswith(WAITING_AT_GATE)
+        at_gate = decision.phase == "descent" and decision.event is DecisionEvent.WAIT_AT_GATE
         if waiting and not at_gate:
             release = decision.t_s
         waiting = at_gate
@@ -190,34 +190,39 @@ HOLD_CAUSES = {
 NOTHING_FREE_WINDOW_S = 30.0
 
 
-def hold_cause(decisions: list[DecisionRecord], reason: str) -> str:
-    """Why a mission without a touchdown ended, from its decisions (flight-log records) and its final reason.
+USED_UP_CAUSES = {
+    RefusalCause.PERSON_IN_FOOTPRINT: "person in the footprint",
+    RefusalCause.PERSON_AT_GATE: "person in the footprint",
+    RefusalCause.NO_FREE_MAP: "no fresh free map",
+    RefusalCause.ZONE_SHRANK: "zone shrank",
+    RefusalCause.WALKER_KEPT_COMING: "walker kept coming",
+}
+"""The hold cause of used-up re-selections, by the last refusal's cause."""
+
+
+def hold_cause(decisions: list[DecisionRecord]) -> str:
+    """Why a mission without a touchdown ended, from its decisions (flight-log records; the last one ended it).
 
     A hold is a decision the log explains: the descents allowed (``guidance.max_reselections``) were all aborted, and
     the last abort names why; or the time limit came, and the phase it came in says whether nothing was free to choose
     or the vehicle was on its way.
     """
-    if "re-selections used up" in reason:
-        if "person seen inside the footprint" in reason:
-            return "person in the footprint"
-        if "no map saw the footprint free" in reason:
-            return "no fresh free map"
-        if "shrank" in reason:
-            return "zone shrank"
-        if "kept walking towards the footprint" in reason:
-            return "walker kept coming"
-        return "other"
-    if "perception silent" in reason:
+    final = decisions[-1] if decisions else None
+    event = None if final is None else final.event
+    if event is DecisionEvent.RESELECTIONS_USED_UP:
+        assert final is not None
+        return USED_UP_CAUSES.get(final.cause, "other") if final.cause is not None else "other"
+    if event in (DecisionEvent.PERCEPTION_HOLD, DecisionEvent.PERCEPTION_FAILSAFE):
         return "perception silent"
-    if "pilot took over" in reason:
+    if event is DecisionEvent.PILOT_TOOK_OVER:
         return "pilot took over"
-    if "no landing within" not in reason:
+    if event is not DecisionEvent.TIME_LIMIT:
         return "other"
     flying = [d for d in decisions if d.source == "frame"]
     if not flying:
         return "nothing free"
     end_s = flying[-1].t_s
-    if flying[-1].reason.startswith(CLIMBING_BACK):
+    if flying[-1].event is DecisionEvent.CLIMB_BACK:
         return "time limit while climbing back"
     recent = [d for d in flying if d.t_s >= end_s - NOTHING_FREE_WINDOW_S]
     if not any(d.target is not None for d in recent):
@@ -229,8 +234,8 @@ def hold_cause(decisions: list[DecisionRecord], reason: str) -> str:
 
 
 def zones_chosen(decisions: list[DecisionRecord]) -> int:
-    """Commitments and switches in the decisions' reasons (:mod:`companion.guidance.commitment`)."""
-    return sum(d.reason.count("committed to zone") + d.reason.count("switched from zone") for d in decisions)
+    """Commitments and switches the decisions report (:mod:`companion.guidance.commitment`)."""
+    return sum(d.chose_zones() for d in decisions)
 
 
 def mission_metrics(
@@ -286,7 +291,7 @@ def mission_metrics(
     path_length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
     targets = [d.target["track_id"] for d in decisions if d.target is not None]
     reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)
-    aborts = sum(1 for d in decisions if "climb back" in d.reason)
+    aborts = sum(1 for d in decisions if d.event is DecisionEvent.ABORT)
     obstacle_m, obstacle_kind = (
         nearest_obstacle(park_layout(sitl.seed, sitl.scenario.roi_side_m), *down.position_ned_m[:2])
         if down is not None
@@ -322,7 +327,7 @@ def mission_metrics(
         obstacle_kind=obstacle_kind,
         touched_obstacle=obstacle_m < vehicle_radius_m,
         people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else None)),
-        hold_cause=None if down is not None else hold_cause(decisions, str(end.get("reason", ""))),
+        hold_cause=None if down is not None else hold_cause(decisions),
         zones_chosen=zones_chosen(decisions),
         overflown_above_gate=down is not None and bool(under[~landing].any()),
     )

@@ -1,0 +1,134 @@
+"""The landing logic's parameters (:class:`GuidanceConfig`, the mission config's ``guidance:``) and what it asks of
+the autopilot when a limit or silence ends a mission (:class:`FailsafeAction`). Metres, seconds, vehicle clock."""
+
+from __future__ import annotations
+
+import enum
+
+from pydantic import Field, model_validator
+
+from companion.config import StrictModel
+from companion.guidance.commitment import CommitmentConfig
+from companion.guidance.walker_watch import WalkerWatchConfig
+
+
+class FailsafeAction(str, enum.Enum):
+    """What the companion asks of the autopilot when perception stays silent for T2."""
+
+    HOLD = "hold"
+    """Autopilot hold (loiter) where it is."""
+    LAND = "land"
+    """Land in place (the autopilot's own landing)."""
+    RETURN = "return"
+    """Return to launch."""
+
+
+class GuidanceConfig(StrictModel):
+    """Landing logic parameters (metres, seconds, vehicle clock)."""
+
+    search_altitude_m: float = Field(default=20.0, gt=2.0, le=120.0, description="Minimum altitude while searching.")
+    search_timeout_s: float = Field(default=6.0, gt=0.0, le=600.0, description="No target this long: search pattern.")
+    search_leg_m: float = Field(default=5.0, gt=0.0, le=100.0, description="First leg of the expanding square.")
+    approach_height_m: float = Field(default=2.0, gt=0.0, le=20.0, description="Descent goal above ground (paper).")
+    land_altitude_m: float = Field(default=2.0, gt=0.0, le=20.0, description="At or below: command the landing.")
+    land_tolerance_m: float = Field(
+        default=0.3, ge=0.0, le=5.0, description="Slack above land_altitude_m (position control converges slowly)."
+    )
+    capture_radius_m: float = Field(default=0.75, gt=0.0, le=10.0, description="Horizontal error to start descending.")
+    max_step_m: float = Field(
+        default=4.0, gt=0.0, le=50.0, description="Farthest horizontal setpoint from the vehicle."
+    )
+    descent_rate_limit_mps: float = Field(default=1.0, gt=0.0, le=5.0)
+    autopilot_z_time_constant_s: float = Field(
+        default=1.0, gt=0.0, le=10.0, description="1 / the autopilot's vertical position gain (PX4 MPC_Z_P = 1/s)."
+    )
+    climb_back_m: float | None = Field(
+        default=4.0,
+        ge=0.0,
+        le=120.0,
+        description="Climb after an aborted descent before choosing again (metres, at most back to the altitude the "
+        "search started from). None: all the way back there, where the policy sees the whole search area (issue "
+        "33: it rescued holds but lost landings that a choice from low down had made; not the default).",
+    )
+    blind_altitude_m: float = Field(
+        default=4.5, gt=0.0, le=50.0, description="Below this the camera cannot see a whole zone on the head plane."
+    )
+    perception_min_altitude_m: float = Field(
+        default=4.5,
+        ge=0.0,
+        le=50.0,
+        description="Below this, maps do not decide: the descent continues on the last map from above it, and a "
+        "person who walks into the footprint later is not seen. The model read magnified grass as people below "
+        "about 10 m until frames were shrunk to its training scale (perception.model.min_gsd_m_per_px), and the "
+        "floor was 12 m; now it is blind_altitude_m: lower, the whole view lies within the footprint and its "
+        "margin, so a shadow at the frame's edge aborted descents (models/density/MODEL_CARD.md).",
+    )
+    landing_map_max_age_s: float = Field(
+        default=12.0,
+        gt=0.0,
+        le=60.0,
+        description="The landing needs a map this recent that saw the footprint free (the descent from "
+        "perception_min_altitude_m to land_altitude_m must fit in it).",
+    )
+    footprint_known_fraction: float = Field(default=0.95, gt=0.0, le=1.0)
+    unsafe_frames_to_abort: int = Field(
+        default=4,
+        ge=1,
+        le=100,
+        description="Consecutive frames with a person seen inside the footprint (or the zone shrunk below the "
+        "minimum) to abort the descent. A person stays in the map from frame to frame; the model's false positives "
+        "flicker (runs of 1-2 frames measured in SITL descents).",
+    )
+    max_reselections: int = Field(
+        default=12,
+        ge=0,
+        le=100,
+        description="Aborted descents before the failsafe (hold). The mission's time limit is the budget that "
+        "bounds the attempts; this only stops a vehicle that keeps being refused from trying for ever.",
+    )
+    hold_after_silence_s: float = Field(default=1.0, gt=0.0, le=60.0, description="T1: perception silent -> hold.")
+    failsafe_after_silence_s: float = Field(default=5.0, gt=0.0, le=600.0, description="T2: -> failsafe action.")
+    failsafe_action: FailsafeAction = Field(
+        default=FailsafeAction.HOLD,
+        description="T2's action. Hold by default: a landing in place lands on whatever is below, where the map "
+        "may just have refused to land (deploy/README.md, 'If the companion dies over a crowd'); return is the next "
+        "best. Land only where nobody can be below (the SITL's campaigns fly the paper's land).",
+    )
+    mission_time_limit_s: float = Field(
+        default=600.0,
+        gt=0.0,
+        le=7200.0,
+        description="Vehicle time from the start of the search to a landing decision; used up: last_resort (the "
+        "pilot or the operator decides). On the vehicle clock, so a lockstep mission ends the same way on any machine.",
+    )
+    last_resort: FailsafeAction = Field(
+        default=FailsafeAction.HOLD,
+        description="What the companion asks of the autopilot when a limit ends the mission before a landing (the "
+        "mission_time_limit_s, the wall limit of `slz fly --timeout`, max_reselections): hold or return, never land "
+        "(a landing the map has not chosen lands on whatever is below).",
+    )
+    commitment: CommitmentConfig = Field(
+        default_factory=CommitmentConfig, description="How firmly a chosen zone is kept (issue 33)."
+    )
+    walkers: WalkerWatchConfig = Field(
+        default_factory=WalkerWatchConfig,
+        description="A descent waits above the blind last metres while someone walks towards its landing point.",
+    )
+    blind_landing: bool = Field(
+        default=False,
+        description="Evaluation baseline only (the paper's 'random landing', with the random selection policy): "
+        "descend and land on the target without checking the map. Never on a vehicle near people.",
+    )
+
+    @model_validator(mode="after")
+    def _order(self) -> GuidanceConfig:
+        if self.failsafe_after_silence_s <= self.hold_after_silence_s:
+            raise ValueError("failsafe_after_silence_s (T2) must exceed hold_after_silence_s (T1)")
+        if self.land_altitude_m < self.approach_height_m:
+            raise ValueError("land_altitude_m must be at least approach_height_m, or the descent never reaches it")
+        if self.last_resort is FailsafeAction.LAND:
+            raise ValueError(
+                "last_resort: must be hold or return (got land): a landing the map has not chosen lands on whatever "
+                "is below"
+            )
+        return self

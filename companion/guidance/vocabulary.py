@@ -1,0 +1,99 @@
+"""What a landing decision did and why, as data: the words campaign metrics, hold explanations and reports read.
+
+Every :class:`~companion.guidance.landing.Decision` carries its :class:`DecisionEvent` (what it did), the
+:class:`RefusalCause` of a landing point or zone it gave up (or waited on), and the :class:`ZoneChange` events of the
+zone commitment in that frame. Its ``reason`` text is for people and may be reworded freely; nothing that counts reads
+it (a test rewords every reason and checks that no metric moves). Flight logs written before these fields existed are
+read through :func:`companion.app.legacy_decisions.vocabulary_of`, the one place that still matches texts.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class DecisionEvent(str, enum.Enum):
+    """What one decision did."""
+
+    MISSION_START = "mission_start"
+    """The mission started: search from where the vehicle is."""
+    HOLD_NO_TARGET = "hold_no_target"
+    """Searching, no target yet: hold position (before the search pattern's timeout)."""
+    SEARCH_PATTERN = "search_pattern"
+    """Searching, no target for the search timeout: fly the expanding square."""
+    CLIMB_BACK = "climb_back"
+    """After an aborted descent, climbing back before choosing again."""
+    APPROACH = "approach"
+    """Flying towards the committed zone."""
+    DESCEND = "descend"
+    """Descending over the locked landing point."""
+    WAIT_AT_GATE = "wait_at_gate"
+    """Held at the walker gate: watching, waiting out a walker or a person in the footprint."""
+    LAND = "land"
+    """The landing command."""
+    ABORT = "abort"
+    """A descent refused its landing point: climb back and re-select (``cause`` says why)."""
+    RESELECTIONS_USED_UP = "reselections_used_up"
+    """A descent refused its point with no re-selection left: the last resort (``cause``: the last refusal's)."""
+    TIME_LIMIT = "time_limit"
+    """The mission time limit came without a landing: the last resort."""
+    LIMIT = "limit"
+    """A limit of the program (its wall limit, a stop) ended the mission: the last resort."""
+    PERCEPTION_HOLD = "perception_hold"
+    """No processed frame for T1: hold."""
+    PERCEPTION_FAILSAFE = "perception_failsafe"
+    """No processed frame for T2: the failsafe action."""
+    LANDED = "landed"
+    """The autopilot reported the vehicle on the ground."""
+    PILOT_TOOK_OVER = "pilot_took_over"
+    """The flight mode left offboard without the companion: yield."""
+    FRAME_IGNORED = "frame_ignored"
+    """A frame in a phase that takes none."""
+    TRANSIT = "transit"
+    """Flying to the search area before the mission starts."""
+
+
+class RefusalCause(str, enum.Enum):
+    """Why a landing point or a committed zone was given up (or, at the walker gate, waited on)."""
+
+    PERSON_IN_FOOTPRINT = "person_in_footprint"
+    """A person seen inside the footprint around it."""
+    PERSON_AT_GATE = "person_at_gate"
+    """A person seen inside the footprint for the walker gate's whole wait limit."""
+    WALKER_KEPT_COMING = "walker_kept_coming"
+    """Someone kept walking towards the footprint for the walker gate's wait limit."""
+    ZONE_SHRANK = "zone_shrank"
+    """The zone became narrower than the smallest a landing needs."""
+    NO_FREE_MAP = "no_free_map"
+    """No recent map saw the whole footprint free when the landing was due."""
+    ZONE_LOST = "zone_lost"
+    """The committed zone was not seen for the commitment's lost time."""
+    LEFT_GEOFENCE = "left_geofence"
+    """The committed zone's footprint left the geofence."""
+
+
+class ZoneChange(str, enum.Enum):
+    """A change of the zone commitment (:mod:`companion.guidance.commitment`)."""
+
+    COMMIT = "commit"
+    """Committed to a zone (nothing was committed)."""
+    SWITCH = "switch"
+    """Switched to a rival that stayed clearly better."""
+    RELEASE = "release"
+    """Released the committed zone (its ``cause`` says why)."""
+    REACQUIRE = "reacquire"
+    """The committed zone, lost by the tracker, seen again under another track."""
+
+
+@dataclass(frozen=True)
+class CommitmentEvent:
+    """One change of the zone commitment in a frame: what changed, why (a release's cause), and the words."""
+
+    change: ZoneChange
+    cause: RefusalCause | None
+    text: str
+
+
+ZONE_CHOICES = (ZoneChange.COMMIT, ZoneChange.SWITCH)
+"""The changes that choose a landing zone (a campaign's ``zones_chosen`` counts them)."""
