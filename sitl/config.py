@@ -8,8 +8,8 @@ from pathlib import Path
 from pydantic import Field, field_validator, model_validator
 
 from companion.config import StrictModel, load_yaml_config
-from sitl.autopilot.params import PARAMS
 from sitl.dynamics.base import DynamicsBackend
+from sitl.px4_params import PARAMS
 from sitl.render.sensor import SensorConfig
 from sitl.world.scenario import ScenarioConfig
 

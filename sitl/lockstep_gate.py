@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
-from companion.vehicle.sim_control import SetpointNedYaw
+from companion.vehicle.sim_control import SetpointNedYaw, same_setpoint
 
 Address = tuple[str, int]
 
@@ -113,6 +114,30 @@ class LockstepGate:
         self.next_tick_s += self.period_s
         self._sent_wall = math.nan
         self.latched_setpoint = latest_setpoint
+
+    @staticmethod
+    def ack_covers_mavlink(
+        ack: dict[str, Any],
+        last_setpoint: SetpointNedYaw | None,
+        commands_seen: dict[int, int],
+        received_from: Callable[[tuple[int, int]], int],
+    ) -> bool:
+        """The client's MAVLink messages sent before its ``ack`` have all been received (no overtaking).
+
+        Either the ack counts them (``mavlink_sent`` from ``sysid/compid``: ``received_from`` says how many came from
+        that source), or it says what must have arrived: ``expect = {"setpoint": [north_m, east_m, down_m,
+        yaw_rad]}`` (``last_setpoint``, the latest position setpoint received, equals it: positions exactly as
+        float32, the yaw within 1e-4 rad) and/or ``{"commands": {id: count}}`` (checked: ids as numbers;
+        ``commands_seen``: that many COMMAND_LONG/INT of each id).
+        """
+        expect = ack.get("expect")
+        if expect is not None:
+            setpoint = expect.get("setpoint")
+            if setpoint is not None and (last_setpoint is None or not same_setpoint(last_setpoint, setpoint)):
+                return False
+            wanted = (expect.get("commands") or {}).items()
+            return all(commands_seen.get(command, 0) >= count for command, count in wanted)
+        return bool(received_from((ack["sysid"], ack["compid"])) >= ack["mavlink_sent"])
 
     def ack_overdue(self) -> bool:
         """The current tick has waited longer than ``timeout_s`` for its acknowledgement."""

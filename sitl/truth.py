@@ -110,6 +110,51 @@ class TruthRecord:
         )
 
 
+class TruthWriter:
+    """Writes a run's ground truth (``truth.jsonl``): its header at the first record, then one record per call, each
+    flushed (the file is read while the run goes on, and must hold what happened if the run dies).
+
+    Parameters
+    ----------
+    path : Path
+        The file (its folder is created).
+    seed : int
+        The scenario's seed, for the header.
+    """
+
+    def __init__(self, path: Path, seed: int) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
+        self.seed = seed
+        self._header_written = False
+
+    def write(self, t_s: float, people: dict[str, Any], vehicle: TruthRecord) -> None:
+        """The record at ``t_s``: ``vehicle`` (its people left out) and the people the world reports (``people``:
+        ``t_s``, ``positions_ne_m``, ``radii_m``, ``moving``; positions recorded only when some walk)."""
+        positions = np.asarray(people["positions_ne_m"], dtype=np.float64).reshape(-1, 2)
+        if not self._header_written:
+            self._header_written = True
+            moving = tuple(bool(m) for m in people["moving"])
+            radii = np.asarray(people["radii_m"], dtype=np.float64)
+            header = TruthHeader(self.seed, float(people["t_s"]), positions, radii, moving)
+            self._file.write(json.dumps(header.to_json()) + "\n")
+        record = TruthRecord(
+            t_s,
+            vehicle.position_ned_m,
+            vehicle.armed,
+            vehicle.mode,
+            vehicle.landed_state,
+            vehicle.on_ground,
+            positions if any(people["moving"]) else None,
+        )
+        self._file.write(json.dumps(record.to_json()) + "\n")
+        self._file.flush()
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+
 def read_truth(path: Path) -> tuple[TruthHeader, list[TruthRecord]]:
     """The ground-truth log at ``path``: its header and records (:class:`TruthError` naming the file and line when it
     has no header or a record lacks a field)."""

@@ -7,7 +7,6 @@ mode or arming change), so MAVSDK stays connected at any simulation speed.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import select
@@ -15,13 +14,13 @@ import signal
 import time
 from pathlib import Path
 from types import FrameType
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
 from companion.config import quote
 from companion.errors import SlzError
-from companion.vehicle.sim_control import Event, Tick, same_setpoint
+from companion.vehicle.sim_control import Event, Tick
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
@@ -43,8 +42,11 @@ from sitl.control_channel import ControlChannel
 from sitl.control_requests import ControlRequests
 from sitl.dynamics.base import DynamicsError
 from sitl.dynamics.factory import make_dynamics
+from sitl.fault_schedule import FaultSchedule
 from sitl.lockstep_gate import LockstepGate
-from sitl.truth import TruthHeader, TruthRecord
+from sitl.run_end import RunEnd
+from sitl.trajectory_log import TrajectoryLog
+from sitl.truth import TruthRecord, TruthWriter
 
 logger = logging.getLogger(__name__)
 
@@ -70,8 +72,8 @@ class SitlVehicle:
 
     def __init__(self, config: SitlConfig) -> None:
         self.config = config
-        self._log: TextIO | None = None  # first, so close() works from any failure below
-        self._truth_file: TextIO | None = None
+        self.trajectory: TrajectoryLog | None = None  # first, so close() works from any failure below
+        self.truth: TruthWriter | None = None
         try:
             self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz)
         except DynamicsError as exc:
@@ -135,7 +137,7 @@ class SitlVehicle:
         self._setpoint: Setpoint | None = None
         self._running = True
         self._exit_code = 0
-        self._grounded_after_release_s: float | None = None  # end_after_touchdown_s counts from here
+        self.run_end = RunEnd(config.end_after_touchdown_s)
         self._last_heartbeat_wall = -math.inf
         self._statustext_id = 0
         self.handler_errors = 0  # messages and requests whose handling raised (dropped, logged, counted)
@@ -143,18 +145,13 @@ class SitlVehicle:
         self.lockstep = LockstepGate(config.lockstep, config.lockstep_period_s, config.lockstep_timeout_s)
         self.requests = ControlRequests(self)
         self.mavlink = MavlinkServer(self)
-        self._faults = sorted(config.faults, key=lambda f: f.at_s)
+        self.faults = FaultSchedule(config.faults)
         self.camera_failed = False  # injected: the camera delivers nothing (ticks go on without frames)
         # Ground truth and trajectory logs
-        self._truth_header_written = False
         if config.truth_path is not None and self.camera is not None:
-            Path(config.truth_path).parent.mkdir(parents=True, exist_ok=True)
-            self._truth_file = open(config.truth_path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
-        self._next_log_s = 0.0
+            self.truth = TruthWriter(Path(config.truth_path), config.seed)
         if config.log_path is not None:
-            Path(config.log_path).parent.mkdir(parents=True, exist_ok=True)
-            self._log = open(config.log_path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
-            self._log.write("t_s,north_m,east_m,down_m,vn_mps,ve_mps,vd_mps,qw,qx,qy,qz,armed,mode,landed_state\n")
+            self.trajectory = TrajectoryLog(Path(config.log_path), config.log_rate_hz)
 
     # -- lifecycle ---------------------------------------------------------------------------------------------
     def limits(self) -> ControllerLimits:
@@ -181,12 +178,12 @@ class SitlVehicle:
         if self.camera is not None:
             self.camera.close()
             self.camera = None
-        if self._log is not None:
-            self._log.close()
-            self._log = None
-        if self._truth_file is not None:
-            self._truth_file.close()
-            self._truth_file = None
+        if self.trajectory is not None:
+            self.trajectory.close()
+            self.trajectory = None
+        if self.truth is not None:
+            self.truth.close()
+            self.truth = None
 
     def describe(self) -> str:
         """One line with the endpoints."""
@@ -273,7 +270,13 @@ class SitlVehicle:
             self.control.send(Tick(gate.seq, self.clock.now_s, frame_seq).to_event(), gate.client)
             gate.sent()
         ack = gate.pending_ack()
-        if ack is not None and self._ack_covers_mavlink(ack):
+        mavlink = self.mavlink
+        if ack is not None and gate.ack_covers_mavlink(
+            ack,
+            mavlink.last_setpoint_ned,
+            mavlink.commands_seen,
+            lambda source: sum(link.stats.per_source.get(source, 0) for link in self.links),
+        ):
             gate.passed(self.mavlink.last_setpoint_ned)
             self.clock.resync()
             return True
@@ -290,29 +293,16 @@ class SitlVehicle:
         return False
 
     def _settled(self) -> bool:
-        """Whether the run ends here by ``end_after_touchdown_s``: a lockstep client has let go and the vehicle is
-        disarmed, or has been on the ground (first seen there after the release) that long. Checked at the outer
-        rate; in simulated time, so the ground truth ends at the same instant at any speed."""
-        end_s = self.config.end_after_touchdown_s
-        if end_s is None or not self.lockstep.released or self.clock.steps % self._outer_every != 0:
+        """Whether the run ends here by ``end_after_touchdown_s`` (:class:`~sitl.run_end.RunEnd`), checked at the
+        outer rate."""
+        end = self.run_end
+        if end.end_after_touchdown_s is None or not self.lockstep.released or self.clock.steps % self._outer_every:
             return False
-        if not self.commander.armed:
-            logger.info(
-                "disarmed after the lockstep client let go, at %.3f s simulated: the run ends", self.clock.now_s
-            )
-            return True
-        if self._grounded_after_release_s is None:
-            if self.dynamics.state().on_ground:
-                self._grounded_after_release_s = self.clock.now_s
-            return False
-        if self.clock.now_s >= self._grounded_after_release_s + end_s - 1e-9:
-            logger.info(
-                "on the ground since %.3f s simulated, %.1f s after the lockstep client let go: the run ends",
-                self._grounded_after_release_s,
-                end_s,
-            )
-            return True
-        return False
+        on_ground = end.grounded_s is None and self.commander.armed and bool(self.dynamics.state().on_ground)
+        why = end.reached(self.clock.now_s, self.lockstep.released, self.commander.armed, on_ground)
+        if why is not None:
+            logger.info("%s", why)
+        return why is not None
 
     def _stop_with(self, exit_code: int) -> None:
         self._exit_code = exit_code
@@ -320,31 +310,13 @@ class SitlVehicle:
 
     def _write_truth(self) -> None:
         """One ground-truth record at this instant (people positions only when some walk)."""
-        if self._truth_file is None or self.camera is None:
+        if self.truth is None or self.camera is None:
             return
         t_s = self.clock.now_s
-        people = self.camera.people_at(t_s)
-        positions = np.asarray(people["positions_ne_m"], dtype=np.float64).reshape(-1, 2)
-        if not self._truth_header_written:
-            self._truth_header_written = True
-            moving = tuple(bool(m) for m in people["moving"])
-            radii = np.asarray(people["radii_m"], dtype=np.float64)
-            header = TruthHeader(self.config.seed, float(people["t_s"]), positions, radii, moving)
-            self._truth_file.write(json.dumps(header.to_json()) + "\n")
-        s = self.dynamics.state()
-        cmd = self.commander
+        s, cmd = self.dynamics.state(), self.commander
         n, e, d = (float(v) for v in s.position_ned_m)
-        record = TruthRecord(
-            t_s,
-            (n, e, d),
-            cmd.armed,
-            cmd.mode.px4_name,
-            cmd.landed_state.name,
-            bool(s.on_ground),
-            positions if any(people["moving"]) else None,
-        )
-        self._truth_file.write(json.dumps(record.to_json()) + "\n")
-        self._truth_file.flush()
+        vehicle = TruthRecord(t_s, (n, e, d), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, bool(s.on_ground))
+        self.truth.write(t_s, self.camera.people_at(t_s), vehicle)
 
     def _send_tick_pose(self) -> None:
         """The pose at the tick instant goes out on the API link before the tick, so the client can pair the tick's
@@ -358,33 +330,9 @@ class SitlVehicle:
             ]
         )
 
-    def _ack_covers_mavlink(self, ack: dict[str, Any]) -> bool:
-        """The client's MAVLink messages sent before its ack have all been received (no overtaking).
-
-        Either the ack counts them (``mavlink_sent`` from ``sysid/compid``), or it says what must have arrived:
-        ``expect = {"setpoint": [north_m, east_m, down_m, yaw_rad]}`` (the latest position setpoint received equals
-        it: positions exactly as float32, the yaw within 1e-4 rad) and/or ``{"commands": {"<id>": count}}`` (that
-        many COMMAND_LONG/INT of each id).
-        """
-        expect = ack.get("expect")
-        if expect is not None:
-            setpoint = expect.get("setpoint")
-            if setpoint is not None:
-                last = self.mavlink.last_setpoint_ned
-                if last is None or not same_setpoint(last, setpoint):
-                    return False
-            for command, count in (expect.get("commands") or {}).items():
-                if self.mavlink.commands_seen.get(command, 0) < count:
-                    return False
-            return True
-        source = (ack["sysid"], ack["compid"])
-        received = sum(link.stats.per_source.get(source, 0) for link in self.links)
-        return bool(received >= ack["mavlink_sent"])
-
     # -- the physics step ----------------------------------------------------------------------------------------
     def _inject_faults(self, t_s: float) -> None:
-        while self._faults and t_s >= self._faults[0].at_s - 1e-9:
-            fault = self._faults.pop(0)
+        for fault in self.faults.due(t_s):
             logger.warning("fault injected at %.3f s: %s", t_s, fault.kind.value)
             if fault.kind is FaultKind.CAMERA_FAIL:
                 self.camera_failed = True
@@ -397,7 +345,7 @@ class SitlVehicle:
 
     def _step(self) -> None:
         t_s = self.clock.now_s
-        if self._faults:
+        if self.faults:
             self._inject_faults(t_s)
         dt_s = self.clock.step_s
         state = self.dynamics.state()
@@ -476,20 +424,11 @@ class SitlVehicle:
                 )
 
     def _write_log_row(self, force: bool = False) -> None:
-        if self._log is None:
-            return
         t_s = self.clock.now_s
-        if not force and t_s < self._next_log_s - 1e-9:
+        if self.trajectory is None or not (force or self.trajectory.due(t_s)):
             return
-        self._next_log_s = t_s + 1.0 / self.config.log_rate_hz
-        s = self.dynamics.state()
-        values = [t_s, *s.position_ned_m, *s.velocity_ned_mps, *s.quaternion_wxyz]
         cmd = self.commander
-        self._log.write(
-            ",".join(f"{v:.17g}" for v in values) + f",{int(cmd.armed)},{cmd.mode.px4_name},{cmd.landed_state.name}\n"
-        )
-        if force:
-            self._log.flush()
+        self.trajectory.write(t_s, self.dynamics.state(), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, force)
 
     # -- inputs --------------------------------------------------------------------------------------------------
     def _poll(self) -> None:

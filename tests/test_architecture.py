@@ -5,8 +5,8 @@ circle. A split that needs a back-reference passes an interface in its construct
 
 Floors, from the bottom: the drone's shared values and geometry; its camera, vehicle link and perception; guidance;
 the flight app; its command line. Then the lab, which may use any of the drone's floors: the simulated world's and
-vehicle's parts; the autopilot, the SITL's config and the renderer; the SITL vehicle process; the harness that starts
-and drives SITL processes; campaigns; the test kit; the lab's command line.
+vehicle's parts (PX4's parameter table among them); the SITL's config and the renderer; the autopilot; the SITL
+vehicle process; the harness that starts and drives SITL processes; campaigns; the test kit; the lab's command line.
 """
 
 from __future__ import annotations
@@ -41,23 +41,28 @@ FLOORS: dict[str, int] = {
     "sitl.world": 10,
     "sitl.dynamics": 10,
     "sitl.truth": 10,
-    # the autopilot, the SITL's config (which names the autopilot's parameters) and the renderer
-    "sitl.autopilot": 11,
+    "sitl.px4_params": 10,
+    "sitl.run_end": 10,
+    "sitl.trajectory_log": 10,
+    # the SITL's config (which checks its parameter overrides against PX4's table below it) and the renderer
     "sitl.config": 11,
+    "sitl.fault_schedule": 11,
     "sitl.render": 11,
+    # the autopilot (configured by the SITL's config)
+    "sitl.autopilot": 12,
     # the SITL vehicle process
-    "sitl.vehicle": 12,
-    "sitl.control_requests": 12,
-    "sitl.sim_camera": 12,
-    "sitl.snapshot": 12,
-    "sitl.flat_scene": 12,
+    "sitl.vehicle": 13,
+    "sitl.control_requests": 13,
+    "sitl.sim_camera": 13,
+    "sitl.snapshot": 13,
+    "sitl.flat_scene": 13,
     # the harness: SITL and companion processes started, leased, stepped, fuzzed, flown as missions
-    "sitl.harness": 13,
-    "sitl.campaign": 14,
-    "sitl.testing": 15,
-    "sitl.cli": 16,
-    "sitl.__main__": 16,
-    "sitl": 16,
+    "sitl.harness": 14,
+    "sitl.campaign": 15,
+    "sitl.testing": 16,
+    "sitl.cli": 17,
+    "sitl.__main__": 17,
+    "sitl": 17,
 }
 
 

@@ -35,7 +35,7 @@ def test_a_scene_from_the_caches_draws_the_pixels_of_a_scene_built_anew() -> Non
     assert people > 0
     assert fresh.crowd.moving.any()
     assert not fresh.crowd.moving.all()  # still people and walkers: both kinds of mesh come from the cache
-    first_fresh = fresh.render(POSE, 0.0)  # the people who stand still are built for the first frame that draws them
+    first_fresh = fresh.render(POSE, 0.0)
     hits_before = [cache.hits for cache in CACHES]
     cached = renderer(33, light)
     first_cached = cached.render(POSE, 0.0)

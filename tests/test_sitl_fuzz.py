@@ -124,7 +124,7 @@ def test_the_fuzz_never_sets_a_real_parameter_to_a_number() -> None:
     parameter carries NaN or infinity, which the SITL refuses."""
     from pymavlink.dialects.v20 import common as mavlink
 
-    from sitl.autopilot.params import PARAMS
+    from sitl.px4_params import PARAMS
 
     names = {spec.name for spec in PARAMS}
     parser = mavlink.MAVLink(None)

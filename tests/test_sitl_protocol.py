@@ -14,8 +14,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot.modes import FlightMode
-from sitl.autopilot.params import ParamType
 from sitl.harness.process import SitlProcess
+from sitl.px4_params import ParamType
 from sitl.testing.helpers import MavlinkPeer, api_port, position_setpoint, state_when, wait_until
 
 pytestmark = pytest.mark.sitl

@@ -14,7 +14,7 @@ from companion.config import ConfigError, validate_config
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, Setpoint
 from sitl.autopilot.modes import FlightMode
-from sitl.autopilot.params import ParamError, ParameterStore, ParamType, decode_value, encode_value
+from sitl.autopilot.params import ParamError, ParameterStore, decode_value, encode_value
 from sitl.autopilot.status import LandedState, MavResult
 from sitl.autopilot.telemetry import StreamSchedule
 from sitl.config import SitlConfig
@@ -22,6 +22,7 @@ from sitl.dynamics.base import DynamicsBackend, VehicleState
 from sitl.dynamics.factory import make_dynamics
 from sitl.dynamics.rigid_body import RigidBodyQuadrotor, quaternion_to_matrix
 from sitl.geodesy import geodetic_to_ned, ned_to_geodetic
+from sitl.px4_params import ParamType
 
 pytestmark = pytest.mark.unit
 

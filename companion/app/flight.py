@@ -44,6 +44,7 @@ from companion.app.mission import MissionConfig, OperatingMode, with_fence_ne_m
 from companion.app.recorder import FlightRecorder
 from companion.app.stall_watchdog import StallWatchdog
 from companion.app.start_sequence import StartAction, StartSequence, StartStage, StartStep
+from companion.app.supervision import COMPANION_MODES, Supervision
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import GeometryError, Pose, polygon_centroid_ne_m
 from companion.guidance.footprint import nearest_occupied_m
@@ -68,13 +69,6 @@ CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
 STOP_UNHEARD_S = 3.0  # wall time a stop waits for a tick to send the last resort in; then it ends without one
 POSE_RECORD_PERIOD_S = 1.0  # vehicle time between two `pose` records: the flight's path in the log
-_OURS = (FlightMode.OFFBOARD, FlightMode.UNKNOWN)  # modes in which offboard setpoints are still the companion's
-# The modes a failsafe command leads to (PX4: a return ends in the autopilot's own landing, then its hold).
-_FAILSAFE_MODES = {
-    CommandKind.HOLD: frozenset({FlightMode.HOLD}),
-    CommandKind.RETURN: frozenset({FlightMode.RETURN_TO_LAUNCH, FlightMode.LAND, FlightMode.HOLD}),
-    CommandKind.LAND: frozenset({FlightMode.LAND}),
-}
 
 
 @dataclass
@@ -176,15 +170,9 @@ class FlightApp:
         self.start_sequence = StartSequence(config.start, self.dry_run)
         self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
         self.tick_setpoint: SetpointNedYaw | None = None  # sent during this lockstep tick
-        self._wall_clock = wall_clock
-        self._wall_limit_s = wall_limit_s
-        self._wall_deadline = None if wall_limit_s is None else wall_clock() + wall_limit_s
-        self._watching: CommandKind | None = None  # after a failsafe command: what the autopilot was asked to do
-        self._airborne_seen = False  # the vehicle has been in the air during this run (a dry run ends on the ground)
+        self.supervision = Supervision(config.supervision.stay_after_failsafe, wall_limit_s, wall_clock)
         self._target_id: int | None = None  # the last decision's target (console and log report switches)
         self._pose_recorded_s = -math.inf  # vehicle time of the last `pose` record
-        self._stop_requested: str | None = None  # why the program is asked to stop (a signal), seen at the next tick
-        self._end_after_failsafe = False  # a stop: the last resort goes out, then the program ends (no watch)
 
     def _new_guidance(self) -> LandingGuidance:
         zones = self.config.perception.zones
@@ -252,15 +240,14 @@ class FlightApp:
             sent = await self._send(decision)
         finally:
             if decision.phase in TERMINAL and not self.dry_run:  # a dry run decides again while the pilot flies
-                stay = self.config.supervision.stay_after_failsafe and not self._end_after_failsafe
-                if sent and decision.phase is LandingPhase.FAILSAFE and stay:
+                if self.supervision.stays_after(decision, sent):
                     self._watch(decision)  # the vehicle is the autopilot's now: watch it until it is safe
                 else:
                     self.done.set()  # after its command went out: ending cancels the tasks
 
     def _watch(self, decision: Decision) -> None:
         """Stay after a failsafe command: until the vehicle is on the ground or the pilot has it (see on_tick)."""
-        self._watching = decision.kind
+        self.supervision.watch(decision.kind)
         reason = f"{decision.reason}: watching until the vehicle is on the ground or the pilot has it"
         self.recorder.write(RecordKind.SUPERVISION, decision.t_s, event="watching", reason=reason)
         logger.warning("%s", reason)
@@ -273,7 +260,7 @@ class FlightApp:
             if not self._commanding or decision.kind is CommandKind.NONE:
                 return False
             mode = self.link.status.mode
-            if self._offboard and mode not in _OURS:
+            if self._offboard and mode not in COMPANION_MODES:
                 return False  # the pilot's mode since the last tick: nothing more goes out (no setpoint, no land, no
                 # hold or return either: that would take the vehicle back), and the next tick yields
             await self._send_one(decision)
@@ -407,8 +394,7 @@ class FlightApp:
         """The start sequence, then pilot takeover, touchdown and perception silence, at vehicle time ``state.t_s``."""
         self.outcome.ticks += 1
         status = self.link.status
-        if status.in_air:
-            self._airborne_seen = True
+        self.supervision.saw(status)
         if state.t_s - self._pose_recorded_s >= POSE_RECORD_PERIOD_S:
             self._pose_recorded_s = state.t_s
             self.recorder.write(
@@ -422,7 +408,7 @@ class FlightApp:
                 armed=status.armed,
                 in_air=status.in_air,
             )
-        if self._watching is not None:
+        if self.supervision.watching is not None:
             self._watch_tick(state)
             return
         if self.dry_run and self._flight_over(state):
@@ -433,17 +419,18 @@ class FlightApp:
             else:
                 self.done.set()
             return
-        if self._offboard and status.mode not in _OURS and not self.dry_run:
+        if self._offboard and status.mode not in COMPANION_MODES and not self.dry_run:
             self._offboard = False
             self._commanding = False  # never take control back in this flight
             mode = status.mode.value
             await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
             return
-        if self._stop_requested is not None:  # after the pilot's word too
-            await self._stop(state, self._stop_requested)
+        if self.supervision.stop_requested is not None:  # after the pilot's word too
+            await self._stop(state)
             return
-        if self._wall_deadline is not None and self._wall_clock() >= self._wall_deadline:  # after the pilot's word
-            await self._wall_limit(state)
+        limit = self.supervision.wall_limit_reached()  # after the pilot's word too
+        if limit is not None:
+            await self._wall_limit(state, limit)
             return
         if not self.start_sequence.started:
             visible = self.head_plane_visible(state) if self.dry_run else True
@@ -466,25 +453,22 @@ class FlightApp:
     def _watch_tick(self, state: VehicleState) -> None:
         """After a failsafe command: end once the vehicle is on the ground, or the pilot has switched it to a mode
         other than the one the failsafe asked for (OFFBOARD still reported is telemetry lagging the command)."""
-        status = self.link.status
-        asked = _FAILSAFE_MODES.get(self._watching or CommandKind.NONE, frozenset())
-        if not status.in_air:
+        end = self.supervision.watch_ends(self.link.status)
+        if end is None:
+            return
+        reason = end.reason
+        if end.event == "on_ground":
             self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
             self.outcome.touchdown_t_s = state.t_s
-            event, reason = "on_ground", f"on the ground at north {state.north_m:.1f} m, east {state.east_m:.1f} m"
-        elif status.mode not in asked and status.mode not in _OURS:
-            event, reason = "pilot_has_it", f"the pilot has it (mode {status.mode.value})"
-        else:
-            return
+            reason = f"{reason} at north {state.north_m:.1f} m, east {state.east_m:.1f} m"
         self.outcome.reason = f"{self.outcome.reason}; {reason}"
-        self.recorder.write(RecordKind.SUPERVISION, state.t_s, event=event, reason=reason)
+        self.recorder.write(RecordKind.SUPERVISION, state.t_s, event=end.event, reason=reason)
         logger.warning("after the failsafe: %s", reason)
         self.done.set()
 
     def _flight_over(self, state: VehicleState) -> bool:
         """A dry run ends once the vehicle, having flown, is on the ground and disarmed (the whole flight logged)."""
-        status = self.link.status
-        if not self._airborne_seen or status.in_air or status.armed:
+        if not self.supervision.flight_over(self.link.status):
             return False
         reason = "the flight is over: on the ground and disarmed"
         self.outcome.reason = reason if self.guidance.phase is LandingPhase.IDLE else f"{self.outcome.reason}; {reason}"
@@ -502,12 +486,10 @@ class FlightApp:
         self.start_sequence = StartSequence(self.config.start, self.dry_run)
         self._target_id = None
 
-    async def _wall_limit(self, state: VehicleState) -> None:
-        """The wall limit of ``slz fly --timeout``: the vehicle the companion flies gets the last resort (hold or
-        return) and the run stays until it is safe; a run that commands nothing (a dry run, a wait for the pilot's
-        handover) just ends."""
-        limit = f"wall limit of {self._wall_limit_s:g} s reached (slz fly --timeout)"
-        self._wall_deadline = None
+    async def _wall_limit(self, state: VehicleState, limit: str) -> None:
+        """The wall limit of ``slz fly --timeout`` (``limit``, in words): the vehicle the companion flies gets the last
+        resort (hold or return) and the run stays until it is safe; a run that commands nothing (a dry run, a wait
+        for the pilot's handover) just ends."""
         if self._flying_it():
             await self.apply(self.guidance.give_up(state, limit), "limit", state, reason=limit)
             return
@@ -520,32 +502,30 @@ class FlightApp:
         """Ask the program to stop (``slz fly`` on SIGINT or SIGTERM: the service stopped, Ctrl-C): at the next tick
         a vehicle it flies gets ``guidance.last_resort`` before it ends, instead of an offboard-loss failsafe later.
         Asked twice, it ends at once."""
-        if self._stop_requested is not None:
+        if not self.supervision.ask_stop(why):
             logger.error("%s again: ending now", why)
             self.done.set()
             return
         logger.warning("%s: the vehicle gets the last resort, then the program ends", why)
-        self._stop_requested = why
         # No tick may come again (a SITL stopped with us, a link gone): the stop must not wait on one.
         asyncio.get_running_loop().call_later(STOP_UNHEARD_S, self._stop_unheard, why)
 
     def _stop_unheard(self, why: str) -> None:
         """``STOP_UNHEARD_S`` after a stop: if no tick has taken it yet, end without sending the last resort."""
-        if self._stop_requested is None or self.done.is_set():
+        if self.done.is_set() or self.supervision.stop_unheard() is None:
             return
-        self._stop_requested = None
         self.outcome.reason = f"{why}: no vehicle tick within {STOP_UNHEARD_S:g} s, ending without the last resort"
         self.recorder.write(RecordKind.SUPERVISION, None, event="stopped", reason=self.outcome.reason)
         logger.error("%s", self.outcome.reason)
         self.done.set()
 
-    async def _stop(self, state: VehicleState, why: str) -> None:
+    async def _stop(self, state: VehicleState) -> None:
         """A stop asked of the program: the last resort for a vehicle it flies, then the end (no watch: a stopping
         service cannot stay); a run that commands nothing just ends."""
+        last_resort = self._flying_it() and self.guidance.phase not in TERMINAL
+        why = self.supervision.take_stop(last_resort)
         reason = f"{why}: stopping"
-        self._stop_requested = None
-        if self._flying_it() and self.guidance.phase not in TERMINAL:
-            self._end_after_failsafe = True
+        if last_resort:
             await self.apply(self.guidance.give_up(state, reason), "stop", state, reason=reason)
             return
         self.outcome.reason = f"{reason}, nothing commanded"

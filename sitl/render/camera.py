@@ -362,8 +362,9 @@ class WorldRenderer:
 
     def _build_people(self) -> None:
         crowd = self.crowd
-        # People who stand still: one mesh per level of detail, built the first time a frame draws that level
-        # (_still_people), and one mesh of their shadows.
+        # People who stand still: one mesh per level of detail, and one mesh of their shadows. Every level is built
+        # here, with the scene, not at the first frame that draws it: a SITL's first frames must not wait on it (a
+        # camera check times their age on the vehicle clock).
         self._still_ids = [i for i in range(len(crowd)) if not crowd.moving[i]]
         self._still_nodes: dict[int, Any] = {}
         if self._still_ids:
@@ -371,6 +372,8 @@ class WorldRenderer:
             shadows_mesh = self._pyrender.Mesh.from_trimesh(trimesh.util.concatenate(shadows), smooth=True)
             shadow_node = self._add(shadows_mesh, DrawSlot.STILL_SHADOWS)
             self._black[shadow_node] = (0, 0, 0)
+            for detail in range(len(DETAIL_CELLS_M) if self.figures is not None else 1):
+                self._still_people(detail).mesh.is_visible = False  # until a frame draws its level
         # Walking people: one mesh per level of detail (and one of their shadows) built at the first frame from
         # cached local vertices, then moved by rewriting its vertex buffer in place each frame (one draw call, no new
         # GL objects).
@@ -401,7 +404,7 @@ class WorldRenderer:
         return np.concatenate([faces + start for (faces, _), start in zip(parts, starts, strict=True)])
 
     def _still_people(self, detail: int) -> Any:
-        """The node of every person who stands still at level of ``detail`` (built the first time it is asked)."""
+        """The node of every person who stands still at level of ``detail`` (built once)."""
         node = self._still_nodes.get(detail)
         if node is None:
             parts = []
