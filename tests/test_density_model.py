@@ -7,6 +7,9 @@ ground and weather the training never saw).
 from __future__ import annotations
 
 import json
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -133,3 +136,65 @@ def test_a_shrunk_frame_run_with_its_context_is_the_padded_frames_map_to_the_bit
             b = predict_downscaled(padded, frame, float(scale)).values
             assert a.shape == b.shape
             assert np.array_equal(a, b), f"{name} at scale {scale:.2f}: max difference {np.abs(a - b).max()}"
+
+
+_WITHOUT_ONNX = """
+import json, sys
+sys.modules["onnx"] = None  # as installed from requirements/drone.lock: onnxruntime, not the onnx package
+import numpy as np
+from companion.geometry import Pose
+from companion.perception.config import load_perception_config
+from companion.perception.pipeline import SlzPipeline
+
+config = load_perception_config("mission_configs/perception.yaml")
+pipeline = SlzPipeline.from_config(config)
+model = pipeline.density_model
+shapes = []
+run_any_size = model.predict_any_size
+model.predict_any_size = lambda frame: (shapes.append(list(frame.shape)), run_any_size(frame))[1]
+pose = Pose.from_ned_euler(0.0, 0.0, -8.0, 0.0, 0.0, 0.0)
+frame = np.random.default_rng(5).integers(0, 256, (config.camera.height_px, config.camera.width_px, 3), np.uint8)
+pipeline.process(frame, pose, 0.0)
+print(json.dumps({
+    "onnx_importable": sys.modules.get("onnx") is not None,
+    "context_px": model.context_px,
+    "stamped_px": model.contract.context_px,
+    "scale": pipeline.input_scale(pose),
+    "frame": list(frame.shape),
+    "shapes": shapes,
+}))
+"""
+
+
+def test_on_the_drones_lock_alone_the_density_stage_at_8_m_runs_the_cropped_input() -> None:
+    """The drone's lock installs onnxruntime, not ``onnx``: the shipped default carries its any-size stamp (measured
+    at export), so at 8 m the shrunk frame runs as itself plus its context, not padded to the whole frame."""
+    lock = (REPO_ROOT / "requirements/drone.lock").read_text(encoding="utf-8")
+    assert re.search(r"^onnx==", lock, re.MULTILINE) is None, "the drone's lock installs onnx: the test means nothing"
+    done = subprocess.run(
+        [sys.executable, "-c", _WITHOUT_ONNX], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    assert seen["onnx_importable"] is False
+    assert seen["stamped_px"] is not None
+    assert seen["context_px"] == seen["stamped_px"]
+    assert seen["scale"] < 0.9, f"at 8 m the frame should be shrunk, scale {seen['scale']}"
+    assert len(seen["shapes"]) == 1, "the density stage did not run the any-size path"
+    height_px, width_px = seen["shapes"][0][:2]
+    assert height_px < seen["frame"][0], seen
+    assert width_px < seen["frame"][1], seen
+
+
+@pytest.mark.parametrize("name", [*SHIPPED, "slz_lite_wide_real"])
+def test_every_shipped_model_is_stamped_to_run_at_any_size(name: str) -> None:
+    """Each shipped model's contract carries the context its graph reads (``models.density.onnx_files``), measured
+    again here from the graph: the stamp is what the graph says."""
+    import onnx
+
+    from companion.perception.density import make_any_size
+
+    path = REPO_ROOT / "models/density" / f"{name}.onnx"
+    stamped = json.loads(read_metadata(path)[CONTRACT_KEY])["context_px"]
+    assert stamped == make_any_size(onnx.load(str(path)))
+    assert OnnxDensityModel(path).context_px == stamped

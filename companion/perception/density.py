@@ -66,6 +66,11 @@ class DensityModelContract(StrictModel):
     mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
     std: tuple[float, float, float] = (1.0, 1.0, 1.0)
     output_stride: int = Field(ge=1, le=64)
+    context_px: int | None = Field(default=None, ge=0, le=4096)
+    """Input pixels past a density cell's own (right and bottom) that the graph reads, measured from the graph at
+    export (:func:`make_any_size`), whose image sides the export left free: then a shrunk frame runs as itself plus
+    this much context without the ``onnx`` package. None: not stamped (measured at load where ``onnx`` is
+    installed)."""
 
     @model_validator(mode="after")
     def _divisible(self) -> DensityModelContract:
@@ -318,35 +323,53 @@ def input_extent_px(graph: Any) -> tuple[int, int] | None:
     return None if result is None else (result[0], max(result[1], result[2]))
 
 
+def make_any_size(model: Any) -> int | None:
+    """Free a model's image sides (symbolic) in place, and return the context (pixels) a cell reads past its own,
+    rounded up to whole multiples of 16 px; None, the model left as it was, where that cannot be bounded
+    (:func:`input_extent_px`).
+
+    Done once at export (``models/density/any_size.py`` stamps the result into the file and its contract's
+    ``context_px``), so a board without the ``onnx`` package runs shrunk frames cropped too.
+
+    Parameters
+    ----------
+    model : onnx.ModelProto
+        The model, changed in place when the result is not None.
+    """
+    found = input_extent_px(model.graph)
+    if found is None:
+        return None
+    stride, hi = found
+    values = (model.graph.input[0], model.graph.output[0])
+    if any(len(v.type.tensor_type.shape.dim) < 3 for v in values):
+        return None
+    for value, names in zip(values, (("height", "width"), ("rows", "cols")), strict=True):
+        # The image's (1, 3, H, W) and the map's (1, 1, h, w) or (1, h, w): ONNX convolutions are channels-first, so
+        # a channels-last input reaches them through a transpose, which input_extent_px refuses.
+        for dim, name in zip(value.type.tensor_type.shape.dim[-2:], names, strict=True):
+            dim.ClearField("dim_value")
+            dim.dim_param = name
+    del model.graph.value_info[:]  # the intermediate shapes of the contract's size
+    return 16 * math.ceil(max(0, hi - stride + 1) / 16)  # past the last cell's own pixels
+
+
 def _any_size_graph(path: Path) -> tuple[bytes, int] | None:
-    """The model with its image sides free (symbolic), and the context (pixels) a cell reads past its own, rounded
-    up to whole multiples of 16 px; None where that cannot be bounded (:func:`input_extent_px`) or the ``onnx``
-    package is not installed (the model then runs on its contract's size, as before)."""
+    """A model exported without its any-size stamp, freed at load (:func:`make_any_size`): its bytes and context;
+    None where that cannot be bounded or the ``onnx`` package is not installed (the model then runs on its
+    contract's size, as before)."""
     try:
         import onnx
     except ImportError:
-        logger.info("the onnx package is not installed: shrunk frames are padded to the model's size")
+        logger.info("%s has no any-size stamp and the onnx package is not installed: shrunk frames are padded", path)
         return None
     try:
         model = onnx.load(str(path))
     except Exception:  # a bad file: onnxruntime's load says what is wrong with it
         return None
-    found = input_extent_px(model.graph)
-    if found is None:
+    context_px = make_any_size(model)
+    if context_px is None:
         logger.info("%s: no bounded receptive field; shrunk frames are padded to the model's size", path)
         return None
-    stride, hi = found
-    context_px = 16 * math.ceil(max(0, hi - stride + 1) / 16)  # past the last cell's own pixels
-    for value, names in ((model.graph.input[0], ("height", "width")), (model.graph.output[0], ("rows", "cols"))):
-        dims = value.type.tensor_type.shape.dim
-        if len(dims) < 3:
-            return None
-        # The image's (1, 3, H, W) and the map's (1, 1, h, w) or (1, h, w): ONNX convolutions are channels-first, so
-        # a channels-last input reaches them through a transpose, which input_extent_px refuses.
-        for dim, name in zip(dims[-2:], names, strict=True):
-            dim.ClearField("dim_value")
-            dim.dim_param = name
-    del model.graph.value_info[:]  # the intermediate shapes of the contract's size
     return model.SerializeToString(), context_px
 
 
@@ -368,7 +391,8 @@ class OnnxDensityModel:
         TensorRT: allow FP16.
     crop_shrunk_frames : bool
         On the CPU provider alone, run a fully convolutional graph on any input size, so that a shrunk frame costs
-        its own pixels (:func:`predict_downscaled`); needs the ``onnx`` package to read the graph.
+        its own pixels (:func:`predict_downscaled`): read from the contract's ``context_px`` where the export stamped
+        it (every shipped model), else measured from the graph with the ``onnx`` package where installed.
 
     Raises
     ------
@@ -414,21 +438,20 @@ class OnnxDensityModel:
         options.inter_op_num_threads = 1
         options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         options.log_severity_level = 3
+        self._session_args = (options, chosen, provider_options)
+        self._session = self._open(str(self.path))
+        metadata = dict(self._session.get_modelmeta().custom_metadata_map)
+        self.contract = _read_contract(self.path, metadata)
         # Any input size (see predict_downscaled): on the CPU only, where a shape costs nothing to change; a TensorRT
         # engine, or CUDA's tuned kernels, would be built again for every new shape.
-        any_size = _any_size_graph(self.path) if crop_shrunk_frames and chosen == ["CPUExecutionProvider"] else None
-        self.context_px: int | None = any_size[1] if any_size is not None else None
+        self.context_px: int | None = None
         """Input pixels past a density cell's own (right and bottom) that the network reads: a shrunk frame runs as
         itself plus this much context (:func:`predict_downscaled`). None: the model runs on its contract's size."""
-        try:
-            self._session = ort.InferenceSession(
-                any_size[0] if any_size is not None else str(self.path),
-                sess_options=options,
-                providers=chosen,
-                provider_options=provider_options,
-            )
-        except Exception as exc:  # onnxruntime raises several unrelated types for a bad file
-            raise PerceptionError("density.load", f"cannot load ONNX model {self.path}: {exc}") from None
+        if crop_shrunk_frames and chosen == ["CPUExecutionProvider"]:
+            if self.contract.context_px is not None and self._sides_free():
+                self.context_px = self.contract.context_px  # stamped at export: no onnx package needed
+            elif (any_size := _any_size_graph(self.path)) is not None:
+                self._session, self.context_px = self._open(any_size[0]), any_size[1]
         self.providers: list[str] = list(self._session.get_providers())
         logger.info("density model %s on %s", self.path, ", ".join(self.providers))
         if self.providers[0] != wanted[0]:
@@ -437,8 +460,6 @@ class OnnxDensityModel:
                 self.providers[0],
                 wanted[0],
             )
-        metadata = dict(self._session.get_modelmeta().custom_metadata_map)
-        self.contract = _read_contract(self.path, metadata)
         self._encoder = InputEncoder(self.contract)
         self._check_graph()
         if self.context_px is not None and not self._any_size_agrees():
@@ -456,6 +477,22 @@ class OnnxDensityModel:
             config.fp16,
             config.crop_shrunk_frames,
         )
+
+    def _open(self, model: str | bytes) -> Any:
+        """An onnxruntime session of the model (a path or the bytes of a graph), with this runner's options."""
+        import onnxruntime as ort
+
+        options, providers, provider_options = self._session_args
+        try:
+            return ort.InferenceSession(
+                model, sess_options=options, providers=providers, provider_options=provider_options
+            )
+        except Exception as exc:  # onnxruntime raises several unrelated types for a bad file
+            raise PerceptionError("density.load", f"cannot load ONNX model {self.path}: {exc}") from None
+
+    def _sides_free(self) -> bool:
+        """Whether the graph's image sides are symbolic (the input's last two dims, as stamped at export)."""
+        return all(not isinstance(d, int) for d in self._session.get_inputs()[0].shape[-2:])
 
     def _any_size_agrees(self) -> bool:
         """Whether this model, on this machine, maps a shrunk frame run with its context exactly as the whole padded

@@ -38,16 +38,16 @@ _SYNTHETIC = (
 )
 
 SHIPPED: dict[str, ModelValidation] = {
-    "0ade09fdabb9147e94f08cfe60112c1d611608ccf5421b80cb4dc583392215e5": ModelValidation(
+    "c6e61bd4e565f7c643f318bcc88bbc3cda3a98cce52391d8a86fa45318af22b5": ModelValidation(
         "slz_lite.onnx", False, _SYNTHETIC.format(false_pct="9-20 %")
     ),
-    "30872c0d93e1977d1b02413e6750a003f2b9c898ce1006057ed79f04b66b81b2": ModelValidation(
+    "f750b07399bb167be9acd0e84cc74eebfbfd3ce095ff96d3934a3e91e34cb4ab": ModelValidation(
         "slz_lite_int8.onnx", False, _SYNTHETIC.format(false_pct="11-20 %")
     ),
-    "522f2c0209dc2e657597b40bf953ebba092de7c0620fc7af5842d59a6262c824": ModelValidation(
+    "71be670efc175b2108179e52b757b002db042f7fbc57ff3f18c097c552e05e4f": ModelValidation(
         "slz_ccnn.onnx", False, _SYNTHETIC.format(false_pct="10-28 %")
     ),
-    "92ec4153b86d736e91ca4340ccf0013e81c77bc15150b4953448a19ab91d93ca": ModelValidation(
+    "093b54deb35460b3d49fff8a70bebe42643217ed2cb2695a682df5c426694421": ModelValidation(
         "slz_lite_wide_real.onnx",
         False,
         "trained with one real site's ground (Caliterra), validated on rendered parks; on a real site it never saw "

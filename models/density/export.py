@@ -34,7 +34,7 @@ import torch
 from models.data.images import frame_paths, read_bgr
 from models.density.architectures import Architecture, build
 from models.density.calibration import FLOORS, fit_floor_and_scale, fit_floor_for_threshold
-from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, set_metadata
+from models.density.onnx_files import CONTRACT_KEY, TRAINING_KEY, set_metadata, stamp_any_size
 from models.density.preprocess import INPUT_HEIGHT_PX, INPUT_WIDTH_PX, contract, to_input
 
 if TYPE_CHECKING:
@@ -83,7 +83,8 @@ def load_checkpoint(path: Path) -> tuple[torch.nn.Module, dict[str, Any]]:
 
 
 def export(model: torch.nn.Module, log: dict[str, Any], out: Path, name: str, version: str) -> None:
-    """Write the ONNX file with fixed input (1, 3, 480, 640) and output (1, 1, 120, 160)."""
+    """Write the ONNX file for input (1, 3, 480, 640) and output (1, 1, 120, 160) (the contract's size); a fully
+    convolutional graph's sides are left free, with its context in the contract (:func:`stamp_any_size`)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     dummy = torch.zeros(1, 3, INPUT_HEIGHT_PX, INPUT_WIDTH_PX)
     with warnings.catch_warnings():
@@ -100,6 +101,7 @@ def export(model: torch.nn.Module, log: dict[str, Any], out: Path, name: str, ve
         )
     training = {k: v for k, v in log.items() if k != "history"}
     set_metadata(out, {CONTRACT_KEY: json.dumps(contract(name, version)), TRAINING_KEY: json.dumps(training)})
+    stamp_any_size(out)  # the image sides freed and the context measured here, where onnx is installed
     onnx.checker.check_model(str(out))
 
 

@@ -37,7 +37,7 @@ from onnxruntime.quantization import (
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from models.data.images import frame_paths, read_bgr
-from models.density.onnx_files import QUANTIZATION_KEY, read_metadata, set_metadata
+from models.density.onnx_files import QUANTIZATION_KEY, read_metadata, set_metadata, stamp_any_size
 from models.density.preprocess import INPUT_HEIGHT_PX, INPUT_WIDTH_PX, to_input
 
 
@@ -86,6 +86,7 @@ def quantize(model: Path, out: Path, frames: list[Path]) -> None:
         "calibration_frames": len(frames),
     }
     set_metadata(out, {**metadata, QUANTIZATION_KEY: json.dumps(summary)})
+    stamp_any_size(out)  # measured again on the quantized graph
 
 
 def to_float16(model: Path, out: Path) -> None:
@@ -97,6 +98,7 @@ def to_float16(model: Path, out: Path) -> None:
     onnx.save(half, str(out))
     summary = {"format": "float16", "weights": "float16", "activations": "float16", "io": "float32"}
     set_metadata(out, {**metadata, QUANTIZATION_KEY: json.dumps(summary)})
+    stamp_any_size(out)
 
 
 def main() -> int:
