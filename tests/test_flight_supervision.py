@@ -264,15 +264,15 @@ def test_telemetry_silent_past_its_limit_is_a_lost_link_and_nothing_more_is_sent
 def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and_link: Any) -> None:
     app, link = app_and_link
     asyncio.run(hand_over(app, link))
-    assert app._offboard
+    assert app.commands.offboard
     app.watchdog.clock = lambda: time.monotonic() + 10.0  # the event loop has not beaten for 10 s
     app.watchdog.start()
     try:
         assert link.stopped_from_thread.wait(timeout=5.0)  # within a quarter of the limit, on a free machine
     finally:
         app.watchdog.stop()
-    assert not app._offboard
-    assert not app._commanding
+    assert not app.commands.offboard
+    assert not app.commands.commanding
     assert not app.watchdog.check()  # disengaged: once is enough
 
 
@@ -480,7 +480,7 @@ def test_a_stop_that_no_tick_takes_ends_without_the_last_resort_within_its_bound
 ) -> None:
     # The SITL stopped with us (a campaign interrupted) or the link is gone: no tick will ever come to act at.
     app, link = app_and_link
-    monkeypatch.setattr("companion.app.flight.STOP_UNHEARD_S", 0.2)
+    monkeypatch.setattr("companion.app.run_end.STOP_UNHEARD_S", 0.2)
 
     async def flight() -> None:
         await hand_over(app, link)

@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from companion.geometry import F64Array, PinholeCamera, Pose, T_body_camera_from_mount
+from companion.geometry import F64Array, GeometryError, PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import CameraConfig, PerceptionConfig
 from companion.perception.density import (
     DensityMap,
@@ -177,6 +177,15 @@ class SlzPipeline:
         scale = input_scale(gsd, self.min_gsd_m_per_px)
         density = _timed(timings, "density", lambda: predict_downscaled(self.density_model, frame_bgr, scale))
         return self._after_density(density, pose, t_s, area_centre_ne_m, timings, gsd)
+
+    def sees_head_plane(self, pose: Pose) -> bool:
+        """A frame taken from ``pose`` can be read: the camera sees the head plane (the vehicle is high enough
+        above it and not tilted past the horizon)."""
+        try:
+            self.projector.finest_gsd_m_per_px(pose)
+        except (PerceptionError, GeometryError):
+            return False
+        return True
 
     def input_scale(self, pose: Pose) -> float:
         """How much the frame is shrunk before the model sees it at this pose (1: not at all).

@@ -1,0 +1,108 @@
+"""What a flight writes about its decisions and its path: each decision with its source and inputs, each phase change,
+each target switch and failsafe (in the flight log and on the console), and the vehicle's pose once a second."""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+from companion.app.flight_log import RecordKind
+from companion.app.recorder import FlightRecorder
+from companion.app.start_sequence import StartStep
+from companion.guidance.landing import Decision, LandingPhase
+from companion.guidance.vehicle_state import VehicleState
+from companion.vehicle.link import VehicleStatus
+
+logger = logging.getLogger(__name__)
+
+POSE_RECORD_PERIOD_S = 1.0  # vehicle time between two `pose` records: the flight's path in the log
+
+
+class FlightJournal:
+    """The flight's decisions and path, as records and log lines.
+
+    Parameters
+    ----------
+    recorder : FlightRecorder
+        Where the records go.
+    dry_run : bool
+        Log lines say so.
+    """
+
+    def __init__(self, recorder: FlightRecorder, dry_run: bool) -> None:
+        self.recorder = recorder
+        self.prefix = "[dry run] " if dry_run else ""
+        self._target_id: int | None = None  # the last decision's target (console and log report switches)
+        self._pose_recorded_s = -math.inf  # vehicle time of the last `pose` record
+
+    def reset(self) -> None:
+        """A fresh state machine decides (a dry run started again): no target yet."""
+        self._target_id = None
+
+    def decision(
+        self,
+        decision: Decision,
+        previous_phase: str,
+        source: str,
+        state: VehicleState | None,
+        observed: dict[str, Any] | None,
+        inputs: dict[str, Any],
+    ) -> None:
+        """Record a decision (with what produced it, from which inputs, and what the map showed around its target:
+        ``observed``), the phase change from ``previous_phase`` it makes, its target switch and its failsafe."""
+        extra = {} if observed is None else {"observed": observed}
+        self.recorder.write(
+            RecordKind.DECISION, decision.t_s, decision=decision, source=source, state=state, inputs=inputs, **extra
+        )
+        if decision.phase.value != previous_phase:
+            self.recorder.write(
+                RecordKind.PHASE, decision.t_s, phase=decision.phase, previous=previous_phase, reason=decision.reason
+            )
+            logger.info("%sphase %s -> %s: %s", self.prefix, previous_phase, decision.phase.value, decision.reason)
+        target = decision.target
+        if target is not None:
+            if target.track_id != self._target_id:  # a switch (slz report lists them too)
+                logger.info(
+                    "%starget: zone %s at north %.1f m, east %.1f m, r = %.2f m (was %s): %s",
+                    self.prefix,
+                    target.track_id,
+                    target.north_m,
+                    target.east_m,
+                    target.radius_m,
+                    "none" if self._target_id is None else f"zone {self._target_id}",
+                    decision.reason,
+                )
+            self._target_id = target.track_id
+        if decision.phase is LandingPhase.FAILSAFE:
+            self.recorder.write(RecordKind.FAILSAFE, decision.t_s, reason=decision.reason, action=decision.kind)
+            logger.warning("%sfailsafe: %s (%s)", self.prefix, decision.reason, decision.kind.value)
+
+    def start_step(self, state: VehicleState, step: StartStep) -> None:
+        """What the start sequence waits for, or the pilot's handover, at this tick."""
+        if step.waiting_for is not None:
+            logger.info("[dry run] waiting for %s", step.waiting_for)
+            self.recorder.write(RecordKind.WAITING, state.t_s, waiting_for=step.waiting_for)
+        if step.waiting_for_modes is not None:
+            logger.info("waiting for the pilot's handover: armed, in the air and in %s", step.waiting_for_modes)
+            self.recorder.write(RecordKind.WAITING_FOR_HANDOVER, state.t_s, modes=step.waiting_for_modes)
+        if step.handed_over is not None:
+            mode = step.handed_over.value
+            self.recorder.write(RecordKind.HANDOVER, state.t_s, mode=mode, altitude_m=state.altitude_m)
+
+    def pose(self, state: VehicleState, status: VehicleStatus) -> None:
+        """The vehicle's pose and status, at most once per ``POSE_RECORD_PERIOD_S`` of vehicle time."""
+        if state.t_s - self._pose_recorded_s < POSE_RECORD_PERIOD_S:
+            return
+        self._pose_recorded_s = state.t_s
+        self.recorder.write(
+            RecordKind.POSE,
+            state.t_s,
+            north_m=state.north_m,
+            east_m=state.east_m,
+            down_m=state.down_m,
+            yaw_deg=state.yaw_deg,
+            mode=status.mode,
+            armed=status.armed,
+            in_air=status.in_air,
+        )
