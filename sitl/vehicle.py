@@ -21,21 +21,14 @@ import numpy as np
 from companion.config import quote
 from companion.errors import SlzError
 from companion.vehicle.sim_control import Event, Tick
+from sitl.autopilot.broadcast import HEARTBEAT_PERIOD_S, Broadcaster
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MavlinkServer
 from sitl.autopilot.params import ParameterStore
 from sitl.autopilot.status import LandedState, Severity
-from sitl.autopilot.telemetry import (
-    API_RATES_HZ,
-    GCS_RATES_HZ,
-    Battery,
-    Origin,
-    StreamSchedule,
-    TelemetryBuilder,
-    statustext_messages,
-)
+from sitl.autopilot.telemetry import Battery, Origin, TelemetryBuilder
 from sitl.clock import SimClock
 from sitl.config import FaultKind, LinkName, SitlConfig
 from sitl.control_channel import ControlChannel
@@ -51,10 +44,6 @@ from sitl.truth import TruthRecord, TruthWriter
 logger = logging.getLogger(__name__)
 
 OUTER_RATE_HZ = 100.0
-HEARTBEAT_PERIOD_S = 1.0
-WAITING_HEARTBEAT_PERIOD_S = 0.1
-"""Heartbeats while a lockstep SITL waits for its first client (simulated time stands still at 0): a client finds
-the autopilot by its heartbeat, so at PX4's 1 Hz a campaign mission's companion waited up to a wall second for one."""
 IDLE_COMMAND = 0.1  # armed on the ground: props spin at idle
 
 
@@ -130,16 +119,12 @@ class SitlVehicle:
             except (RenderError, OSError) as exc:
                 self.close()
                 raise SitlError("camera", str(exc)) from None
-        self.schedules = {
-            id(self.links[0]): StreamSchedule(API_RATES_HZ),
-            id(self.links[1]): StreamSchedule(GCS_RATES_HZ),
-        }
+        self.broadcast = Broadcaster(self.links[0], self.links[1], self.telemetry, self.commander, self.battery)
+        self.schedules = self.broadcast.schedules
         self._setpoint: Setpoint | None = None
         self._running = True
         self._exit_code = 0
         self.run_end = RunEnd(config.end_after_touchdown_s)
-        self._last_heartbeat_wall = -math.inf
-        self._statustext_id = 0
         self.handler_errors = 0  # messages and requests whose handling raised (dropped, logged, counted)
         self._last_handler_error_wall = -math.inf
         self.lockstep = LockstepGate(config.lockstep, config.lockstep_period_s, config.lockstep_timeout_s)
@@ -204,7 +189,7 @@ class SitlVehicle:
             while self._running:
                 if not fast or self.clock.steps % self._outer_every == 0:
                     self._poll()
-                self._heartbeat_if_due()
+                self.broadcast.heartbeat_if_due(self.lockstep.enabled and self.lockstep.client is None)
                 if self.config.duration_s is not None and self.clock.now_s >= self.config.duration_s - 1e-9:
                     logger.info("duration reached at %.3f s simulated", self.clock.now_s)
                     break
@@ -265,7 +250,7 @@ class SitlVehicle:
                         logger.error("lockstep: the frame client did not take frame %d; stopping", frame_seq)
                         self._stop_with(3)
                         return False
-            self._send_tick_pose()
+            self.broadcast.tick_pose(self.clock.now_s, self.dynamics.state())
             self._write_truth()
             self.control.send(Tick(gate.seq, self.clock.now_s, frame_seq).to_event(), gate.client)
             gate.sent()
@@ -318,18 +303,6 @@ class SitlVehicle:
         vehicle = TruthRecord(t_s, (n, e, d), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, bool(s.on_ground))
         self.truth.write(t_s, self.camera.people_at(t_s), vehicle)
 
-    def _send_tick_pose(self) -> None:
-        """The pose at the tick instant goes out on the API link before the tick, so the client can pair the tick's
-        frame with a pose stamped at its capture time (the scheduled streams need not fall on tick instants)."""
-        api = self.links[0]
-        state = self.dynamics.state()
-        api.send_all(
-            [
-                self.telemetry.build(name, api.mav, self.clock.now_s, state, self.commander, self.battery)
-                for name in ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION")
-            ]
-        )
-
     # -- the physics step ----------------------------------------------------------------------------------------
     def _inject_faults(self, t_s: float) -> None:
         for fault in self.faults.due(t_s):
@@ -359,9 +332,10 @@ class SitlVehicle:
                     state, self._setpoint, self._outer_dt_s, integrate=cmd.landed_state is not LandedState.ON_GROUND
                 )
             self.telemetry.setpoint = self._setpoint
-            self._announce()
+            if self.broadcast.announce(t_s, state):
+                self._write_log_row(force=True)  # phase changes reach the disk at once
             self.battery.update(self.controller.collective, self._outer_dt_s, cmd.armed)
-            self._send_telemetry(t_s, state)
+            self.broadcast.streams(t_s, state)
             self._write_log_row()
         if self._setpoint is not None:
             motors = self.controller.update_attitude(state, dt_s)
@@ -372,56 +346,13 @@ class SitlVehicle:
         self.dynamics.step(dt_s)
         self.clock.advance()
 
-    def _announce(self) -> None:
-        """Send the commander's new events as STATUSTEXT and a heartbeat at once on a change."""
-        cmd = self.commander
-        if cmd.changed:
-            cmd.changed = False
-            self._last_heartbeat_wall = -math.inf
-            self._write_log_row(force=True)  # phase changes reach the disk at once
-        while cmd.events:
-            severity, text = cmd.events.popleft()
-            self.statustext(text, severity)
-        nav = cmd.navigator
-        if nav.mission_changed:
-            nav.mission_changed = False
-            state = self.dynamics.state()
-            for link in self.links:
-                link.send(self.telemetry.build("MISSION_CURRENT", link.mav, self.clock.now_s, state, cmd, self.battery))
-        while nav.mission_reached:
-            seq = nav.mission_reached.popleft()
-            for link in self.links:
-                link.send(link.mav.mission_item_reached_encode(seq))
-
     def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
-        """A STATUSTEXT on every link, at PX4's severity (refusals and failsafes CRITICAL), in chunks of 50
-        characters when longer (MAVLink 2's ``id`` and ``chunk_seq``)."""
-        self._statustext_id = (self._statustext_id + 1) % 65536 or 1
-        for link in self.links:
-            for message in statustext_messages(link.mav, text, int(severity), self._statustext_id):
-                link.send(message)
+        """A STATUSTEXT on every link (:meth:`Broadcaster.statustext`)."""
+        self.broadcast.statustext(text, severity)
 
     def heartbeat_now(self) -> None:
-        """A heartbeat on every link at once (a mode or arming change must be seen without waiting)."""
-        self._last_heartbeat_wall = -math.inf
-        self._heartbeat_if_due()
-
-    def _heartbeat_if_due(self) -> None:
-        now = time.monotonic()
-        waiting = self.lockstep.enabled and self.lockstep.client is None
-        if now - self._last_heartbeat_wall >= (WAITING_HEARTBEAT_PERIOD_S if waiting else HEARTBEAT_PERIOD_S):
-            self._last_heartbeat_wall = now
-            for link in self.links:
-                link.send(self.telemetry.heartbeat(link.mav, self.commander))
-
-    def _send_telemetry(self, t_s: float, state: Any) -> None:
-        """The streams due at ``t_s``, each link's in as few datagrams as fit (:meth:`MavlinkLink.send_all`)."""
-        for link in self.links:
-            due = self.schedules[id(link)].due(t_s)
-            if due:
-                link.send_all(
-                    [self.telemetry.build(n, link.mav, t_s, state, self.commander, self.battery) for n in due]
-                )
+        """A heartbeat on every link at once."""
+        self.broadcast.heartbeat_now()
 
     def _write_log_row(self, force: bool = False) -> None:
         t_s = self.clock.now_s

@@ -16,6 +16,7 @@ import numpy as np
 
 from companion.geometry import inside_polygon
 from sitl.autopilot.controller import Setpoint
+from sitl.autopilot.land_detector import LOW_THRUST_SHARE, TOUCHING_BELOW_MPS, LandDetector, LandEvent
 from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.navigator import Navigator
 from sitl.autopilot.params import ParameterStore
@@ -90,7 +91,7 @@ class Commander:
         self.home_ned_m = np.asarray(home_ned_m, dtype=np.float64).copy()
         self.armed = False
         self.mode = FlightMode.AUTO_LOITER
-        self.landed_state = LandedState.ON_GROUND
+        self.land_detector = LandDetector()
         self.events: deque[tuple[Severity, str]] = deque(maxlen=32)
         self.offboard: OffboardSetpoint | None = None
         self.rc_lost = False
@@ -99,7 +100,6 @@ class Commander:
         self.failsafe: str | None = None
         self.failsafe_since_s = math.nan
         self._armed_at_s = math.nan
-        self._landed_since_s = math.nan
         self.hold_ned_m = self.home_ned_m.copy()
         self.hold_yaw_rad = math.nan
         self.braking = False
@@ -110,6 +110,15 @@ class Commander:
         self.fence = Fence()
         self._fence_breached = False
         self.navigator = Navigator(self)  # mission, orbit, go-to, return home
+
+    @property
+    def landed_state(self) -> LandedState:
+        """The land detector's state."""
+        return self.land_detector.state
+
+    @landed_state.setter
+    def landed_state(self, value: LandedState) -> None:
+        self.land_detector.state = value
 
     # -- helpers ---------------------------------------------------------------------------------------------
     def event(self, text: str, severity: Severity = Severity.INFO) -> None:
@@ -147,7 +156,7 @@ class Commander:
                 return MavResult.DENIED
         self.armed = True
         self._armed_at_s = self.now_s
-        self._landed_since_s = math.nan
+        self.land_detector.reset_landed_time()
         self._capture_hold()
         self.event("Armed")
         return MavResult.ACCEPTED
@@ -263,7 +272,7 @@ class Commander:
         """Advance the state machine to ``t_s``; returns the setpoint to fly, or None for motors off/idle."""
         self.now_s = t_s
         self._state = state
-        self._land_detector(t_s, state, collective)
+        self._detect_landing(t_s, state, collective)
         self._failsafes(t_s)
         if not self.armed:
             return None
@@ -272,7 +281,7 @@ class Commander:
             and self.landed_state is LandedState.ON_GROUND
             and self.params["COM_DISARM_PRFLT"] > 0
             and t_s - self._armed_at_s > self.params["COM_DISARM_PRFLT"]
-            and math.isnan(self._landed_since_s)
+            and math.isnan(self.land_detector.landed_since_s)
         ):
             self.disarm(reason="Disarmed: no takeoff after arming")
             return None
@@ -280,9 +289,8 @@ class Commander:
         if self.landed_state is LandedState.ON_GROUND and not self._wants_to_climb(setpoint, state):
             return None  # armed on the ground: motors idle until something asks to climb
         if self.landed_state is LandedState.ON_GROUND:
-            self.landed_state = LandedState.TAKEOFF
+            self.land_detector.take_off()
             self._armed_at_s = math.nan
-            self._landed_since_s = math.nan
             self.event("Takeoff")
         return setpoint
 
@@ -294,34 +302,25 @@ class Commander:
             not math.isnan(vel_down) and vel_down < -0.2
         )
 
-    def _land_detector(self, t_s: float, state: VehicleState, collective: float) -> None:
-        alt = float(self.home_ned_m[2] - state.position_ned_m[2])
-        if self.landed_state in (LandedState.TAKEOFF, LandedState.IN_AIR, LandedState.LANDING):
-            if self.landed_state is LandedState.TAKEOFF and alt > 0.5:
-                self.landed_state = LandedState.IN_AIR
-            landing = self.mode is FlightMode.AUTO_LAND or (
-                self.mode is FlightMode.AUTO_MISSION and self.navigator.item_landing
-            )
-            if self.landed_state is LandedState.IN_AIR and landing:
-                self.landed_state = LandedState.LANDING
-            if self.landed_state is LandedState.LANDING and not landing:
-                self.landed_state = LandedState.IN_AIR
-            touching = state.on_ground and float(np.linalg.norm(state.velocity_ned_mps)) < 0.3
-            if touching and (not self.armed or collective < 0.9 * self.params["MPC_THR_HOVER"]):
-                if math.isnan(self._landed_since_s):
-                    self._landed_since_s = t_s
-                elif t_s - self._landed_since_s >= 0.5 or not self.armed:
-                    self.landed_state = LandedState.ON_GROUND
-                    self.event("Landing detected")
-                    if self.mode is FlightMode.AUTO_MISSION and self.navigator.item_landing:
-                        self.navigator.item_reached()  # the land item ends the mission
-            else:
-                self._landed_since_s = math.nan
-        elif self.armed and not math.isnan(self._landed_since_s):
-            delay = self.params["COM_DISARM_LAND"]
-            if delay >= 0 and t_s - self._landed_since_s >= 0.5 + delay:
-                self.disarm(reason="Disarmed after landing")
-                self._landed_since_s = math.nan
+    def _detect_landing(self, t_s: float, state: VehicleState, collective: float) -> None:
+        """The land detector's update (:mod:`sitl.autopilot.land_detector`), acted on: the landing announced (a
+        mission's land item reached), the disarm after landing."""
+        mission_lands = self.mode is FlightMode.AUTO_MISSION and self.navigator.item_landing
+        event = self.land_detector.update(
+            t_s,
+            altitude_m=float(self.home_ned_m[2] - state.position_ned_m[2]),
+            touching=bool(state.on_ground) and float(np.linalg.norm(state.velocity_ned_mps)) < TOUCHING_BELOW_MPS,
+            low_thrust=collective < LOW_THRUST_SHARE * self.params["MPC_THR_HOVER"],
+            armed=self.armed,
+            landing=self.mode is FlightMode.AUTO_LAND or mission_lands,
+            disarm_delay_s=self.params["COM_DISARM_LAND"],
+        )
+        if event is LandEvent.LANDED:
+            self.event("Landing detected")
+            if mission_lands:
+                self.navigator.item_reached()  # the land item ends the mission
+        elif event is LandEvent.DISARM_DUE:
+            self.disarm(reason="Disarmed after landing")
 
     def _outside_fence(self) -> bool:
         """Outside the uploaded fence, or beyond GF_MAX_HOR_DIST / GF_MAX_VER_DIST from home (0: no limit)."""
