@@ -81,13 +81,13 @@ test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow
 
 bench: $(STAMP)
-	$(BIN)/python bench/perception.py
-	$(BIN)/python bench/sitl_speed.py
-	$(BIN)/python bench/render.py
-	$(BIN)/python bench/density.py
-	$(BIN)/python bench/companion_latency.py
-	$(BIN)/python bench/sitl_fuzz.py
-	$(BIN)/python bench/hostile_configs.py
+	$(BIN)/python -m bench.perception
+	$(BIN)/python -m bench.sitl_speed
+	$(BIN)/python -m bench.render
+	$(BIN)/python -m bench.density
+	$(BIN)/python -m bench.companion_latency
+	$(BIN)/python -m bench.sitl_fuzz
+	$(BIN)/python -m bench.hostile_configs
 
 # The paper's Table I at 100 runs per cell (900 missions; resumable: run it again to continue).
 paper-table: $(STAMP)

@@ -1,6 +1,6 @@
 """Before and after at the same time: ``bench/mission_cpu.py`` in two checkouts at once, on the same machine moment.
 
-Run: ``.venv/bin/python bench/ab_cpu.py BEFORE_DIR AFTER_DIR [--rounds 2] [--sample]``. On a shared virtual machine
+Run: ``.venv/bin/python -m bench.ab_cpu BEFORE_DIR AFTER_DIR [--rounds 2] [--sample]``. On a shared virtual machine
 whose speed drifts by 10 % over minutes, two runs taken one after the other compare the machine's moments as much as
 the code (on this project's 2-core machine, the same commit measured 14.5 and 12.7 s of warm CPU per mission ten
 minutes apart). Here both checkouts (``git worktree add``) fly ``bench/mission_cpu.py`` together: each flies one
@@ -25,13 +25,13 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.campaign_sample import SPEC, differences
+from bench.machine import machine_context, save_report
+from sitl.campaign.runner import read_results
+from sitl.campaign.spec import load_campaign_spec
 
-from bench.campaign_sample import SPEC, differences  # noqa: E402
-from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.campaign.runner import read_results  # noqa: E402
-from sitl.campaign.spec import load_campaign_spec  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 RECORD = Path("bench") / "results" / "mission_cpu.json"
 SAMPLE_RECORD = Path("bench") / "results" / "campaign_sample_warm.json"

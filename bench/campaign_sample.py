@@ -1,6 +1,6 @@
 """Throughput on the ROI paper table's own missions, and whether the committed table still reproduces.
 
-Run: ``.venv/bin/python bench/campaign_sample.py [--workers 2] [--backend local|ray] [--cold] [--out DIR]
+Run: ``.venv/bin/python -m bench.campaign_sample [--workers 2] [--backend local|ray] [--cold] [--out DIR]
 [--compare DIR]``. Flies ``mission_configs/campaigns/paper_table1_roi_sample.yaml`` (runs 0 to 6 of each of the nine
 cells: 63 missions with the table's seeds and start poses) into a new folder, warm workers unless ``--cold``, then
 prints and saves ``bench/results/campaign_sample_<warm|cold>.json``: missions per hour of wall time, missions per
@@ -16,19 +16,18 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from sitl.campaign.metrics import with_gate_overflight
+from sitl.campaign.runner import Backend, read_results, run_campaign
+from sitl.campaign.spec import load_campaign_spec
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.campaign.metrics import with_gate_overflight  # noqa: E402
-from sitl.campaign.runner import Backend, read_results, run_campaign  # noqa: E402
-from sitl.campaign.spec import load_campaign_spec  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 SPEC = REPO_ROOT / "mission_configs" / "campaigns" / "paper_table1_roi_sample.yaml"
 # Committed results of the same missions, newest first: the ROI table itself, flown at 8b4f6ba, 91405d5 and f47a508

@@ -1,6 +1,6 @@
 """The companion's frame-arrival to setpoint-sent latency and CPU share, flying real missions in real time.
 
-Run: ``.venv/bin/python bench/companion_latency.py [--seeds 1,2] [--out bench/results/companion_latency.json]``.
+Run: ``.venv/bin/python -m bench.companion_latency [--seeds 1,2] [--out bench/results/companion_latency.json]``.
 
 Each mission is the SITL in real time (no lockstep, camera at 10 Hz, as a drone's camera would run) and ``slz fly``
 with ``mission_configs/sitl.yaml``: the latency is from the moment the companion has a whole frame to the moment the
@@ -13,19 +13,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from companion.app.flight_log import FlightLog, RecordKind
+from sitl.harness.instances import lease_instance
+from sitl.harness.mission import MissionSpec, fly
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from companion.app.flight_log import FlightLog, RecordKind  # noqa: E402
-from sitl.harness.instances import lease_instance  # noqa: E402
-from sitl.harness.mission import MissionSpec, fly  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def main() -> int:

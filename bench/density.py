@@ -1,6 +1,6 @@
 """Latency of the shipped density models per 640x480 frame, on one and on two CPU threads.
 
-Run: ``.venv/bin/python bench/density.py [--frames N] [--model NAME=PATH.onnx ...] [--out bench/results/density.json]``
+Run: ``.venv/bin/python -m bench.density [--frames N] [--model NAME=PATH.onnx ...] [--out bench/results/density.json]``
 (``--model`` adds a candidate, e.g. a freshly trained network, beside the shipped ones).
 Times ``OnnxDensityModel.predict`` (preprocessing included: colour conversion, normalisation, layout) on rendered
 frames of the held-out style, after a warm-up. Prints median and p95 per variant and thread count, the model's
@@ -18,13 +18,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from companion.perception.density import OnnxDensityModel
+from models.data.images import read_bgr
+from models.density.onnx_files import TRAINING_KEY, read_metadata
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from companion.perception.density import OnnxDensityModel  # noqa: E402
-from models.data.images import read_bgr  # noqa: E402
-from models.density.onnx_files import TRAINING_KEY, read_metadata  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 VARIANTS = {
     "slz-lite (default)": "models/density/slz_lite.onnx",

@@ -7,7 +7,7 @@ decides the same), and reads its flight log and truth with :mod:`sitl.campaign.h
 companion gave up and why, for the ones it gave up for a person how far the nearest body really was, and whether a
 disc as large as the footprint was truly free in the landing area (what a perfect map would have landed on).
 
-Run: ``.venv/bin/python bench/hold_replays.py runs/campaigns/paper_table1_roi [--jobs 2] [--resume]`` (a replay
+Run: ``.venv/bin/python -m bench.hold_replays runs/campaigns/paper_table1_roi [--jobs 2] [--resume]`` (a replay
 takes one to five minutes of one core; ``--jobs`` flies that many at once, each SITL on its own ports). Writes the
 replays under ``runs/hold_replays/<campaign>/`` and the table as JSON (``--out``).
 """
@@ -24,12 +24,12 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from sitl.campaign.hold_explain import explain_run
+from sitl.campaign.runner import read_results
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.campaign.hold_explain import explain_run  # noqa: E402
-from sitl.campaign.runner import read_results  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 KEPT = ("reason", "hold_cause", "zones_chosen", "aborts", "reselections")
 

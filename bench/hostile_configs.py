@@ -1,6 +1,6 @@
 """How fast and how clearly ``slz fly --dry-run`` refuses each hostile config file (sitl/testing/hostile_configs.py).
 
-Run: ``.venv/bin/python bench/hostile_configs.py``. Each file runs in its own ``slz fly --dry-run`` process (the
+Run: ``.venv/bin/python -m bench.hostile_configs``. Each file runs in its own ``slz fly --dry-run`` process (the
 refusal must come before anything is started), timed from process start to exit; the load alone is also timed in
 this process. Asserted: exit 2, no traceback, the field (or the document) named with one of the project's own
 reasons, a message under 2,000 characters, every file refused within 1 s of loading. Prints and saves
@@ -15,13 +15,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from companion.app.mission import load_mission_config
+from companion.config import ConfigError
+from sitl.testing.hostile_configs import fly_dry_run, hostile_configs
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from companion.app.mission import load_mission_config  # noqa: E402
-from companion.config import ConfigError  # noqa: E402
-from sitl.testing.hostile_configs import fly_dry_run, hostile_configs  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 MAX_LOAD_S = 1.0
 

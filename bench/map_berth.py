@@ -15,7 +15,7 @@ area whose true clearance (to the nearest body's edge) is between 0.5 and 6 m:
   the map calls occupied (false positives away from people), by the scene's sun elevation: below 30 degrees a
   person's shadow is more than 2.9 m long.
 
-Run: ``.venv/bin/python bench/map_berth.py runs/hold_replays/paper_table1_roi/*/*/* [--every 25]`` (one model run
+Run: ``.venv/bin/python -m bench.map_berth runs/hold_replays/paper_table1_roi/*/*/* [--every 25]`` (one model run
 per sampled frame, about 30 ms, then the variants). Prints the table with the machine's context and writes JSON.
 """
 
@@ -30,22 +30,22 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from companion.app.flight_log import FlightLog, RecordKind
+from companion.app.replay import config_from_header
+from companion.config import load_yaml_config
+from companion.geometry import Pose, inside_polygon
+from companion.perception.density import input_scale, predict_downscaled
+from companion.perception.occupancy import OccupancyMapper
+from companion.perception.pipeline import SlzPipeline
+from companion.perception.projection import HeadPlaneOccupancy
+from sitl.campaign.hold_explain import TruthAt
+from sitl.config import SitlConfig
+from sitl.sim_camera import scene_light
+from sitl.truth import clearance_m, people_at, read_truth
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from companion.app.flight_log import FlightLog, RecordKind  # noqa: E402
-from companion.app.replay import config_from_header  # noqa: E402
-from companion.config import load_yaml_config  # noqa: E402
-from companion.geometry import Pose, inside_polygon  # noqa: E402
-from companion.perception.density import input_scale, predict_downscaled  # noqa: E402
-from companion.perception.occupancy import OccupancyMapper  # noqa: E402
-from companion.perception.pipeline import SlzPipeline  # noqa: E402
-from companion.perception.projection import HeadPlaneOccupancy  # noqa: E402
-from sitl.campaign.hold_explain import TruthAt  # noqa: E402
-from sitl.config import SitlConfig  # noqa: E402
-from sitl.sim_camera import scene_light  # noqa: E402
-from sitl.truth import clearance_m, people_at, read_truth  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 VARIANTS: dict[str, tuple[float, float]] = {
     "shipped (threshold 0.01, dilation 0.5 m)": (0.01, 0.5),

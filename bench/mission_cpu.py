@@ -1,6 +1,6 @@
 """CPU seconds one campaign mission costs, cold (new processes) and warm (a worker's kept processes), one at a time.
 
-Run: ``.venv/bin/python bench/mission_cpu.py [--missions ID ...]``. Flies each mission of
+Run: ``.venv/bin/python -m bench.mission_cpu [--missions ID ...]``. Flies each mission of
 ``mission_configs/campaigns/paper_table1_roi_sample.yaml`` named (default: four, one per kind of cell) alone on this
 machine, first with new processes, then on one warm worker (after one warm-up mission that pays the imports), and
 measures per mission the wall time and the CPU time (user + system, every thread) of every process involved: the
@@ -14,21 +14,20 @@ from __future__ import annotations
 import argparse
 import os
 import resource
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.campaign_sample import NOT_METRICS, SPEC, differences
+from bench.machine import machine_context, save_report
+from sitl.campaign.spec import load_campaign_spec
+from sitl.campaign.worker import fly_one
+from sitl.harness.instances import leased_instance
+from sitl.harness.warm import WarmWorker
 
-from bench.campaign_sample import NOT_METRICS, SPEC, differences  # noqa: E402
-from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.campaign.spec import load_campaign_spec  # noqa: E402
-from sitl.campaign.worker import fly_one  # noqa: E402
-from sitl.harness.instances import leased_instance  # noqa: E402
-from sitl.harness.warm import WarmWorker  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 MISSIONS = ("static/oldest/0001", "moving_10/biggest/0001", "moving_20/oldest/0001", "weather/biggest/0001")
 WARM_UP = "static/random/0000"

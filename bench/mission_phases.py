@@ -1,6 +1,6 @@
 """Where a warm mission's CPU goes, by phase of the flight: the SITL's and the companion's CPU seconds in each.
 
-Run: ``.venv/bin/python bench/mission_phases.py [--missions ID ...] [--out PATH]``. One warm worker (after one
+Run: ``.venv/bin/python -m bench.mission_phases [--missions ID ...] [--out PATH]``. One warm worker (after one
 warm-up mission that pays the imports) flies the missions named (default: a scene the SITL has not built, then a
 second strategy of the same scene, then a walker mission) of ``mission_configs/campaigns/paper_table1_roi_sample.yaml``
 one after the other. While each flies, a thread reads both processes' CPU time (``/proc/<pid>/stat``, every thread)
@@ -28,17 +28,17 @@ import threading
 from pathlib import Path
 from typing import Any
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.campaign_sample import SPEC
+from bench.machine import machine_context, save_report
+from bench.mission_cpu import WARM_UP, process_cpu_s
+from companion.app.flight_log import FlightLog
+from sitl.campaign.spec import load_campaign_spec
+from sitl.campaign.worker import fly_one
+from sitl.harness.instances import leased_instance
+from sitl.harness.warm import WarmWorker
 
-from bench.campaign_sample import SPEC  # noqa: E402
-from bench.machine import machine_context, save_report  # noqa: E402
-from bench.mission_cpu import WARM_UP, process_cpu_s  # noqa: E402
-from companion.app.flight_log import FlightLog  # noqa: E402
-from sitl.campaign.spec import load_campaign_spec  # noqa: E402
-from sitl.campaign.worker import fly_one  # noqa: E402
-from sitl.harness.instances import leased_instance  # noqa: E402
-from sitl.harness.warm import WarmWorker  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 MISSIONS = ("static/oldest/0001", "static/biggest/0001", "moving_20/oldest/0001")
 PHASES = ("setup", "start", "search", "approach", "descent", "land", "done")

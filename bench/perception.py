@@ -1,6 +1,6 @@
 """Per-stage latency of the SLZ perception pipeline on 640x480 frames, on one CPU thread.
 
-Run: ``.venv/bin/python bench/perception.py [--frames N] [--out bench/results/perception.json]``.
+Run: ``.venv/bin/python -m bench.perception [--frames N] [--out bench/results/perception.json]``.
 The density model is the one `mission_configs/perception.yaml` ships. Frames are rendered from seeded planar scenes
 along a slow descent (20 m -> 8 m) so tracking sees a moving camera.
 Prints median and p95 per stage and in total, with and without the network, and writes them as JSON.
@@ -17,14 +17,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from companion.geometry import Pose
+from companion.perception.config import load_perception_config
+from companion.perception.pipeline import STAGES, SlzPipeline, camera_from_config
+from sitl.flat_scene import FlatScene
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from companion.geometry import Pose  # noqa: E402
-from companion.perception.config import load_perception_config  # noqa: E402
-from companion.perception.pipeline import STAGES, SlzPipeline, camera_from_config  # noqa: E402
-from sitl.flat_scene import FlatScene  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def main() -> int:

@@ -1,6 +1,6 @@
 """Milliseconds per SITL camera frame at 320x240, 640x480 and 960x720, 120 people, 20 % walking, weather on.
 
-Run: ``.venv/bin/python bench/render.py``. pyrender offscreen through EGL (Mesa llvmpipe on a CPU-only machine).
+Run: ``.venv/bin/python -m bench.render``. pyrender offscreen through EGL (Mesa llvmpipe on a CPU-only machine).
 Measures the colour frame alone, with depth, and with depth and the person-mask pass, then the weather effect; writes
 ``bench/results/render.json`` with the machine's context. Then procedural against MakeHuman people at 640x480 on the
 same scene (same places, same walkers), in alternating rounds so that both see the machine at the same moment, from
@@ -16,16 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from sitl.render.camera import Light, WorldRenderer
+from sitl.world.crowd import Crowd
+from sitl.world.park import Park
+from sitl.world.scenario import PeopleModel, ScenarioConfig, WalkerKind, WeatherKind
+from sitl.world.weather import WeatherState, apply_weather
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount  # noqa: E402
-from sitl.render.camera import Light, WorldRenderer  # noqa: E402
-from sitl.world.crowd import Crowd  # noqa: E402
-from sitl.world.park import Park  # noqa: E402
-from sitl.world.scenario import PeopleModel, ScenarioConfig, WalkerKind, WeatherKind  # noqa: E402
-from sitl.world.weather import WeatherState, apply_weather  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def main() -> int:

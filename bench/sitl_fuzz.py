@@ -1,6 +1,6 @@
 """Hostile input at scale: 100,000 malformed MAVLink datagrams and 10,000 hostile control requests against one SITL.
 
-Run: ``.venv/bin/python bench/sitl_fuzz.py [--datagrams 100000] [--requests 10000] [--seed 23]``.
+Run: ``.venv/bin/python -m bench.sitl_fuzz [--datagrams 100000] [--requests 10000] [--seed 23]``.
 
 A ground-station peer and an API peer hold the two MAVLink links (each is its link's partner and heartbeats at 1 Hz, as
 MAVSDK and QGroundControl do) and record every heartbeat's wall time. A stray sender then sends the seeded datagrams of
@@ -26,16 +26,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from sitl.config import SitlConfig
+from sitl.harness.fuzz import ControlFuzzer, MavlinkFuzzer
+from sitl.harness.instances import lease_instance
+from sitl.harness.process import SitlProcess
+from sitl.testing.helpers import MavlinkPeer, wait_until
+from sitl.testing.mavsdk_client import Client
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.config import SitlConfig  # noqa: E402
-from sitl.harness.fuzz import ControlFuzzer, MavlinkFuzzer  # noqa: E402
-from sitl.harness.instances import lease_instance  # noqa: E402
-from sitl.harness.process import SitlProcess  # noqa: E402
-from sitl.testing.helpers import MavlinkPeer, wait_until  # noqa: E402
-from sitl.testing.mavsdk_client import Client  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 MAX_HEARTBEAT_GAP_S = 1.5
 PACE_PER_S = 4000.0  # paced phase: slow enough that the SITL's socket buffer never overflows

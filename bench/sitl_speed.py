@@ -1,6 +1,6 @@
 """Real-time factor of the SITL vehicle: headless for each dynamics backend, then with world and camera in lockstep.
 
-Run: ``.venv/bin/python bench/sitl_speed.py [--sim-seconds 60]``. The whole vehicle runs in this process, as fast as
+Run: ``.venv/bin/python -m bench.sitl_speed [--sim-seconds 60]``. The whole vehicle runs in this process, as fast as
 possible: physics and attitude control at 400 Hz, position control, commander, telemetry encoding and UDP sends at
 100 Hz, trajectory log off. It takes off and flies to a point 22 m away and holds there. Then the full run: a SITL
 process pinned to one core with the world and the 640x480 camera at 10 Hz, in lockstep with a client that arms, takes
@@ -21,18 +21,17 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from companion.camera.frames import SitlFrameSource
+from sitl.autopilot.modes import FlightMode
+from sitl.config import SitlConfig
+from sitl.dynamics.base import DynamicsBackend
+from sitl.harness.instances import leased_instance
+from sitl.harness.lockstep import LockstepControl
+from sitl.harness.process import SitlProcess
+from sitl.vehicle import SitlVehicle
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from companion.camera.frames import SitlFrameSource  # noqa: E402
-from sitl.autopilot.modes import FlightMode  # noqa: E402
-from sitl.config import SitlConfig  # noqa: E402
-from sitl.dynamics.base import DynamicsBackend  # noqa: E402
-from sitl.harness.instances import leased_instance  # noqa: E402
-from sitl.harness.lockstep import LockstepControl  # noqa: E402
-from sitl.harness.process import SitlProcess  # noqa: E402
-from sitl.vehicle import SitlVehicle  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def measure(backend: DynamicsBackend, sim_seconds: float, instance: int) -> dict[str, float]:

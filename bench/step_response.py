@@ -1,6 +1,6 @@
 """Closed-loop step response of the SITL vehicle (rigid body + cascaded controller), and what a physics step costs.
 
-Run: ``.venv/bin/python bench/step_response.py``. In this process, without MAVLink: the default rigid-body quadrotor
+Run: ``.venv/bin/python -m bench.step_response``. In this process, without MAVLink: the default rigid-body quadrotor
 hovering at 10 m under the default controller (position loops at 50 Hz, attitude and rates at the physics rate) is
 given a 5 m step north and, separately, a 3 m step up. For each: rise time (10 % to 90 %), overshoot, settling time
 (within 5 cm for good), and the end error. Then the wall time of one physics step (controller + dynamics) over 20 s
@@ -17,12 +17,12 @@ from typing import Any
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from sitl.autopilot.controller import CascadedController, Setpoint
+from sitl.dynamics.rigid_body import RigidBodyQuadrotor
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.autopilot.controller import CascadedController, Setpoint  # noqa: E402
-from sitl.dynamics.rigid_body import RigidBodyQuadrotor  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 PHYSICS_RATE_HZ = 400.0
 OUTER_EVERY = 8  # position loops at 50 Hz, as the SITL vehicle runs them

@@ -11,7 +11,7 @@ maps each frame onto the head plane. Against the crowd's true positions it repor
 - **largest zone**: the largest free circle the zone finder finds in the region (mean over frames), m;
 - **bodies seen**: bodies whose head cell has an occupied cell within 0.3 m.
 
-Run: ``.venv/bin/python bench/sun_occupancy.py [--seeds 12] [--suns 22 45 70]`` (a few seconds per seed).
+Run: ``.venv/bin/python -m bench.sun_occupancy [--seeds 12] [--suns 22 45 70]`` (a few seconds per seed).
 """
 
 from __future__ import annotations
@@ -23,20 +23,20 @@ from typing import Any
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from bench.map_berth import bodies_seen
+from companion.config import load_yaml_config
+from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount, inside_polygon
+from companion.perception.config import PerceptionConfig
+from companion.perception.pipeline import SlzPipeline
+from sitl.render.camera import Light, WorldRenderer
+from sitl.truth import clearance_m
+from sitl.world.crowd import Crowd
+from sitl.world.park import Park
+from sitl.world.scenario import ScenarioConfig
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from bench.map_berth import bodies_seen  # noqa: E402
-from companion.config import load_yaml_config  # noqa: E402
-from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount, inside_polygon  # noqa: E402
-from companion.perception.config import PerceptionConfig  # noqa: E402
-from companion.perception.pipeline import SlzPipeline  # noqa: E402
-from sitl.render.camera import Light, WorldRenderer  # noqa: E402
-from sitl.truth import clearance_m  # noqa: E402
-from sitl.world.crowd import Crowd  # noqa: E402
-from sitl.world.park import Park  # noqa: E402
-from sitl.world.scenario import ScenarioConfig  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 ALTITUDES_M = (40.0, 20.0, 8.0)
 AWAY_FROM_PEOPLE_M = 3.0

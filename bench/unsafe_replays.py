@@ -5,7 +5,7 @@ person's body inside the footprint (landed, not a success) is flown again, in lo
 from a copy of its campaign's spec and record. The table puts each mission's recorded outcome beside today's: a
 mission is now **safe** when it lands clear of people or holds (no touchdown).
 
-Run: ``.venv/bin/python bench/unsafe_replays.py [--out bench/results/unsafe_replays.json]`` (about a minute per
+Run: ``.venv/bin/python -m bench.unsafe_replays [--out bench/results/unsafe_replays.json]`` (about a minute per
 mission on two cores). Writes the replays under ``runs/unsafe_replays/`` and the table as JSON.
 """
 
@@ -22,11 +22,11 @@ from typing import Any
 
 import yaml
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT))
+from bench.machine import machine_context, save_report
+from sitl.campaign.spec import load_campaign_spec
 
-from bench.machine import machine_context, save_report  # noqa: E402
-from sitl.campaign.spec import load_campaign_spec  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 
 TABLES = {
     "paper_table1": ("docs/results/paper_table1", "mission_configs/campaigns/paper_table1.yaml"),

@@ -120,7 +120,7 @@ MODELS=(--model slz-lite="$OUT/slz_lite.onnx" --model slz-lite-int8="$OUT/slz_li
 "$PY" -m models.eval.real --out models/eval/results/real "${MODELS[@]}"
 # What each one trades: recall against false-occupied ground over a grid of thresholds (a diagnostic, never a choice).
 "$PY" -m models.eval.tradeoff --out models/eval/results/tradeoff_all "${MODELS[@]}"
-"$PY" bench/density.py --model wide-real="$RUNS/wide_real.onnx"
+"$PY" -m bench.density --model wide-real="$RUNS/wide_real.onnx"
 
 # 5. Issue 52 (model card, "Real-photo features, held out by site"; none shipped): YOLOX-nano's early stages
 #    (../shared/pretrained, Apache-2.0) under our density head, against the from-scratch lite-wide, the same recipe
@@ -158,7 +158,7 @@ round gb garfield boruszyn   # Caliterra held out
 SITES=()
 for tag in cg cb gb; do SITES+=(--model "yolox-$tag=$RUNS/yolox_$tag/yolox_$tag.onnx" --model "wide-$tag=$RUNS/wide_$tag/wide_$tag.onnx"); done
 "$PY" -m models.eval.real --out models/eval/results/real_by_site --model slz-lite=models/density/slz_lite.onnx "${SITES[@]}"
-"$PY" bench/density.py --model yolox-cg="$RUNS/yolox_cg/yolox_cg.onnx"
+"$PY" -m bench.density --model yolox-cg="$RUNS/yolox_cg/yolox_cg.onnx"
 
 # 6. Issue 51 (model card, "What each choice bought", the new people): round cg's yolox-lite on MakeHuman people with
 #    the camera model against the same recipe on the procedural people ($DATA), seeds 0 and 1, thresholds by the same
