@@ -41,8 +41,8 @@ from companion.perception.pipeline import SlzPipeline
 from companion.perception.projection import HeadPlaneOccupancy
 from sitl.campaign.hold_explain import TruthAt
 from sitl.config import SitlConfig
-from sitl.sim_camera import scene_light
-from sitl.truth import clearance_m, people_at, read_truth
+from sitl.vehicle.sim_camera import scene_light
+from sitl.vehicle.truth import clearance_m, people_at, read_truth
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 

@@ -21,7 +21,7 @@ from bench.machine import machine_context, save_report
 from companion.geometry import Pose
 from companion.perception.config import load_perception_config
 from companion.perception.pipeline import STAGES, SlzPipeline, camera_from_config
-from sitl.flat_scene import FlatScene
+from sitl.render.flat_scene import FlatScene
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 

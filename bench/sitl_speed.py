@@ -29,7 +29,7 @@ from sitl.dynamics.base import DynamicsBackend
 from sitl.harness.instances import leased_instance
 from sitl.harness.lockstep import LockstepControl
 from sitl.harness.process import SitlProcess
-from sitl.vehicle import SitlVehicle
+from sitl.vehicle.process import SitlVehicle
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 

@@ -30,7 +30,7 @@ from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount, in
 from companion.perception.config import PerceptionConfig
 from companion.perception.pipeline import SlzPipeline
 from sitl.render.camera import Light, WorldRenderer
-from sitl.truth import clearance_m
+from sitl.vehicle.truth import clearance_m
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import ScenarioConfig

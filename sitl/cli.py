@@ -190,14 +190,14 @@ def _campaign_replay(args: argparse.Namespace) -> int:
 
 def _cmd_sitl(args: argparse.Namespace) -> int:
     if args.action == "snapshot":
-        from sitl.snapshot import contact_sheet
+        from sitl.render.snapshot import contact_sheet
 
         path = contact_sheet(args.seed or 0, args.out)
         sys.stdout.write(f"wrote {path}\n")
         return 0
     from companion.config import validate_config
     from sitl.config import SitlConfig, load_sitl_config
-    from sitl.vehicle import SitlError, SitlVehicle, install_signal_handlers
+    from sitl.vehicle.process import SitlError, SitlVehicle, install_signal_handlers
 
     base = load_sitl_config(args.config) if args.config else SitlConfig()
     overrides = {

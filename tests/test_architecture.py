@@ -34,28 +34,24 @@ FLOORS: dict[str, int] = {
     "companion": 4,
     # the simulated world's and vehicle's parts (no I/O of a process)
     "sitl.geodesy": 10,
-    "sitl.clock": 10,
-    "sitl.lockstep_gate": 10,
-    "sitl.frame_server": 10,
-    "sitl.control_channel": 10,
+    "sitl.vehicle.clock": 10,
+    "sitl.vehicle.lockstep_gate": 10,
+    "sitl.vehicle.frame_server": 10,
+    "sitl.vehicle.control_channel": 10,
     "sitl.world": 10,
     "sitl.dynamics": 10,
-    "sitl.truth": 10,
+    "sitl.vehicle.truth": 10,
     "sitl.px4_params": 10,
-    "sitl.run_end": 10,
-    "sitl.trajectory_log": 10,
+    "sitl.vehicle.run_end": 10,
+    "sitl.vehicle.trajectory_log": 10,
     # the SITL's config (which checks its parameter overrides against PX4's table below it) and the renderer
     "sitl.config": 11,
-    "sitl.fault_schedule": 11,
+    "sitl.vehicle.fault_schedule": 11,
     "sitl.render": 11,
     # the autopilot (configured by the SITL's config)
     "sitl.autopilot": 12,
-    # the SITL vehicle process
+    # the SITL vehicle process (the package; its parts above sit on their own floors)
     "sitl.vehicle": 13,
-    "sitl.control_requests": 13,
-    "sitl.sim_camera": 13,
-    "sitl.snapshot": 13,
-    "sitl.flat_scene": 13,
     # the harness: SITL and companion processes started, leased, stepped, fuzzed, flown as missions
     "sitl.harness": 14,
     "sitl.campaign": 15,

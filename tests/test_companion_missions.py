@@ -25,7 +25,7 @@ from companion.perception.config import PerceptionConfig
 from sitl.harness.instances import leased_instance
 from sitl.harness.mission import MissionResult, MissionSpec, fly
 from sitl.testing.helpers import ListeningGroundStation, free_udp_port
-from sitl.truth import read_truth, touchdown
+from sitl.vehicle.truth import read_truth, touchdown
 
 pytestmark = pytest.mark.sitl
 

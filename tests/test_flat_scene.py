@@ -8,7 +8,7 @@ import pytest
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.config import ProjectionConfig
 from companion.perception.projection import HeadPlaneProjector
-from sitl.flat_scene import FlatScene, SceneError
+from sitl.render.flat_scene import FlatScene, SceneError
 
 pytestmark = pytest.mark.integration
 

@@ -12,7 +12,7 @@ import pytest
 from companion.app.flight_log import DecisionRecord
 from companion.app.legacy_decisions import vocabulary_of, zone_changes_of
 from sitl.campaign.hold_explain import TruthAt, abort_kind, explain_hold, explain_run, release_kind
-from sitl.truth import TruthHeader, TruthRecord
+from sitl.vehicle.truth import TruthHeader, TruthRecord
 
 pytestmark = pytest.mark.unit
 

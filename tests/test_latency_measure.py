@@ -41,7 +41,7 @@ def pose_at(t_s: float) -> tuple[VehicleState, Pose]:
 def record_yawing_flight(out: Path, instance: int, configured_s: float, true_s: float) -> None:
     """A flight log as `slz fly` writes one for a camera stamped with ``configured_s`` of latency when it has
     ``true_s``: each frame is what the camera saw at its true exposure, paired with the pose at its logged time."""
-    from sitl.sim_camera import SimCamera
+    from sitl.vehicle.sim_camera import SimCamera
 
     mission = MissionConfig.model_validate({"camera": {"latency_s": configured_s}})
     recorder = FlightRecorder(out, frame_every=1, lossless=True)

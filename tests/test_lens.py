@@ -58,7 +58,7 @@ def test_a_distorted_frame_undistorts_back_to_the_pinhole_image() -> None:
 
 @pytest.mark.sitl
 def test_the_sitl_camera_flies_a_lens_the_pipeline_takes_off_again(instance: int) -> None:
-    from sitl.sim_camera import SimCamera
+    from sitl.vehicle.sim_camera import SimCamera
 
     state = VehicleState(position_ned_m=np.array([0.0, 0.0, -15.0]), on_ground=False)
     plain_config = SitlConfig.model_validate({"instance": instance, "seed": 5, "camera": {"enabled": True}})

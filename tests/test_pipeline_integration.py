@@ -13,7 +13,7 @@ from companion.perception.config import PerceptionConfig
 from companion.perception.density import DensityMap, DensityModel, OnnxDensityModel, downscaled_size
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import STAGES, FrameResult, SlzPipeline, camera_from_config
-from sitl.flat_scene import FlatScene, RenderedFrame
+from sitl.render.flat_scene import FlatScene, RenderedFrame
 
 pytestmark = pytest.mark.integration
 

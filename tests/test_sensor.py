@@ -129,7 +129,7 @@ def test_flying_north_moves_the_ground_down_the_picture_of_a_nadir_camera() -> N
 def test_the_sitl_camera_applies_it_deterministically(instance: int) -> None:
     from sitl.config import SitlConfig
     from sitl.dynamics.base import VehicleState
-    from sitl.sim_camera import SimCamera
+    from sitl.vehicle.sim_camera import SimCamera
 
     state = VehicleState(position_ned_m=np.array([0.0, 0.0, -15.0]), velocity_ned_mps=np.array([3.0, 1.0, 0.0]))
     frames = []

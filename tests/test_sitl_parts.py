@@ -10,11 +10,11 @@ import pytest
 
 from companion.vehicle.sim_control import SetpointNedYaw
 from sitl.config import FaultConfig, FaultKind
-from sitl.fault_schedule import FaultSchedule
-from sitl.lockstep_gate import LockstepGate
-from sitl.run_end import RunEnd
-from sitl.trajectory_log import HEADER, TrajectoryLog
-from sitl.truth import TruthRecord, TruthWriter, read_truth
+from sitl.vehicle.fault_schedule import FaultSchedule
+from sitl.vehicle.lockstep_gate import LockstepGate
+from sitl.vehicle.run_end import RunEnd
+from sitl.vehicle.trajectory_log import HEADER, TrajectoryLog
+from sitl.vehicle.truth import TruthRecord, TruthWriter, read_truth
 
 pytestmark = pytest.mark.unit
 

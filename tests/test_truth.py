@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sitl.truth import (
+from sitl.vehicle.truth import (
     TRUTH_SCHEMA_VERSION,
     TruthError,
     TruthHeader,

@@ -218,7 +218,7 @@ def test_the_scene_light_comes_from_the_seed_within_the_scenario_ranges() -> Non
     reads the mission's config), and its sun lies within the scenario's elevation range."""
     from sitl.config import SitlConfig
     from sitl.render.camera import Light
-    from sitl.sim_camera import scene_light
+    from sitl.vehicle.sim_camera import scene_light
 
     low_sun = ScenarioConfig.model_validate({"sun_elevation_deg": {"low": 20.0, "high": 30.0}})
     lights = [scene_light(SitlConfig(seed=seed, scenario=low_sun)) for seed in range(20)]

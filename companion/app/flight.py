@@ -14,8 +14,9 @@ vehicle's clock throughout.
   the setpoint the simulator must have received first. The same seed gives the same flight at any speed.
 
 Tasks are created together, kept, and cancelled together when one ends or fails (structured concurrency that also
-runs on Python 3.10: :func:`~companion.app.task_group.run_until_first_ends`). The start (takeoff or the pilot's handover, climb, transit) is decided by
-:class:`~companion.app.start_sequence.StartSequence`, which does no I/O; this module sends what it asks for. A
+runs on Python 3.10: :func:`~companion.app.task_group.run_until_first_ends`). The start (takeoff or the pilot's
+handover, climb, transit) is decided by :class:`~companion.app.start_sequence.StartSequence`, which does no I/O;
+this module sends what it asks for. A
 **stall watchdog** (:class:`~companion.app.stall_watchdog.StallWatchdog`) stops offboard from outside the event loop
 when the loop stops beating for ``decision_watchdog_s``, since MAVSDK keeps re-sending the last setpoint on its own
 thread. In lockstep it is off: simulated time waits for the loop, so a stall cannot move the vehicle, and a wall-clock

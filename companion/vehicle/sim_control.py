@@ -3,10 +3,11 @@
 The control channel is JSON over UDP beside MAVLink, for what MAVLink does not carry: lockstep ticks and their
 acknowledgements, a simulated pilot (mode switch, sticks, RC loss), injected faults, wind, ground truth and shutdown.
 A request is ``{"cmd": <Command>, ...fields}`` (with an optional ``"id"`` the reply echoes); a reply or an
-unsolicited event is ``{"event": <Event>, ...}``. The SITL (``sitl.control_channel``, ``sitl.vehicle``), its process
-wrapper and lockstep client (``sitl.harness.process``, ``sitl.harness.lockstep``) and the companion's lockstep client
-(``companion.vehicle.lockstep``) all speak it through this module, which lives in ``companion`` because the companion
-is one of its clients and must not import the lab.
+unsolicited event is ``{"event": <Event>, ...}``. The SITL (``sitl.vehicle.control_channel``,
+``sitl.vehicle.process``), its process wrapper and lockstep client (``sitl.harness.process``,
+``sitl.harness.lockstep``) and the companion's lockstep client (``companion.vehicle.lockstep``) all speak it
+through this module, which lives in ``companion`` because the companion is one of its clients and must not import
+the lab.
 
 Requests are checked here before use: at most :data:`MAX_REQUEST_BYTES` bytes, nesting at most
 :data:`MAX_REQUEST_DEPTH` deep, strict JSON (no ``NaN`` or ``Infinity``, no number that overflows to infinity), an

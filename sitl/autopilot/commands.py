@@ -24,11 +24,11 @@ from sitl.autopilot.navigator import Orbit
 from sitl.autopilot.params import ParameterStore
 from sitl.autopilot.status import LandedState, MavResult, Severity
 from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT, Battery, StreamSchedule, TelemetryBuilder
-from sitl.clock import SimClock
 from sitl.config import SitlConfig
 from sitl.dynamics.base import Dynamics
 from sitl.geodesy import geodetic_to_ned
-from sitl.lockstep_gate import LockstepGate
+from sitl.vehicle.clock import SimClock
+from sitl.vehicle.lockstep_gate import LockstepGate
 
 MAV_CMD_REQUEST_PROTOCOL_VERSION = 519
 REPOSITION_CHANGE_MODE = 1  # DO_REPOSITION param2 bit: switch to the go-to mode

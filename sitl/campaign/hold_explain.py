@@ -36,7 +36,7 @@ import numpy.typing as npt
 from companion.app.flight_log import DecisionRecord, FlightLog
 from companion.geometry import inside_polygon
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause, ZoneChange
-from sitl.truth import TruthHeader, TruthRecord, body_edges_m, clearance_m, people_at, read_truth
+from sitl.vehicle.truth import TruthHeader, TruthRecord, body_edges_m, clearance_m, people_at, read_truth
 
 FREE_SAMPLE_S = 5.0
 """How often (vehicle seconds) the truth's largest free disc is measured over a flight."""

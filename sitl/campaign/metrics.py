@@ -28,7 +28,7 @@ from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause
 from sitl.config import SitlConfig
-from sitl.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
+from sitl.vehicle.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
 METRICS_VERSION = 6

@@ -22,7 +22,7 @@ from sitl.campaign.spec import CampaignSpec, MissionPlan
 from sitl.harness.mission import MissionError, MissionProcesses, MissionSpec, fly
 from sitl.harness.process import SitlProcessError
 from sitl.harness.warm import ServeProcessError, WarmWorker
-from sitl.truth import TruthError
+from sitl.vehicle.truth import TruthError
 
 
 def mission_spec(spec: CampaignSpec, plan: MissionPlan, run_dir: Path, instance: int, **extra: Any) -> MissionSpec:

@@ -24,7 +24,7 @@ from companion.app.landing_report import landing_report
 from companion.app.replay import flight_config, replay
 from companion.app.report import camera_views, tracks_at_landing
 from sitl.harness.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly
-from sitl.truth import people_at, read_truth, touchdown
+from sitl.vehicle.truth import people_at, read_truth, touchdown
 
 logger = logging.getLogger(__name__)
 

@@ -29,7 +29,7 @@ from companion.config import paths_from, read_yaml_file, validate_config
 from companion.errors import SlzError
 from sitl.config import SitlConfig
 from sitl.harness.process import REPO_ROOT, SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
-from sitl.truth import TruthError, body_edges_m, read_truth, touchdown
+from sitl.vehicle.truth import TruthError, body_edges_m, read_truth, touchdown
 
 logger = logging.getLogger(__name__)
 

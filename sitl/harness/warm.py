@@ -41,7 +41,7 @@ SERVE_READY_WALL_S = 60.0  # imports on a machine busy with parallel missions
 STOP_WALL_S = 10.0  # a SITL told to shut down closes its sockets and logs within this
 # Imported before the first mission. pyrender is not: the renderer chooses the OpenGL platform (EGL) before it
 # imports pyrender (sitl.render.camera), and the first mission does that.
-SITL_PRELOAD = ("sitl.cli", "sitl.vehicle", "sitl.sim_camera")
+SITL_PRELOAD = ("sitl.cli", "sitl.vehicle.process", "sitl.vehicle.sim_camera")
 COMPANION_PRELOAD = ("companion.app.flight", "companion.app.mission", "companion.vehicle.mavsdk_link", "mavsdk.asyncio")
 
 

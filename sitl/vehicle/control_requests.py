@@ -1,6 +1,6 @@
 """The SITL's control-channel requests, answered against one vehicle: the simulated pilot, faults, wind, lockstep
 subscription and acknowledgement, ground truth and shutdown. The vocabulary and the checks of every field are
-``companion.vehicle.sim_control``; the socket is ``sitl.control_channel``; this is what each request does.
+``companion.vehicle.sim_control``; the socket is ``sitl.vehicle.control_channel``; this is what each request does.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MAX_SENDERS_REPORTED, MavlinkServer
 from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.status import ControlSource
-from sitl.clock import SimClock
 from sitl.config import MAX_WIND_MPS, SitlConfig
-from sitl.control_channel import ControlChannel
 from sitl.dynamics.base import Dynamics
-from sitl.lockstep_gate import LockstepGate
+from sitl.vehicle.clock import SimClock
+from sitl.vehicle.control_channel import ControlChannel
+from sitl.vehicle.lockstep_gate import LockstepGate
 
 
 class ControlledVehicle(Protocol):
@@ -36,7 +36,7 @@ class ControlledVehicle(Protocol):
     mavlink: MavlinkServer
     control: ControlChannel | None
     camera: Any
-    """The simulated camera (``sitl.sim_camera.SimCamera``), or None without one."""
+    """The simulated camera (``sitl.vehicle.sim_camera.SimCamera``), or None without one."""
     camera_failed: bool
     handler_errors: int
 

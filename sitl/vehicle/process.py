@@ -29,17 +29,17 @@ from sitl.autopilot.mavlink_server import MavlinkServer
 from sitl.autopilot.params import ParameterStore
 from sitl.autopilot.status import LandedState, Severity
 from sitl.autopilot.telemetry import Battery, Origin, TelemetryBuilder
-from sitl.clock import SimClock
 from sitl.config import FaultKind, LinkName, SitlConfig
-from sitl.control_channel import ControlChannel
-from sitl.control_requests import ControlRequests
 from sitl.dynamics.base import DynamicsError
 from sitl.dynamics.factory import make_dynamics
-from sitl.fault_schedule import FaultSchedule
-from sitl.lockstep_gate import LockstepGate
-from sitl.run_end import RunEnd
-from sitl.trajectory_log import TrajectoryLog
-from sitl.truth import TruthRecord, TruthWriter
+from sitl.vehicle.clock import SimClock
+from sitl.vehicle.control_channel import ControlChannel
+from sitl.vehicle.control_requests import ControlRequests
+from sitl.vehicle.fault_schedule import FaultSchedule
+from sitl.vehicle.lockstep_gate import LockstepGate
+from sitl.vehicle.run_end import RunEnd
+from sitl.vehicle.trajectory_log import TrajectoryLog
+from sitl.vehicle.truth import TruthRecord, TruthWriter
 
 logger = logging.getLogger(__name__)
 
@@ -112,7 +112,7 @@ class SitlVehicle:
             raise SitlError("network", str(exc)) from None
         if config.camera.enabled:
             from sitl.render.camera import RenderError
-            from sitl.sim_camera import SimCamera
+            from sitl.vehicle.sim_camera import SimCamera
 
             try:
                 self.camera = SimCamera(config)
@@ -278,8 +278,8 @@ class SitlVehicle:
         return False
 
     def _settled(self) -> bool:
-        """Whether the run ends here by ``end_after_touchdown_s`` (:class:`~sitl.run_end.RunEnd`), checked at the
-        outer rate."""
+        """Whether the run ends here by ``end_after_touchdown_s`` (:class:`~sitl.vehicle.run_end.RunEnd`), checked at
+        the outer rate."""
         end = self.run_end
         if end.end_after_touchdown_s is None or not self.lockstep.released or self.clock.steps % self._outer_every:
             return False

@@ -14,9 +14,9 @@ from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
 from companion.perception.lens import LensDistortion
 from sitl.config import SitlConfig
 from sitl.dynamics.base import VehicleState
-from sitl.frame_server import FrameServer
 from sitl.render.camera import Light, WorldRenderer
 from sitl.render.sensor import image_velocity_px_s, optics, readout
+from sitl.vehicle.frame_server import FrameServer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 from sitl.world.scenario import WeatherKind

@@ -1,5 +1,6 @@
-"""The SITL's ground-truth log, ``truth.jsonl``: its schema, written by the vehicle process (:mod:`sitl.vehicle`) and
-read, typed, by whoever scores a mission (:mod:`sitl.harness.mission`, :mod:`sitl.campaign.metrics`, the demo).
+"""The SITL's ground-truth log, ``truth.jsonl``: its schema, written by the vehicle process
+(:mod:`sitl.vehicle.process`) and read, typed, by whoever scores a mission (:mod:`sitl.harness.mission`,
+:mod:`sitl.campaign.metrics`, the demo).
 
 One JSON object per line: first the header (``kind: header``: the scene's seed, every person's head-plane position
 at the start, body radius and whether they walk, and the schema version), then one record per camera frame or
