@@ -267,6 +267,10 @@ class Commander:
             self.event("RC regained")
         self.rc_lost = lost
 
+    def set_pilot_sticks(self, north: float, east: float, down: float) -> None:
+        """The pilot's sticks as velocity fractions in world NED, each in [-1, 1] (flown in POSCTL)."""
+        self.pilot_sticks = np.array([north, east, down])
+
     # -- the periodic update ---------------------------------------------------------------------------------
     def update(self, t_s: float, state: VehicleState, collective: float) -> Setpoint | None:
         """Advance the state machine to ``t_s``; returns the setpoint to fly, or None for motors off/idle."""

@@ -16,7 +16,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot.commander import FORCE_MAGIC, Commander
-from sitl.autopilot.controller import CascadedController, ControllerLimits
+from sitl.autopilot.controller import CascadedController
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mission_server import MAX_DISTANCE_M
 from sitl.autopilot.modes import FlightMode, MainMode
@@ -81,8 +81,6 @@ class AutopilotHost(Protocol):
     schedules: dict[int, StreamSchedule]
     """Each link's telemetry schedule, by the link's ``id()``."""
     lockstep: LockstepGate
-    speed_mps: float | None
-    """DO_CHANGE_SPEED's horizontal speed while it holds (None: the parameter's)."""
 
     def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
         """A STATUSTEXT on every link."""
@@ -92,8 +90,12 @@ class AutopilotHost(Protocol):
         """A heartbeat on every link at once."""
         ...
 
-    def limits(self) -> ControllerLimits:
-        """The controller's limits from the live parameters and ``speed_mps``."""
+    def change_speed(self, speed_mps: float | None) -> None:
+        """DO_CHANGE_SPEED: fly at most this horizontal speed from now on (None: the parameter's again)."""
+        ...
+
+    def refresh_limits(self) -> None:
+        """The controller's limits again from the live parameters (after a change)."""
         ...
 
 
@@ -239,15 +241,13 @@ class CommandHandlers:
         """As PX4: the speed flown from now on, within MPC_XY_VEL_MAX; no parameter changes (-1: back to it)."""
         spec = self.v.params.spec("MPC_XY_VEL_MAX")
         if r.p[1] == -1:
-            self.v.speed_mps = None
-            result = MavResult.ACCEPTED
+            self.v.change_speed(None)
         elif math.isfinite(r.p[1]) and spec.minimum <= r.p[1] <= spec.maximum:
-            self.v.speed_mps = float(r.p[1])
-            result = MavResult.ACCEPTED
+            self.v.change_speed(float(r.p[1]))
         else:
-            result = MavResult.DENIED
-        self.v.controller.limits = self.v.limits()
-        return result
+            self.v.refresh_limits()
+            return MavResult.DENIED
+        return MavResult.ACCEPTED
 
     def _global_target(self, msg: Any, is_int: bool) -> tuple[float, float, float] | None:
         """The NED point of a command's x/y/z (latitude, longitude, altitude): NaN where the command leaves the

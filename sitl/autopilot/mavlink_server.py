@@ -158,7 +158,7 @@ class MavlinkServer:
         yaw = self.v.telemetry.euler(self.v.dynamics.state())[2]
         north = forward * math.cos(yaw) - right * math.sin(yaw)
         east = forward * math.sin(yaw) + right * math.cos(yaw)
-        self.v.commander.pilot_sticks = np.array([north, east, -up])
+        self.v.commander.set_pilot_sticks(north, east, -up)
 
     def _send_ack(self, link: MavlinkLink, msg: Any, result: MavResult) -> None:
         link.send(
@@ -267,7 +267,7 @@ class MavlinkServer:
                     f"flying with {params[name]:g}",
                     Severity.WARNING,
                 )
-            self.v.controller.limits = self.v.limits()
+            self.v.refresh_limits()
         except ParamError as exc:
             self.v.statustext(str(exc), Severity.CRITICAL)
         for each in self.v.links:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from sitl.vehicle.clock import SimClock
 from sitl.vehicle.control_channel import ControlChannel
 from sitl.vehicle.lockstep_gate import LockstepGate
 
+if TYPE_CHECKING:  # the camera module needs the renderer, which a SITL without a camera never loads
+    from sitl.vehicle.sim_camera import SimCamera
+
 
 class ControlledVehicle(Protocol):
     """What the control channel's requests read and act on (:class:`sitl.vehicle.SitlVehicle` is one)."""
@@ -35,10 +38,14 @@ class ControlledVehicle(Protocol):
     links: list[MavlinkLink]
     mavlink: MavlinkServer
     control: ControlChannel | None
-    camera: Any
-    """The simulated camera (``sitl.vehicle.sim_camera.SimCamera``), or None without one."""
+    camera: SimCamera | None
+    """The simulated camera, or None without one."""
     camera_failed: bool
     handler_errors: int
+
+    def fail_camera(self, failed: bool) -> None:
+        """The camera delivers nothing from now on (or again)."""
+        ...
 
     def request_stop(self, *_: object) -> None:
         """Stop at the next loop turn."""
@@ -68,8 +75,8 @@ class ControlRequests:
                     raise RequestError("mode: expected a mode name")
                 reply["result"] = int(v.commander.set_mode(FlightMode.from_name(mode[:32]), ControlSource.PILOT))
             elif cmd == Command.PILOT_STICKS:
-                v.commander.pilot_sticks = np.array(
-                    [number(request, k, -1.0, 1.0, default=0.0) for k in ("north", "east", "down")]
+                v.commander.set_pilot_sticks(
+                    *(number(request, k, -1.0, 1.0, default=0.0) for k in ("north", "east", "down"))
                 )
             elif cmd == Command.RC_LOSS:
                 v.commander.set_rc_lost(flag(request, "lost"))
@@ -88,7 +95,7 @@ class ControlRequests:
             elif cmd == Command.CAMERA_FAIL:
                 if v.camera is None:
                     raise ValueError("this SITL has no camera")
-                v.camera_failed = flag(request, "failed")
+                v.fail_camera(flag(request, "failed"))
             elif cmd == Command.LINK_LOSS:
                 v.links[0].cut = flag(request, "lost")
             elif cmd == Command.LOCKSTEP_ACK:

@@ -14,7 +14,7 @@ import signal
 import time
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,6 +40,9 @@ from sitl.vehicle.lockstep_gate import LockstepGate
 from sitl.vehicle.run_end import RunEnd
 from sitl.vehicle.trajectory_log import TrajectoryLog
 from sitl.vehicle.truth import TruthRecord, TruthWriter
+
+if TYPE_CHECKING:  # the camera module needs the renderer, which a SITL without a camera never loads
+    from sitl.vehicle.sim_camera import SimCamera
 
 logger = logging.getLogger(__name__)
 
@@ -93,7 +96,7 @@ class SitlVehicle:
         self.battery = Battery()
         self.links: list[MavlinkLink] = []
         self.control: ControlChannel | None = None
-        self.camera: Any = None
+        self.camera: SimCamera | None = None
         self._next_frame_s = 0.0
         try:
             sysid, bind = config.system_id, config.bind_address
@@ -149,6 +152,19 @@ class SitlVehicle:
             z_vel_max_down_mps=p["MPC_Z_VEL_MAX_DN"],
             tilt_max_deg=p["MPC_TILTMAX_AIR"],
         )
+
+    def change_speed(self, speed_mps: float | None) -> None:
+        """DO_CHANGE_SPEED: fly at most this horizontal speed from now on (None: MPC_XY_VEL_MAX again)."""
+        self.speed_mps = speed_mps
+        self.refresh_limits()
+
+    def refresh_limits(self) -> None:
+        """The controller's limits again from the live parameters (after a change)."""
+        self.controller.limits = self.limits()
+
+    def fail_camera(self, failed: bool) -> None:
+        """The camera delivers nothing from now on (or again), as injected (ticks go on without frames)."""
+        self.camera_failed = failed
 
     def request_stop(self, *_: object) -> None:
         """Stop at the next loop turn (signal handler and control channel)."""
