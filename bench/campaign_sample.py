@@ -22,7 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from bench.machine import machine_context, save_report
+from sitl.campaign.metric_fields import field_infos
 from sitl.campaign.metrics import with_gate_overflight
+from sitl.campaign.record import FlownMission, compared_fields, parse_result
 from sitl.campaign.runner import Backend, read_results, run_campaign
 from sitl.campaign.spec import load_campaign_spec
 
@@ -34,17 +36,19 @@ SPEC = REPO_ROOT / "mission_configs" / "campaigns" / "paper_table1_roi_sample.ya
 # (docs/results/paper_table1_roi.md; the walker campaign of 1dfd031 that flew the moving_20 cells with the same
 # seeds predates the commitment of issue 33, so its missions no longer reproduce and it is not a reference).
 REFERENCES = (REPO_ROOT / "docs" / "results" / "paper_table1_roi" / "results.jsonl",)
-NOT_METRICS = {"wall_s", "segment", "finished_utc", "node", "commit", "metrics_version"}
+NOT_METRICS = set(field_infos(FlownMission)) - set(compared_fields())
+"""The facts of a mission's run, which two flights of it need not share (their field metadata)."""
 
 
 def differences(flown: dict[str, Any], committed: dict[str, Any], policy: str | None = None) -> list[str]:
     """The fields of ``flown`` whose value differs from the committed result's (absent fields included). A result of
     an earlier metrics version is first completed with the fields a later version added where no flight is needed
     (:func:`sitl.campaign.metrics.with_gate_overflight`, for the mission's selection ``policy``); a stale one keeps
-    its difference."""
+    its difference. The fields compared are the outcomes of a flight (their metadata,
+    :func:`sitl.campaign.record.compared_fields`), not the facts of its run (wall time, node, commit)."""
     flown, committed = with_gate_overflight(flown, policy), with_gate_overflight(committed, policy)
-    keys = (set(flown) | set(committed)) - NOT_METRICS
-    return sorted(k for k in keys if flown.get(k) != committed.get(k))
+    parse_result(flown), parse_result(committed)  # ResultError names a field that is not a result's
+    return sorted(k for k in compared_fields() if flown.get(k) != committed.get(k))
 
 
 def main() -> int:

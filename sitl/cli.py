@@ -55,6 +55,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_campaign(args: argparse.Namespace) -> int:
     from sitl.campaign.gate import GateError, check_against, make_baseline, read_baseline
     from sitl.campaign.provenance import source_commit
+    from sitl.campaign.record import ResultError, parse_results
     from sitl.campaign.report import build_report
     from sitl.campaign.runner import Backend, CampaignError, check_folder_spec, read_results, run_campaign
     from sitl.campaign.spec import load_campaign_spec
@@ -101,7 +102,12 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
             sys.stderr.write(f"slz campaign: --compare-with {args.compare_with}: no such results file\n")
             return 2
         previous = (str(args.compare_with), read_results(args.compare_with))
-    summary = build_report(spec, results, out, previous)
+    try:
+        summary = build_report(spec, results, out, previous)
+        records = parse_results(results)
+    except ResultError as exc:  # a line that is not a campaign result: named, not reported as "n/a"
+        sys.stderr.write(f"slz campaign: {exc}\n")
+        return 1
     for name, cell in summary["cells"].items():
         success = cell["success"]
         sys.stdout.write(
@@ -110,14 +116,14 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         )
     sys.stdout.write(f"wrote {out / 'report.md'}\n")
     if args.write_baseline:
-        baseline = make_baseline(spec, results, source_commit())
+        baseline = make_baseline(spec, records, source_commit())
         args.write_baseline.parent.mkdir(parents=True, exist_ok=True)
         args.write_baseline.write_text(json.dumps(baseline, indent=1) + "\n")
         sys.stdout.write(f"wrote baseline {args.write_baseline} ({len(baseline['missions'])} missions)\n")
     if args.check_against:
         try:
             gate = check_against(
-                spec, results, read_baseline(args.check_against), args.alpha, name=str(args.check_against)
+                spec, records, read_baseline(args.check_against), args.alpha, name=str(args.check_against)
             )
         except GateError as exc:
             sys.stderr.write(f"slz campaign: {exc}\n")

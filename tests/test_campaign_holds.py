@@ -10,6 +10,7 @@ import pytest
 from companion.app.flight_log import DecisionRecord
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause, ZoneChange
 from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, hold_cause, zones_chosen
+from sitl.campaign.record import FlownMission, flown_missions, parse_results
 from sitl.campaign.report import against_previous, build_report, hold_kind
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 
@@ -128,6 +129,10 @@ def _results(spec: CampaignSpec, over_a_person: set[str], held: dict[str, str | 
     return rows
 
 
+def _flown(lines: list[dict[str, Any]]) -> list[FlownMission]:
+    return flown_missions(parse_results(lines))
+
+
 def test_the_report_counts_holds_by_cause_and_compares_with_an_earlier_flight(tmp_path: Path) -> None:
     spec = _spec(tmp_path)
     oldest = [p.mission_id for p in spec.missions() if p.strategy.name == "oldest"]
@@ -136,9 +141,10 @@ def test_the_report_counts_holds_by_cause_and_compares_with_an_earlier_flight(tm
     earlier = next(r for r in now if r["mission_id"] == oldest[2])
     earlier.update(landed=False, success=False, reason=TIME_LIMIT)
     del earlier["hold_cause"]  # a result of metrics version 4
-    assert hold_kind(earlier) == "(before version 5) no landing within 300 s of the start"
+    earlier["metrics_version"] = 4
+    assert hold_kind(_flown([earlier])[0]) == "(before version 5) no landing within 300 s of the start"
 
-    cells = {r["cell"]: r for r in against_previous(spec, now, before)}
+    cells = {r["cell"]: r for r in against_previous(spec, _flown(now), _flown(before))}
     cell = cells["static/oldest"]
     assert (cell["pairs"], cell["before"], cell["now"]) == (8, 2, 5)
     assert (cell["only_before"], cell["only_now"]) == (0, 3)  # runs 3 to 5 improved; 0 to 2 held now

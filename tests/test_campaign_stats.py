@@ -25,6 +25,7 @@ from sitl.campaign.metrics import (
     with_gate_overflight,
     with_obstacles,
 )
+from sitl.campaign.record import CampaignResult, flown_missions, parse_results
 from sitl.campaign.report import PAPER_TABLE1, build_report, completed, paper_comparison, people_density
 from sitl.campaign.runner import CampaignError, missions_to_fly, scene_groups, worker_instances
 from sitl.campaign.spec import CampaignSpec, load_campaign_spec
@@ -474,6 +475,11 @@ def _results(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[dict[str, 
     return rows
 
 
+def _records(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[CampaignResult]:
+    """:func:`_results` read back as typed records."""
+    return parse_results(_results(spec, failed))
+
+
 def test_a_partial_campaigns_report_says_how_many_missions_are_not_flown_yet(tmp_path: Path) -> None:
     spec = load_campaign_spec(_gate_spec(tmp_path, runs=4))
     rows = _results(spec, {})
@@ -490,23 +496,32 @@ def test_a_partial_campaigns_report_says_how_many_missions_are_not_flown_yet(tmp
 def test_the_people_map_averages_the_missions_that_carry_one() -> None:
     # Two missions with a map (2 people in one cell, then 1 there and 1 elsewhere) and one restored from results.csv
     # without: the mean is over the two, not diluted by the third as if its park were empty.
-    rows: list[dict[str, Any]] = [
-        {"people_cells": [[28, 20, 2]]},
-        {"people_cells": [[28, 20, 1], [0, 39, 1]]},
-        {"mission_id": "restored/without/map"},
-    ]
+    line = MissionMetrics(
+        "static/oldest/0000", "static", "oldest", 0, 1, "done", "landed", landed=True, success=True, warning_1m=False,
+        warning_1_5m=False, people_within_1m=0, people_within_1_5m=0, touchdown_nearest_m=4.0, zone_area_m2=20.0,
+        nearest_person_mean_m=4.0, nearest_person_min_m=4.0, zone_iou=0.8, time_to_land_s=40.0, path_length_m=30.0,
+        reselections=0, aborts=0, failsafes=0, touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0,
+        obstacle_kind="bench", touched_obstacle=False, people_cells=None, hold_cause=None, zones_chosen=1,
+    ).to_json()  # fmt: skip
+    del line["people_cells"]  # as restored from results.csv
+    rows = flown_missions(
+        parse_results(
+            [line | {"people_cells": [[28, 20, 2]]}, line | {"people_cells": [[28, 20, 1], [0, 39, 1]]}, line]
+        )
+    )
+    assert rows[2].people_cells is None  # a detail a stored result may leave out
     density = people_density(rows)
     assert density.shape == (40, 40)
     assert (density[28, 20], density[0, 39], density.sum()) == (1.5, 0.5, 2.0)
-    assert people_density([{"mission_id": "restored/without/map"}]).sum() == 0.0
+    assert people_density(rows[2:]).sum() == 0.0
 
 
 def test_the_gate_fails_a_strategy_significantly_worse_on_the_same_scenes(tmp_path: Path) -> None:
     spec = load_campaign_spec(_gate_spec(tmp_path, runs=12))
-    baseline = make_baseline(spec, _results(spec, {}), commit="abc")
+    baseline = make_baseline(spec, _records(spec, {}), commit="abc")
     # 7 of 12 paired scenes got worse for `nearest`, none better: p = 0.5 ** 7 = 0.0078 one-sided, Holm over 6 checks
     # 0.047 < 0.05. One worse scene for `oldest` is chance.
-    report = check_against(spec, _results(spec, {"nearest": set(range(7)), "oldest": {0}}), baseline, 0.05)
+    report = check_against(spec, _records(spec, {"nearest": set(range(7)), "oldest": {0}}), baseline, 0.05)
     by_check = {(c.strategy, c.metric): c for c in report.checks}
     worse = by_check["nearest", "success"]
     assert (worse.pairs, worse.worse, worse.better) == (12, 7, 0)
@@ -522,18 +537,18 @@ def test_the_gate_fails_a_strategy_significantly_worse_on_the_same_scenes(tmp_pa
     assert "| nearest | success | 12 | 100.0 % | 41.7 % | 7 | 0 |" in text
     assert "- static/nearest/0000: success True -> False, warning_1m False -> True, warning_1_5m False -> True" in text
     # Six worse scenes are not enough after the adjustment (6 * 0.5 ** 6 = 0.094): no false alarm on weak evidence.
-    assert not check_against(spec, _results(spec, {"nearest": set(range(6))}), baseline, 0.05).failed
+    assert not check_against(spec, _records(spec, {"nearest": set(range(6))}), baseline, 0.05).failed
     # Improvements never fail the gate.
-    improved = check_against(spec, _results(spec, {}), make_baseline(spec, _results(spec, {"oldest": {1, 2}})))
+    improved = check_against(spec, _records(spec, {}), make_baseline(spec, _records(spec, {"oldest": {1, 2}})))
     assert not improved.failed
     assert improved.checks[0].better + improved.checks[3].better == 2
 
 
 def test_the_gate_refuses_a_baseline_of_other_scenes(tmp_path: Path) -> None:
     spec = load_campaign_spec(_gate_spec(tmp_path, runs=2))
-    other = make_baseline(spec, _results(spec, {})) | {"master_seed": 4}
+    other = make_baseline(spec, _records(spec, {})) | {"master_seed": 4}
     with pytest.raises(GateError, match="not the same scenes"):
-        check_against(spec, _results(spec, {}), other)
+        check_against(spec, _records(spec, {}), other)
     (tmp_path / "junk.json").write_text("{}")
     with pytest.raises(GateError, match="is not a campaign baseline"):
         read_baseline(tmp_path / "junk.json")
@@ -548,7 +563,7 @@ def test_slz_campaign_check_against_exits_1_with_a_readable_diff(tmp_path: Path)
         "".join(json.dumps(r) + "\n" for r in _results(spec, {"nearest": set(range(8))}))
     )
     baseline = tmp_path / "baseline.json"
-    baseline.write_text(json.dumps(make_baseline(spec, _results(spec, {}))))
+    baseline.write_text(json.dumps(make_baseline(spec, _records(spec, {}))))
     command = ["campaign", "--spec", str(spec_path), "--out", str(out), "--report-only", "--check-against"]
     done = subprocess.run(
         [sys.executable, "-m", "companion.cli", *command, str(baseline)],

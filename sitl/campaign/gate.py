@@ -17,12 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import SlzError
+from sitl.campaign.record import CampaignResult, FlownMission, flown_missions
 from sitl.campaign.spec import CampaignSpec
 from sitl.campaign.stats import holm, mcnemar_exact
 
 BASELINE_FORMAT = "slz-campaign-baseline/1"
 GATED: dict[str, bool] = {"success": True, "warning_1m": False, "warning_1_5m": False}
-"""The gated outcomes and whether True is the good value."""
+"""The gated outcomes and whether True is the good value: rates of the report (their field metadata)."""
 
 
 class GateError(SlzError):
@@ -100,12 +101,11 @@ class GateReport:
         }
 
 
-def make_baseline(spec: CampaignSpec, results: list[dict[str, Any]], commit: str | None = None) -> dict[str, Any]:
+def make_baseline(spec: CampaignSpec, results: list[CampaignResult], commit: str | None = None) -> dict[str, Any]:
     """The baseline of a flown campaign: its spec's identity and each flown mission's gated outcomes."""
     missions = {
-        r["mission_id"]: {"strategy": r["strategy"], **{k: bool(r[k]) for k in GATED}}
-        for r in results
-        if "error" not in r
+        r.mission_id: {"strategy": r.strategy, **{k: bool(getattr(r, k)) for k in GATED}}
+        for r in flown_missions(results)
     }
     return {
         "format": BASELINE_FORMAT,
@@ -128,7 +128,7 @@ def read_baseline(path: Path) -> dict[str, Any]:
 
 
 def check_against(
-    spec: CampaignSpec, results: list[dict[str, Any]], baseline: dict[str, Any], alpha: float = 0.05, name: str = ""
+    spec: CampaignSpec, results: list[CampaignResult], baseline: dict[str, Any], alpha: float = 0.05, name: str = ""
 ) -> GateReport:
     """Compare a campaign's results with a baseline of the same spec, mission by mission.
 
@@ -147,24 +147,20 @@ def check_against(
             "not the same scenes"
         )
     before: dict[str, dict[str, Any]] = baseline["missions"]
-    flown = [r for r in results if "error" not in r]
-    paired = [r for r in flown if r["mission_id"] in before]
+    paired: list[FlownMission] = [r for r in flown_missions(results) if r.mission_id in before]
     unpaired = len(results) - len(paired)
     changes: list[str] = []
-    for r in sorted(paired, key=lambda r: r["mission_id"]):
-        moved = [
-            f"{k} {before[r['mission_id']][k]} -> {bool(r[k])}"
-            for k in GATED
-            if bool(r[k]) != before[r["mission_id"]][k]
-        ]
+    for r in sorted(paired, key=lambda r: r.mission_id):
+        was = before[r.mission_id]
+        moved = [f"{k} {was[k]} -> {bool(getattr(r, k))}" for k in GATED if bool(getattr(r, k)) != was[k]]
         if moved:
-            changes.append(f"{r['mission_id']}: " + ", ".join(moved))
+            changes.append(f"{r.mission_id}: " + ", ".join(moved))
     raw: list[tuple[str, str, int, float, float, int, int, float]] = []
-    for strategy in sorted({r["strategy"] for r in paired}):
-        rows = [r for r in paired if r["strategy"] == strategy]
+    for strategy in sorted({r.strategy for r in paired}):
+        rows = [r for r in paired if r.strategy == strategy]
         for metric, good in GATED.items():
-            old = [before[r["mission_id"]][metric] for r in rows]
-            new = [bool(r[metric]) for r in rows]
+            old = [before[r.mission_id][metric] for r in rows]
+            new = [bool(getattr(r, metric)) for r in rows]
             # One-sided: pairs where only the baseline was good (worse now) outnumber those where only this run is.
             test = mcnemar_exact([o == good for o in old], [n == good for n in new], alternative="greater")
             raw.append(

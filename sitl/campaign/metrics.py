@@ -27,6 +27,7 @@ import numpy as np
 from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause
+from sitl.campaign.metric_fields import Summary, result_field
 from sitl.config import SitlConfig
 from sitl.vehicle.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
@@ -87,47 +88,48 @@ class MissionMetrics:
     seed: int
     phase: str
     reason: str
-    landed: bool
-    success: bool
-    warning_1m: bool
-    warning_1_5m: bool
-    people_within_1m: int
-    people_within_1_5m: int
-    touchdown_nearest_m: float
-    zone_area_m2: float
-    nearest_person_mean_m: float
-    nearest_person_min_m: float
-    zone_iou: float
-    time_to_land_s: float
-    path_length_m: float
-    reselections: int
-    aborts: int
-    failsafes: int
-    touchdown_north_m: float
-    touchdown_east_m: float
-    obstacle_distance_m: float
+    landed: bool = result_field(Summary.RATE, order=1)
+    success: bool = result_field(Summary.RATE, order=0)
+    warning_1m: bool = result_field(Summary.RATE, order=2)
+    warning_1_5m: bool = result_field(Summary.RATE, order=3)
+    people_within_1m: int = result_field(Summary.MEAN, order=10)
+    people_within_1_5m: int = result_field(Summary.MEAN, order=11)
+    touchdown_nearest_m: float = result_field(Summary.MEAN, order=3)
+    zone_area_m2: float = result_field(Summary.MEAN, order=0)
+    nearest_person_mean_m: float = result_field(Summary.MEAN, order=1)
+    nearest_person_min_m: float = result_field(Summary.MEAN, order=2)
+    zone_iou: float = result_field(Summary.MEAN, order=4)
+    time_to_land_s: float = result_field(Summary.MEAN, order=5)
+    path_length_m: float = result_field(Summary.MEAN, order=6)
+    reselections: int = result_field(Summary.MEAN, order=7)
+    aborts: int = result_field(Summary.MEAN, order=8)
+    failsafes: int = result_field(Summary.MEAN, order=9)
+    touchdown_north_m: float = result_field()
+    touchdown_east_m: float = result_field()
+    obstacle_distance_m: float = result_field(since=3)
     """Horizontal distance from the touchdown point to the nearest solid park object's outline seen from above (tree
     crown, car, bench, bin, bush, pole), 0 inside it; NaN without a touchdown."""
-    obstacle_kind: str | None
+    obstacle_kind: str | None = result_field(since=3)
     """That object's kind."""
-    touched_obstacle: bool
+    touched_obstacle: bool = result_field(Summary.RATE, order=4, since=3)
     """The vehicle's footprint (``vehicle_radius_m``) overlapped that outline at touchdown: a real vehicle would have
     hit it. Not part of ``success``, which is about people (the issue's definition)."""
-    people_cells: list[list[int]]
+    people_cells: list[list[int]] | None = result_field(optional=True)
     """People at touchdown (or at the companion's last record) on a 1 m grid over [-20, 20) m: ``[row, col, count]``
-    of the occupied cells (row from north -20 m, col from east -20 m), for the report's touchdown-over-density plots."""
-    hold_cause: str | None
+    of the occupied cells (row from north -20 m, col from east -20 m), for the report's touchdown-over-density plots;
+    None in a result restored from ``results.csv``, which does not hold them."""
+    hold_cause: str | None = result_field(since=5)
     """Why a mission without a touchdown ended (:data:`HOLD_CAUSES`); None after a touchdown."""
-    zones_chosen: int
+    zones_chosen: int = result_field(since=5)
     """How many times the companion chose a landing zone: its first commitment, each commitment after a release, and
     each switch to a rival (``reselections`` counts changes of the target's track id, which a zone that the tracker
     lost and found again also makes)."""
-    overflown_above_gate: bool = False
+    overflown_above_gate: bool = result_field(since=6, default=False)
     """A landing (False without a touchdown) where a person's body came within the vehicle's footprint under it
     during the final descent but before the walker gate let it go: the vehicle hovering at the gate, 3 m above the
     heads, while someone walked under it, or descending towards it. Not part of ``success``, which looks at the
     landing descent (:data:`METRICS_VERSION` 6); ``nearest_person_min_m`` still covers the whole final descent."""
-    metrics_version: int = METRICS_VERSION
+    metrics_version: int = result_field(compared=False, default=METRICS_VERSION)
     """The definitions these were computed with (:data:`METRICS_VERSION`)."""
 
     def to_json(self) -> dict[str, Any]:

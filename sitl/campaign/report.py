@@ -22,8 +22,10 @@ from typing import Any
 import numpy as np
 
 from companion.app.recorder import read_log
-from sitl.campaign.metrics import HOLD_CAUSES, park_layout, stale, with_obstacles
+from sitl.campaign.metric_fields import Summary, fields_of
+from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, park_layout, stale, with_obstacles
 from sitl.campaign.provenance import Segment, SegmentLog, segments
+from sitl.campaign.record import FlownMission, MissionFailure, flown_missions, parse_results
 from sitl.campaign.spec import CampaignSpec
 from sitl.campaign.stats import (
     Estimate,
@@ -54,71 +56,58 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float | None, flo
 # experimental section): its success percentages are counts of 100.
 PAPER_RUNS_PER_ROW = 100
 
-MEANS = (
-    "zone_area_m2",
-    "nearest_person_mean_m",
-    "nearest_person_min_m",
-    "touchdown_nearest_m",
-    "zone_iou",
-    "time_to_land_s",
-    "path_length_m",
-    "reselections",
-    "aborts",
-    "failsafes",
-    "people_within_1m",
-    "people_within_1_5m",
-)
-RATES = ("success", "landed", "warning_1m", "warning_1_5m", "touched_obstacle")
+MEANS = fields_of(MissionMetrics, Summary.MEAN)
+"""The metrics a cell reports as means with a bootstrap interval, in the report's order (their field metadata)."""
+RATES = fields_of(MissionMetrics, Summary.RATE)
+"""The metrics a cell reports as rates with Wilson's interval (their field metadata)."""
 
 
-def _values(rows: list[dict[str, Any]], key: str) -> list[float]:
-    return [float(r[key]) for r in rows if r.get(key) is not None]
+def _values(rows: list[FlownMission], key: str) -> list[float]:
+    """A mean's values: the missions where it applies (NaN where it does not)."""
+    values = (float(getattr(r, key)) for r in rows)
+    return [v for v in values if math.isfinite(v)]
 
 
-def cell_summary(rows: list[dict[str, Any]], errors: int, seed: int) -> dict[str, Any]:
+def cell_summary(rows: list[FlownMission], errors: int, seed: int) -> dict[str, Any]:
     """Every metric of one cell with its interval, and its holds counted by cause."""
     out: dict[str, Any] = {"missions": len(rows), "errors": errors}
     for key in RATES:
-        out[key] = asdict(wilson(sum(1 for r in rows if r[key]), len(rows)))
+        out[key] = asdict(wilson(sum(1 for r in rows if getattr(r, key)), len(rows)))
     for k, key in enumerate(MEANS):
         out[key] = asdict(bootstrap_mean(_values(rows, key), seed + k))
-    out["holds"] = dict(sorted(collections.Counter(hold_kind(r) for r in rows if not r["landed"]).items()))
-    out["landed_unsafe"] = sum(1 for r in rows if r["landed"] and not r["success"])
-    out["overflown_above_gate"] = sum(1 for r in rows if r.get("overflown_above_gate"))
+    out["holds"] = dict(sorted(collections.Counter(hold_kind(r) for r in rows if not r.landed).items()))
+    out["landed_unsafe"] = sum(1 for r in rows if r.landed and not r.success)
+    out["overflown_above_gate"] = sum(1 for r in rows if r.overflown_above_gate)
     return out
 
 
-def hold_kind(result: dict[str, Any]) -> str:
+def hold_kind(result: FlownMission) -> str:
     """A hold's cause (metrics version 5: :func:`sitl.campaign.metrics.hold_cause`); for an earlier result, its
     final reason, marked as such."""
-    cause = result.get("hold_cause")
-    if cause is not None:
-        return str(cause)
-    reason = str(result.get("reason", ""))
-    return f"(before version 5) {reason.split(':')[0].split(';')[0]}"
+    if result.hold_cause is not None:
+        return result.hold_cause
+    return f"(before version 5) {result.reason.split(':')[0].split(';')[0]}"
 
 
 def against_previous(
-    spec: CampaignSpec, results: list[dict[str, Any]], previous: list[dict[str, Any]]
+    spec: CampaignSpec, results: list[FlownMission], previous: list[FlownMission]
 ) -> list[dict[str, Any]]:
     """Each cell's success against an earlier flight of the same spec, mission by mission (the same scenes and start
     poses): exact two-sided McNemar test, Holm-adjusted over the cells."""
-    now = {r["mission_id"]: r for r in results if "error" not in r}
-    before = {r["mission_id"]: r for r in previous if "error" not in r}
+    now = {r.mission_id: r for r in results}
+    before = {r.mission_id: r for r in previous}
     rows: list[dict[str, Any]] = []
     tests = []
     for condition, strategy in spec.cell_names():
-        ids = sorted(
-            m for m in set(now) & set(before) if now[m]["condition"] == condition and now[m]["strategy"] == strategy
-        )
-        test = mcnemar_exact([bool(before[m]["success"]) for m in ids], [bool(now[m]["success"]) for m in ids])
+        ids = sorted(m for m in set(now) & set(before) if now[m].condition == condition and now[m].strategy == strategy)
+        test = mcnemar_exact([before[m].success for m in ids], [now[m].success for m in ids])
         tests.append(test)
         rows.append(
             {
                 "cell": f"{condition}/{strategy}",
                 "pairs": test.n_pairs,
-                "before": sum(bool(before[m]["success"]) for m in ids),
-                "now": sum(bool(now[m]["success"]) for m in ids),
+                "before": sum(before[m].success for m in ids),
+                "now": sum(now[m].success for m in ids),
                 "only_before": test.only_a,
                 "only_now": test.only_b,
                 "p": test.p_value,
@@ -127,6 +116,11 @@ def against_previous(
     for row, p_holm in zip(rows, holm([t.p_value for t in tests]), strict=True):
         row["p_holm"] = p_holm
     return rows
+
+
+def _flown(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[FlownMission]:
+    """The flown missions of stored result lines, completed (:func:`completed`) and read as typed records."""
+    return flown_missions(parse_results(completed(spec, results)))
 
 
 def completed(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -164,25 +158,26 @@ def build_report(
     ``previous``, a name and the results of an earlier flight of the same spec, adds a paired comparison with it.
     """
     results = completed(spec, results)
-    good = [r for r in results if "error" not in r]
+    records = parse_results(results)
+    good = flown_missions(records)
+    failed = [r for r in records if isinstance(r, MissionFailure)]
     policies = spec.policies()
     cells: dict[str, Any] = {}
     for k, (condition, strategy) in enumerate(spec.cell_names()):
-        rows = [r for r in good if r["condition"] == condition and r["strategy"] == strategy]
-        errors = sum(1 for r in results if "error" in r and r["condition"] == condition and r["strategy"] == strategy)
+        rows = [r for r in good if r.condition == condition and r.strategy == strategy]
+        errors = sum(1 for r in failed if r.condition == condition and r.strategy == strategy)
         cells[f"{condition}/{strategy}"] = cell_summary(rows, errors, seed=1000 * k)
     paired = []
     for condition in dict.fromkeys(c for c, _ in spec.cell_names()):
         strategies = [s for c, s in spec.cell_names() if c == condition]
         for a, b in itertools.combinations(strategies, 2):
-            by_run_a = {r["run"]: r for r in good if r["condition"] == condition and r["strategy"] == a}
-            by_run_b = {r["run"]: r for r in good if r["condition"] == condition and r["strategy"] == b}
+            by_run_a = {r.run: r for r in good if r.condition == condition and r.strategy == a}
+            by_run_b = {r.run: r for r in good if r.condition == condition and r.strategy == b}
             runs = sorted(set(by_run_a) & set(by_run_b))
-            test = mcnemar_exact([by_run_a[i]["success"] for i in runs], [by_run_b[i]["success"] for i in runs])
-            nearest = [(by_run_a[i]["nearest_person_mean_m"], by_run_b[i]["nearest_person_mean_m"]) for i in runs]
+            test = mcnemar_exact([by_run_a[i].success for i in runs], [by_run_b[i].success for i in runs])
             diff = paired_mean_difference(
-                [x if x is not None else math.nan for x, _ in nearest],
-                [y if y is not None else math.nan for _, y in nearest],
+                [by_run_a[i].nearest_person_mean_m for i in runs],
+                [by_run_b[i].nearest_person_mean_m for i in runs],
                 seed=7,
             )
             paired.append(
@@ -205,13 +200,16 @@ def build_report(
         "campaign": spec.name,
         "missions": len(results),
         "errors": len(results) - len(good),
-        "stale": sum(stale(r, policies.get(r["mission_id"])) for r in good),
+        "stale": sum(stale(r, policies.get(r["mission_id"])) for r in results if "error" not in r),
         "cells": cells,
         "paired": paired,
         "paper": against_paper,
         "previous": None
         if previous is None
-        else {"name": previous[0], "cells": against_previous(spec, good, completed(spec, previous[1]))},
+        else {
+            "name": previous[0],
+            "cells": against_previous(spec, good, _flown(spec, previous[1])),
+        },
         "flown": {
             "wall_s": wall_s,
             "missions_per_hour": 3600.0 * len(good) / wall_s if wall_s > 0 else None,
@@ -495,11 +493,11 @@ def _fmt(value: float | None, digits: int = 2) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
-def people_density(rows: list[dict[str, Any]]) -> np.ndarray:
+def people_density(rows: list[FlownMission]) -> np.ndarray:
     """People per mission on the report's 1 m grid, shape (40, 40) (row: north from -20 m, col: east from -20 m): the
     mean of the ``people_cells`` maps of the results that carry one (a result restored from ``results.csv``, which
     does not hold them, is left out rather than counted as an empty park); zeros when none does."""
-    mapped = [r["people_cells"] for r in rows if "people_cells" in r]
+    mapped = [r.people_cells for r in rows if r.people_cells is not None]
     density = np.zeros((40, 40))
     for cells in mapped:
         for row, col, count in cells:
@@ -507,7 +505,7 @@ def people_density(rows: list[dict[str, Any]]) -> np.ndarray:
     return density / max(len(mapped), 1)
 
 
-def _plots(spec: CampaignSpec, good: list[dict[str, Any]], cells: dict[str, Any], out_dir: Path) -> list[str]:
+def _plots(spec: CampaignSpec, good: list[FlownMission], cells: dict[str, Any], out_dir: Path) -> list[str]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -539,9 +537,9 @@ def _plots(spec: CampaignSpec, good: list[dict[str, Any]], cells: dict[str, Any]
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(names)), 4))
     data = [
         [
-            r["nearest_person_mean_m"]
+            r.nearest_person_mean_m
             for r in good
-            if f"{r['condition']}/{r['strategy']}" == n and r["nearest_person_mean_m"] is not None
+            if f"{r.condition}/{r.strategy}" == n and math.isfinite(r.nearest_person_mean_m)
         ]
         or [math.nan]
         for n in names
@@ -555,20 +553,13 @@ def _plots(spec: CampaignSpec, good: list[dict[str, Any]], cells: dict[str, Any]
     files.append("nearest_person.png")
 
     for condition in dict.fromkeys(c for c, _ in spec.cell_names()):
-        rows = [r for r in good if r["condition"] == condition]
+        rows = [r for r in good if r.condition == condition]
         fig, ax = plt.subplots(figsize=(5.5, 5))
         ax.imshow(people_density(rows), origin="lower", extent=(-20, 20, -20, 20), cmap="Greys")
         for k, strategy in enumerate(dict.fromkeys(s for c, s in spec.cell_names() if c == condition)):
-            points = [
-                (r["touchdown_east_m"], r["touchdown_north_m"])
-                for r in rows
-                if r["strategy"] == strategy and r["touchdown_north_m"] is not None
-            ]
-            marks = [
-                "o" if r["success"] else "x"
-                for r in rows
-                if r["strategy"] == strategy and r["touchdown_north_m"] is not None
-            ]
+            touched = [r for r in rows if r.strategy == strategy and math.isfinite(r.touchdown_north_m)]
+            points = [(r.touchdown_east_m, r.touchdown_north_m) for r in touched]
+            marks = ["o" if r.success else "x" for r in touched]
             for (x, y), mark in zip(points, marks, strict=True):
                 ax.plot(x, y, mark, color=f"C{k}", markersize=4)
             ax.plot([], [], "o", color=f"C{k}", label=strategy)

@@ -127,8 +127,10 @@ def _stop_workers(pool: concurrent.futures.ProcessPoolExecutor) -> None:
 
 
 def read_results(path: Path) -> list[dict[str, Any]]:
-    """The missions of a campaign folder's ``results.jsonl``, one per mission (a later line for the same mission, a
-    re-flown error, supersedes the earlier one), in file order; a torn last line is skipped."""
+    """The missions of a campaign folder's ``results.jsonl`` as stored lines, one per mission (a later line for the same
+    mission, a re-flown error, supersedes the earlier one), in file order; a torn last line is skipped. What resumes a
+    campaign and completes an older result reads these; the report, the gate and the benchmark read them typed
+    (:func:`sitl.campaign.record.parse_results`)."""
     latest: dict[str, dict[str, Any]] = {}
     for record in read_log(path) if path.is_file() else []:
         latest.pop(record["mission_id"], None)
