@@ -203,3 +203,15 @@ def test_every_error_the_project_defines_derives_from_one_root() -> None:
                     if isinstance(cls, type) and issubclass(cls, BaseException) and not issubclass(cls, SlzError):
                         outside.append(f"{name}.{node.name}")
     assert outside == []
+
+
+@pytest.mark.unit
+def test_no_class_in_companion_or_sitl_is_over_350_lines() -> None:
+    """Classes that grew back are split into the parts their state shows (issue 54): a line budget keeps it so."""
+    longer = [
+        f"{name}.{node.name}: {node.end_lineno - node.lineno + 1} lines"
+        for name, path in sorted(module_files().items())
+        for node in ast.walk(ast.parse(path.read_text(), str(path)))
+        if isinstance(node, ast.ClassDef) and node.end_lineno is not None and node.end_lineno - node.lineno + 1 > 350
+    ]
+    assert longer == []

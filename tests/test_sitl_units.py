@@ -179,7 +179,7 @@ def test_rc_loss_in_position_mode_returns_home() -> None:
     cmd.update(0.0, grounded(), 0.0)
     cmd.set_mode(FlightMode.POSCTL)
     cmd.arm()
-    cmd.landed_state = LandedState.IN_AIR
+    cmd.land_detector.state = LandedState.IN_AIR
     cmd.set_rc_lost(True)
     cmd.update(0.3, airborne(), 0.5)
     assert mode_of(cmd) is FlightMode.POSCTL  # COM_RC_LOSS_T = 0.5 s
@@ -192,13 +192,13 @@ def test_disarm_in_the_air_is_denied_and_landing_disarms() -> None:
     cmd = commander()
     cmd.update(0.0, grounded(), 0.0)
     cmd.arm()
-    cmd.landed_state = LandedState.IN_AIR
+    cmd.land_detector.state = LandedState.IN_AIR
     assert cmd.disarm() is MavResult.DENIED
     assert cmd.disarm(force=True) is MavResult.ACCEPTED
     cmd = commander()
     cmd.update(0.0, grounded(), 0.0)
     cmd.arm()
-    cmd.landed_state = LandedState.LANDING
+    cmd.land_detector.state = LandedState.LANDING
     cmd.set_mode(FlightMode.AUTO_LAND)
     touching = VehicleState(position_ned_m=np.array([0.0, 0.0, -0.12]), on_ground=True)
     t = 10.0

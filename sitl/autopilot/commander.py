@@ -116,10 +116,6 @@ class Commander:
         """The land detector's state."""
         return self.land_detector.state
 
-    @landed_state.setter
-    def landed_state(self, value: LandedState) -> None:
-        self.land_detector.state = value
-
     # -- helpers ---------------------------------------------------------------------------------------------
     def event(self, text: str, severity: Severity = Severity.INFO) -> None:
         logger.info(text)

@@ -69,7 +69,6 @@ class NavigatorHost(Protocol):
     params: ParameterStore
     home_ned_m: F64Array
     armed: bool
-    landed_state: LandedState
     mode: FlightMode
     now_s: float
     hold_ned_m: F64Array
@@ -79,6 +78,11 @@ class NavigatorHost(Protocol):
     """Braking to a stop before holding (a go-to ends it: the hold point is the target)."""
     changed: bool
     """Set when ground stations must hear of a change at once."""
+
+    @property
+    def landed_state(self) -> LandedState:
+        """The land detector's state (read only)."""
+        ...
 
     def position(self) -> F64Array:
         """The vehicle's position, local NED (m), a copy."""

@@ -59,6 +59,15 @@ class SitlError(SlzError):
         self.what = what
 
 
+def describe(c: SitlConfig) -> str:
+    """One line with a SITL's endpoints."""
+    return (
+        f"SITL instance {c.instance} ready: sysid {c.system_id}, api udp {c.bind_address}:{c.api_port_local} -> "
+        f"{c.api_port_remote}, gcs {c.gcs_port_local} -> {c.gcs_port_remote}, control {c.control_port}, "
+        f"dynamics {c.dynamics.value}, speed {c.speed_factor or 'max'}{', lockstep' if c.lockstep else ''}"
+    )
+
+
 class SitlVehicle:
     """One simulated PX4 quadrotor. Build it, then :meth:`run` until shutdown; :meth:`close` frees the ports."""
 
@@ -186,18 +195,9 @@ class SitlVehicle:
             self.truth.close()
             self.truth = None
 
-    def describe(self) -> str:
-        """One line with the endpoints."""
-        c = self.config
-        return (
-            f"SITL instance {c.instance} ready: sysid {c.system_id}, api udp {c.bind_address}:{c.api_port_local} -> "
-            f"{c.api_port_remote}, gcs {c.gcs_port_local} -> {c.gcs_port_remote}, control {c.control_port}, "
-            f"dynamics {c.dynamics.value}, speed {c.speed_factor or 'max'}{', lockstep' if c.lockstep else ''}"
-        )
-
     def run(self) -> int:
         """Run until shutdown, ``duration_s`` or a lockstep timeout; returns the exit code."""
-        logger.info(self.describe())
+        logger.info(describe(self.config))
         assert self.control is not None
         sockets: list[Any] = [*self.links, self.control, *([self.camera] if self.camera is not None else [])]
         fast = self.config.speed_factor == 0 or self.config.speed_factor > 1
