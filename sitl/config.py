@@ -103,6 +103,21 @@ class SigningConfig(StrictModel):
         return bytes.fromhex(self.key_hex)
 
 
+class BatteryConfig(StrictModel):
+    """The simulated pack (drained by the motors' thrust; PX4's BAT_* thresholds and COM_LOW_BAT_ACT act on it)."""
+
+    capacity_mah: float = Field(
+        default=5000.0, ge=100.0, le=100_000.0, description="Full capacity (a 4S 5000 mAh pack hovers about 20 min)."
+    )
+    initial_fraction: float = Field(
+        default=1.0,
+        gt=0.0,
+        le=1.0,
+        description="Charge at the start, a fraction of the capacity (a campaign makes "
+        "energy scarce with a smaller pack or a partly used one).",
+    )
+
+
 class SitlConfig(StrictModel):
     """One simulated vehicle. Ports follow PX4 SITL and shift with ``instance``."""
 
@@ -148,6 +163,7 @@ class SitlConfig(StrictModel):
     )
     camera: SitlCameraConfig = Field(default_factory=SitlCameraConfig)
     faults: list[FaultConfig] = Field(default_factory=list, description="Injected at their simulated times.")
+    battery: BatteryConfig = Field(default_factory=BatteryConfig)
     scenario: ScenarioConfig = Field(default_factory=ScenarioConfig)
 
     @field_validator("params")

@@ -52,6 +52,7 @@ from companion.app.supervision import Supervision
 from companion.app.task_group import run_until_first_ends
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import Pose, polygon_centroid_ne_m
+from companion.guidance.energy import EnergyBudget
 from companion.guidance.footprint import nearest_occupied_m
 from companion.guidance.geofence import Geofence, latlon_to_ne_m
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
@@ -142,6 +143,7 @@ class FlightApp:
         self.start_sequence = StartSequence(config.start, self.dry_run)
         self._last_frame_t_s = -math.inf  # capture time of the newest processed frame (vehicle clock)
         self.supervision = Supervision(config.supervision.stay_after_failsafe, wall_limit_s, wall_clock)
+        self.energy = EnergyBudget(config.guidance.energy) if config.guidance.energy.enabled else None
         self.ending = RunEnd(self.supervision, recorder, self.outcome, self.done)
 
     def _new_guidance(self) -> LandingGuidance:
@@ -263,9 +265,11 @@ class FlightApp:
             self.outcome.touchdown_t_s = state.t_s
             await self.apply(self.guidance.landed(state.t_s), "landed", state)
             return
-        used_up = self.guidance.time_used_up(state)
+        low = self.energy.check(state, status) if self.energy is not None else None
+        used_up = self.guidance.time_used_up(state, None if low is None else low.reason())
         if used_up is not None:
-            await self.apply(used_up, "time", state)
+            inputs: dict[str, Any] = {} if low is None else {"reason": low.reason(), "remaining": low.remaining}
+            await self.apply(used_up, "time" if low is None else "energy", state, **inputs)
             return
         silent_s = state.t_s - self._last_frame_t_s
         decision = self.guidance.perception_silent(state, silent_s)

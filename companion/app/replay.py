@@ -218,6 +218,7 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
         "silence": lambda: guidance.perception_silent(state, float(inputs["silent_s"])),
         "landed": lambda: guidance.landed(state.t_s),
         "time": lambda: guidance.time_used_up(state),
+        "energy": lambda: guidance.time_used_up(state, str(inputs["reason"])),
         "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
         "limit": lambda: guidance.give_up(state, str(inputs["reason"])),
         "stop": lambda: guidance.give_up(state, str(inputs["reason"])),

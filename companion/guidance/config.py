@@ -23,6 +23,39 @@ class FailsafeAction(str, enum.Enum):
     """Return to launch."""
 
 
+class EnergyConfig(StrictModel):
+    """The mission config's ``guidance.energy``: the search's budget from the battery (off by default)."""
+
+    enabled: bool = Field(default=False, description="Budget the search by the battery (needs capacity_mah).")
+    capacity_mah: float | None = Field(
+        default=None, gt=0.0, le=1_000_000.0, description="The pack's full capacity (PX4: BAT1_CAPACITY)."
+    )
+    reserve_fraction: float = Field(
+        default=0.25,
+        ge=0.0,
+        lt=1.0,
+        description="Charge never planned against: the vehicle is home and down with at least this much left. Keep "
+        "it above the autopilot's critical threshold (PX4: BAT_CRIT_THR), so its failsafe never has to act.",
+    )
+    return_speed_mps: float = Field(default=5.0, gt=0.0, le=30.0, description="Horizontal speed home (RTL's).")
+    descent_speed_mps: float = Field(default=1.0, gt=0.0, le=10.0, description="Descent speed of the landing.")
+    margin: float = Field(default=1.3, ge=1.0, le=5.0, description="Factor on the time home and down.")
+    current_smoothing_s: float = Field(
+        default=10.0, gt=0.0, le=300.0, description="Time constant of the current's average (vehicle seconds)."
+    )
+    action: FailsafeAction = Field(
+        default=FailsafeAction.RETURN, description="What the budget's end asks of the autopilot: return or hold."
+    )
+
+    @model_validator(mode="after")
+    def _complete(self) -> EnergyConfig:
+        if self.enabled and self.capacity_mah is None:
+            raise ValueError("capacity_mah: required when the energy budget is enabled (the pack's mAh)")
+        if self.action is FailsafeAction.LAND:
+            raise ValueError("action: must be return or hold (got land): a landing the map has not chosen")
+        return self
+
+
 class GuidanceConfig(StrictModel):
     """Landing logic parameters (metres, seconds, vehicle clock)."""
 
@@ -113,6 +146,10 @@ class GuidanceConfig(StrictModel):
     walkers: WalkerWatchConfig = Field(
         default_factory=WalkerWatchConfig,
         description="A descent waits above the blind last metres while someone walks towards its landing point.",
+    )
+    energy: EnergyConfig = Field(
+        default_factory=EnergyConfig,
+        description="The search's budget from the battery (companion/guidance/energy.py); off by default.",
     )
     blind_landing: bool = Field(
         default=False,

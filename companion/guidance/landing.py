@@ -403,10 +403,13 @@ class LandingGuidance:
         n, e, alt = locked.north_m, locked.east_m, step.goal_altitude_m
         return self._setpoint(state, LandingPhase.DESCENT, locked, step.reason, n, e, alt, step.event, step.cause)
 
-    def time_used_up(self, state: VehicleState) -> Decision | None:
-        """The failsafe (hold) once ``mission_time_limit_s`` has passed since :meth:`start` without a landing."""
+    def time_used_up(self, state: VehicleState, energy_low: str | None = None) -> Decision | None:
+        """The last resort once ``mission_time_limit_s`` has passed since :meth:`start` without a landing, or the energy
+        budget's action once it says ``energy_low`` (why, in words: :mod:`companion.guidance.energy`)."""
         if self._started_s is None or self.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
             return None
+        if energy_low is not None:
+            return self._failsafe(state, energy_low, DecisionEvent.ENERGY_LOW, self.config.energy.action)
         if state.t_s - self._started_s < self.config.mission_time_limit_s:
             return None
         limit = f"no landing within {self.config.mission_time_limit_s:g} s of the start"

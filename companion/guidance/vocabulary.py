@@ -38,6 +38,8 @@ class DecisionEvent(str, enum.Enum):
     """A descent refused its point with no re-selection left: the last resort (``cause``: the last refusal's)."""
     TIME_LIMIT = "time_limit"
     """The mission time limit came without a landing: the last resort."""
+    ENERGY_LOW = "energy_low"
+    """The energy budget no longer covers getting home and down: its action (return or hold)."""
     LIMIT = "limit"
     """A limit of the program (its wall limit, a stop) ended the mission: the last resort."""
     PERCEPTION_HOLD = "perception_hold"

@@ -65,6 +65,12 @@ class VehicleStatus:
     offboard_entries: int = 0
     """Times the telemetry reported the autopilot entering OFFBOARD: a stay that the next report already ended (a
     pilot who switched away at once) still counts, where ``mode`` shows only the latest."""
+    battery_remaining: float | None = None
+    """The pack's remaining charge, a fraction (None until reported)."""
+    battery_current_a: float | None = None
+    """The current it supplies, amperes (None until reported)."""
+    home_ne_m: tuple[float, float] | None = None
+    """Home, local NED north and east (m), as the autopilot reports it (None until reported)."""
 
 
 class VehicleLink(Protocol):

@@ -100,6 +100,8 @@ class MavsdkVehicleLink:
             asyncio.create_task(self._follow(self._telemetry.subscribe_in_air(), self._on_in_air)),
             asyncio.create_task(self._follow(self._telemetry.subscribe_landed_state(), self._on_landed_state)),
             asyncio.create_task(self._follow(self._telemetry.subscribe_health(), self._on_health)),
+            asyncio.create_task(self._follow(self._telemetry.subscribe_battery(), self._on_battery)),
+            asyncio.create_task(self._follow(self._direct.subscribe_message("HOME_POSITION"), self._on_home)),
         ]
 
     async def _follow(self, stream: AsyncIterator[Any], handle: Callable[[Any], None]) -> None:
@@ -176,6 +178,24 @@ class MavsdkVehicleLink:
     def _on_health(self, health: Any) -> None:
         self.status.armable = bool(health.is_armable)
         self.status.local_position_ok = bool(health.is_local_position_ok)
+
+    def _on_battery(self, battery: Any) -> None:
+        remaining, current = float(battery.remaining_percent), float(battery.current_battery_a)
+        self.status.battery_remaining = remaining / 100.0 if math.isfinite(remaining) and remaining >= 0 else None
+        self.status.battery_current_a = current if math.isfinite(current) and current >= 0 else None
+        self._count("battery")
+
+    def _on_home(self, message: Any) -> None:
+        f = self._fields(message)
+        try:
+            home = (float(f["x"]), float(f["y"])) if f is not None else None
+        except (KeyError, ValueError, TypeError):
+            home = None
+        if home is None or not all(math.isfinite(v) for v in home):
+            self.dropped_samples += 1
+            return
+        self.status.home_ne_m = home
+        self._count("HOME_POSITION")
 
     async def _call(self, what: str, action: Callable[[], Awaitable[Any]], timeout_s: float = 10.0) -> None:
         try:

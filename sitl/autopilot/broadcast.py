@@ -7,13 +7,13 @@ from __future__ import annotations
 import math
 import time
 
+from sitl.autopilot.battery import Battery
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.status import Severity
 from sitl.autopilot.telemetry import (
     API_RATES_HZ,
     GCS_RATES_HZ,
-    Battery,
     StreamSchedule,
     TelemetryBuilder,
     statustext_messages,

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.geometry import inside_polygon
+from sitl.autopilot.arming_checks import prearm_problem
+from sitl.autopilot.battery import BatteryLevel, failsafe_action
 from sitl.autopilot.controller import Setpoint
 from sitl.autopilot.land_detector import LOW_THRUST_SHARE, TOUCHING_BELOW_MPS, LandDetector, LandEvent
 from sitl.autopilot.modes import FlightMode
@@ -108,6 +110,7 @@ class Commander:
         self.takeoff_altitude_m = float(params["MIS_TAKEOFF_ALT"])
         self.changed = False  # set on every arm/mode change, cleared by whoever announces it
         self.fence = Fence()
+        self.battery_level = BatteryLevel.OK
         self._fence_breached = False
         self.navigator = Navigator(self)  # mission, orbit, go-to, return home
 
@@ -158,20 +161,8 @@ class Commander:
         return MavResult.ACCEPTED
 
     def prearm_problem(self) -> str | None:
-        """Why arming would be denied now, or None when the pre-arm checks pass."""
-        if self.landed_state is not LandedState.ON_GROUND:
-            return "not landed"
-        if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL, FlightMode.ORBIT):
-            return f"mode {self.mode.px4_name} is not armable"
-        if self.mode is FlightMode.AUTO_MISSION and not self.navigator.mission:
-            return "no mission"
-        if self._outside_fence():
-            return "vehicle outside the geofence"
-        if self.mode is FlightMode.OFFBOARD and not self.offboard_stream_ok():
-            return "no offboard setpoints"
-        if self.rc_lost and self.mode is FlightMode.POSCTL:
-            return "no RC"
-        return None
+        """Why arming would be denied now, or None (:mod:`sitl.autopilot.arming_checks`)."""
+        return prearm_problem(self)
 
     def disarm(self, force: bool = False, reason: str = "Disarmed") -> MavResult:
         """Disarm; refused in the air unless forced (it would drop the vehicle)."""
@@ -322,7 +313,7 @@ class Commander:
         elif event is LandEvent.DISARM_DUE:
             self.disarm(reason="Disarmed after landing")
 
-    def _outside_fence(self) -> bool:
+    def outside_fence(self) -> bool:
         """Outside the uploaded fence, or beyond GF_MAX_HOR_DIST / GF_MAX_VER_DIST from home (0: no limit)."""
         position = self.position()
         offset = position - self.home_ned_m
@@ -353,7 +344,7 @@ class Commander:
         if not self.fence_limited or self.landed_state is LandedState.ON_GROUND:
             self._fence_breached = False
             return
-        outside = self._outside_fence()
+        outside = self.outside_fence()
         if outside and not self._fence_breached:
             action = GF_ACTIONS.get(int(self.params["GF_ACTION"]))
             if action == "warn":
@@ -374,6 +365,14 @@ class Commander:
             action = int(self.params["NAV_RCL_ACT"])
             if exposed and not excepted and action > 0 and self.failsafe != "RC lost":
                 self._trigger_failsafe("RC lost", RCL_ACTIONS.get(action, "land"))
+
+    def battery_failsafe(self, level: BatteryLevel) -> None:
+        """PX4's battery failsafe at a new, worse level: a warning, then the action ``COM_LOW_BAT_ACT`` asks."""
+        self.battery_level = level
+        action = failsafe_action(level, int(self.params["COM_LOW_BAT_ACT"]))
+        self.event(f"Battery {level.name.lower()}", Severity.CRITICAL if level > BatteryLevel.LOW else Severity.WARNING)
+        if action is not None and self.armed and self.landed_state is not LandedState.ON_GROUND:
+            self._trigger_failsafe(f"battery {level.name.lower()}", action)
 
     def _trigger_failsafe(self, reason: str, name: str) -> None:
         """Fly the failsafe action ``name`` (land, hold or rtl; hold on the ground) for ``reason``."""

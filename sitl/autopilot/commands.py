@@ -15,6 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl.autopilot.battery import Battery
 from sitl.autopilot.commander import FORCE_MAGIC, Commander
 from sitl.autopilot.controller import CascadedController
 from sitl.autopilot.mavlink_link import MavlinkLink
@@ -23,7 +24,7 @@ from sitl.autopilot.modes import FlightMode, MainMode
 from sitl.autopilot.navigator import Orbit
 from sitl.autopilot.params import ParameterStore
 from sitl.autopilot.status import LandedState, MavResult, Severity
-from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT, Battery, StreamSchedule, TelemetryBuilder
+from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT, StreamSchedule, TelemetryBuilder
 from sitl.config import SitlConfig
 from sitl.dynamics.base import Dynamics
 from sitl.geodesy import geodetic_to_ned

@@ -17,6 +17,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.vehicle.statustext import statustext_chunks
+from sitl.autopilot.battery import Battery
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import Setpoint
 from sitl.autopilot.modes import FlightMode
@@ -152,30 +153,6 @@ class Origin:
     lat_deg: float
     lon_deg: float
     alt_m: float
-
-
-class Battery:
-    """A 4S pack drained by thrust: voltage and remaining fraction."""
-
-    def __init__(self, capacity_mah: float = 5000.0) -> None:
-        self.capacity_mah = capacity_mah
-        self.used_mah = 0.0
-        self.current_a = 0.0
-
-    def update(self, collective: float, dt_s: float, armed: bool) -> None:
-        """Draw current for ``dt_s`` at a collective thrust in [0, 1]."""
-        self.current_a = (0.5 + 40.0 * collective**1.5) if armed else 0.3
-        self.used_mah += self.current_a * dt_s / 3.6
-
-    @property
-    def remaining(self) -> float:
-        """Fraction of capacity left, [0, 1]."""
-        return max(0.0, 1.0 - self.used_mah / self.capacity_mah)
-
-    @property
-    def voltage_v(self) -> float:
-        """Pack voltage under load."""
-        return 4 * (3.5 + 0.7 * self.remaining) - 0.01 * self.current_a
 
 
 class StreamSchedule:
@@ -382,6 +359,8 @@ class TelemetryBuilder:
             int(bat.used_mah),
             -1,
             int(bat.remaining * 100),
+            round(min(bat.time_remaining_s, 2**31 - 1)),
+            int(cmd.battery_level),  # MAV_BATTERY_CHARGE_STATE: OK, LOW, CRITICAL, EMERGENCY
         )
 
     def _home(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:

@@ -185,6 +185,7 @@ HOLD_CAUSES = {
     "again",
     "perception silent": "no processed frame for the failsafe's time",
     "pilot took over": "the flight mode left offboard without the companion",
+    "energy budget": "the battery no longer covered the way home and down with its reserve (guidance.energy)",
     "other": "anything else (the log's reason is in the result)",
 }
 """The kinds of :func:`hold_cause`, each with what it means."""
@@ -218,6 +219,8 @@ def hold_cause(decisions: list[DecisionRecord]) -> str:
         return "perception silent"
     if event is DecisionEvent.PILOT_TOOK_OVER:
         return "pilot took over"
+    if event is DecisionEvent.ENERGY_LOW:
+        return "energy budget"
     if event is not DecisionEvent.TIME_LIMIT:
         return "other"
     flying = [d for d in decisions if d.source == "frame"]

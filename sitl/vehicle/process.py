@@ -21,6 +21,7 @@ import numpy as np
 from companion.config import quote
 from companion.errors import SlzError
 from companion.vehicle.sim_control import Event, Tick
+from sitl.autopilot.battery import Battery, BatteryMonitor
 from sitl.autopilot.broadcast import HEARTBEAT_PERIOD_S, Broadcaster
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
@@ -28,7 +29,7 @@ from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MavlinkServer
 from sitl.autopilot.params import ParameterStore
 from sitl.autopilot.status import LandedState, Severity
-from sitl.autopilot.telemetry import Battery, Origin, TelemetryBuilder
+from sitl.autopilot.telemetry import Origin, TelemetryBuilder
 from sitl.config import FaultKind, LinkName, SitlConfig
 from sitl.dynamics.base import DynamicsError
 from sitl.dynamics.factory import make_dynamics
@@ -102,7 +103,8 @@ class SitlVehicle:
             np.random.default_rng(config.seed),
             config.position_noise_m,
         )
-        self.battery = Battery()
+        self.battery = Battery(config.battery.capacity_mah, config.battery.initial_fraction)
+        self.battery_monitor = BatteryMonitor()
         self.links: list[MavlinkLink] = []
         self.control: ControlChannel | None = None
         self.camera: SimCamera | None = None
@@ -351,6 +353,8 @@ class SitlVehicle:
             if self.broadcast.announce(t_s, state):
                 self._write_log_row(force=True)  # phase changes reach the disk at once
             self.battery.update(self.controller.collective, self._outer_dt_s, cmd.armed)
+            if (level := self.battery_monitor.update(self.battery.remaining, self.params)) is not None:
+                cmd.battery_failsafe(level)  # PX4's battery failsafe: a warning, or COM_LOW_BAT_ACT's action
             self.broadcast.streams(t_s, state)
             self._write_log_row()
         if self._setpoint is not None:
