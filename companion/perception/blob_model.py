@@ -144,7 +144,7 @@ def build_blob_density_model(
     )
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", opset)], producer_name="slz-lander")
     model.ir_version = 8
-    helper.set_model_props(model, {CONTRACT_METADATA_KEY: contract.model_dump_json()})
+    helper.set_model_props(model, {CONTRACT_METADATA_KEY: contract.model_dump_json(exclude_none=True)})
     onnx.checker.check_model(model, full_check=True)
     return model
 
