@@ -24,6 +24,8 @@ from companion.vehicle.pose_buffer import PoseBuffer, PoseBufferError
 
 logger = logging.getLogger(__name__)
 
+CLOSE_TIMEOUT_S = 3.0  # wall time the telemetry streams get to end when the link closes
+
 _MODES = {
     "MANUAL": FlightMode.MANUAL,
     "ALTCTL": FlightMode.ALTCTL,
@@ -352,8 +354,10 @@ class MavsdkVehicleLink:
         """Cancel the telemetry tasks and destroy the MAVSDK instance."""
         for task in self._tasks:
             task.cancel()
-        if self._tasks:
-            await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._tasks:  # each stream's end unsubscribes in MAVSDK: bounded, a link going away must not hold the exit
+            _, pending = await asyncio.wait(self._tasks, timeout=CLOSE_TIMEOUT_S)
+            if pending:
+                logger.warning("%d telemetry streams did not end within %g s", len(pending), CLOSE_TIMEOUT_S)
         self._tasks = []
         if self._mavsdk is not None:
             self._mavsdk.destroy()
