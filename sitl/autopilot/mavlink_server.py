@@ -5,7 +5,7 @@ Every field that came over the wire is checked before use: a command parameter t
 infinite or fractional is DENIED (:func:`sitl.autopilot.commands.whole`; the command table is
 :mod:`sitl.autopilot.commands`), a setpoint field the type mask uses must be finite and in range. The vehicle owns the
 state and this server acts on it, seeing the vehicle through :class:`AutopilotHost` alone
-(:class:`sitl.vehicle.SitlVehicle` is one), so it never imports the process that runs it.
+(:class:`sitl.vehicle.process.SitlVehicle` is one), so it never imports the process that runs it.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ if TYPE_CHECKING:  # the camera module needs the renderer, which a SITL without 
 
 
 class ControlledVehicle(Protocol):
-    """What the control channel's requests read and act on (:class:`sitl.vehicle.SitlVehicle` is one)."""
+    """What the control channel's requests read and act on (:class:`sitl.vehicle.process.SitlVehicle` is one)."""
 
     config: SitlConfig
     clock: SimClock

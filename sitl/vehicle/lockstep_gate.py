@@ -1,9 +1,9 @@
 """The lockstep gate's bookkeeping: which client steps with the SITL, which tick is out, which acknowledgement came.
 
 Simulated time stops at every tick (every ``period_s``) until the client acknowledges it; the vehicle
-(:class:`sitl.vehicle.SitlVehicle`) sends the tick's frame, pose and event and checks that an acknowledgement does not
-overtake the client's MAVLink. This class holds the state of that exchange and its rules, without any I/O, so the
-vehicle keeps one attribute for it instead of ten.
+(:class:`sitl.vehicle.process.SitlVehicle`) sends the tick's frame, pose and event and checks that an acknowledgement
+does not overtake the client's MAVLink. This class holds the state of that exchange and its rules, without any I/O,
+so the vehicle keeps one attribute for it instead of ten.
 """
 
 from __future__ import annotations
