@@ -140,6 +140,11 @@ class SitlConfig(StrictModel):
     lockstep_timeout_s: float = Field(default=10.0, gt=0.0, le=600.0, description="Wall-clock wait for an ack.")
     seed: int = Field(default=0, ge=0)
     position_noise_m: float = Field(default=0.0, ge=0.0, le=5.0, description="Noise on reported positions.")
+    home_ne_m: tuple[float, float] = Field(
+        default=(0.0, 0.0),
+        description="Where the vehicle rests at the start and returns to (local NED north, east, m; PX4's home). The "
+        "world's region of interest is centred on the origin: a home outside it is a launch point clear of the crowd.",
+    )
     wind_ned_mps: tuple[float, float, float] = Field(
         default=(0.0, 0.0, 0.0), description=f"Wind, NED m/s, each component within +-{MAX_WIND_MPS:g}."
     )

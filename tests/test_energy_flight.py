@@ -22,7 +22,11 @@ from sitl.vehicle.truth import read_truth, touchdown
 pytestmark = pytest.mark.sitl
 
 RESERVE = 0.25
-SPEC = f"""
+
+
+def _spec(home_n: float, home_e: float) -> str:
+    """A one-mission campaign on a scarce pack, home at (home_n, home_e) local NED."""
+    return f"""
 campaign:
   name: energy
   master_seed: 2026
@@ -35,14 +39,19 @@ campaign:
       energy: {{enabled: true, capacity_mah: 5000.0, reserve_fraction: {RESERVE}}}
   conditions:
     - name: scarce                     # a pack 29 % full: the way home is all it has above the reserve
-      sitl: {{battery: {{initial_fraction: 0.29}}, params: {{COM_LOW_BAT_ACT: 3}}}}
+      sitl: {{battery: {{initial_fraction: 0.29}}, params: {{COM_LOW_BAT_ACT: 3}}, home_ne_m: [{home_n}, {home_e}]}}
   strategies:
     - {{name: oldest, policy: oldest}}
 """
 
 
-def test_a_scarce_pack_ends_the_search_and_brings_the_vehicle_home_above_the_reserve(tmp_path: Path) -> None:
-    (tmp_path / "energy.yaml").write_text(SPEC)
+@pytest.mark.parametrize("home_ne_m", [(0.0, 0.0), (22.0, -5.0)], ids=["home_in_the_crowd", "home_clear"])
+def test_a_scarce_pack_ends_the_search_and_brings_the_vehicle_home_above_the_reserve(
+    tmp_path: Path, home_ne_m: tuple[float, float]
+) -> None:
+    """Home where the crowd is (the scenes' default) and a launch point outside the region of interest: the budget
+    reads home from the autopilot (HOME_POSITION) and the return lands there."""
+    (tmp_path / "energy.yaml").write_text(_spec(*home_ne_m))
     spec = load_campaign_spec(tmp_path / "energy.yaml")
     plan = spec.missions()[0]
     run_dir = tmp_path / "run"
@@ -64,7 +73,7 @@ def test_a_scarce_pack_ends_the_search_and_brings_the_vehicle_home_above_the_res
     _, truth = read_truth(run_dir / "truth.jsonl")
     down = touchdown(truth)
     assert down is not None
-    assert math.hypot(down.position_ned_m[0], down.position_ned_m[1]) < 2.0
+    assert math.hypot(down.position_ned_m[0] - home_ne_m[0], down.position_ned_m[1] - home_ne_m[1]) < 2.0
     metrics = mission_metrics(run_dir, plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
     assert metrics.landed  # at home: the return, not a zone (the report's outcome kinds are issue 53's next step)
     # The budget's decision replays from the log as flown (its source and inputs are recorded).

@@ -77,7 +77,8 @@ class SitlVehicle:
         self.trajectory: TrajectoryLog | None = None  # first, so close() works from any failure below
         self.truth: TruthWriter | None = None
         try:
-            self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz)
+            home_ned_m = np.array([*config.home_ne_m, 0.0])
+            self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz, home_ned_m)
         except DynamicsError as exc:
             raise SitlError("dynamics", str(exc)) from None
         if config.physics_rate_hz < self.dynamics.min_rate_hz:
