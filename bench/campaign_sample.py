@@ -47,7 +47,8 @@ def differences(flown: dict[str, Any], committed: dict[str, Any], policy: str | 
     its difference. The fields compared are the outcomes of a flight (their metadata,
     :func:`sitl.campaign.record.compared_fields`), not the facts of its run (wall time, node, commit)."""
     flown, committed = with_gate_overflight(flown, policy), with_gate_overflight(committed, policy)
-    parse_result(flown), parse_result(committed)  # ResultError names a field that is not a result's
+    for line in (flown, committed):
+        parse_result(line)  # ResultError names a field that is not a result's
     return sorted(k for k in compared_fields() if flown.get(k) != committed.get(k))
 
 

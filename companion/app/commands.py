@@ -64,7 +64,7 @@ class VehicleCommands:
         async with self._lock:
             if not self.commanding or decision.kind is CommandKind.NONE:
                 return False
-            if self.offboard and self.link.status.mode not in COMPANION_MODES:
+            if self.pilot_has_it():
                 return False  # the pilot's mode since the last tick: nothing more goes out (no setpoint, no land, no
                 # hold or return either: that would take the vehicle back), and the next tick yields
             await self._send_one(decision)
@@ -124,7 +124,7 @@ class VehicleCommands:
 
     def pilot_has_it(self) -> bool:
         """This flight's setpoints were flown and the autopilot now reports a mode of the pilot's."""
-        return self.offboard and self.commanding and self.link.status.mode not in COMPANION_MODES
+        return self.flying_offboard and self.link.status.mode not in COMPANION_MODES
 
     def stop(self) -> None:
         """Command nothing more in this flight (the pilot took over, the link is lost)."""

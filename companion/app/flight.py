@@ -266,9 +266,10 @@ class FlightApp:
             await self.apply(self.guidance.landed(state.t_s), "landed", state)
             return
         low = self.energy.check(state, status) if self.energy is not None else None
-        used_up = self.guidance.time_used_up(state, None if low is None else low.reason())
+        reason = None if low is None else low.reason()
+        used_up = self.guidance.time_used_up(state, reason)
         if used_up is not None:
-            inputs: dict[str, Any] = {} if low is None else {"reason": low.reason(), "remaining": low.remaining}
+            inputs: dict[str, Any] = {} if low is None else {"reason": reason, "remaining": low.remaining}
             await self.apply(used_up, "time" if low is None else "energy", state, **inputs)
             return
         silent_s = state.t_s - self._last_frame_t_s
