@@ -23,6 +23,7 @@ from typing import Any
 import pytest
 
 from sitl.campaign.runner import read_results
+from sitl.harness.process import log_tail
 from sitl.testing.helpers import wait_until
 
 pytestmark = pytest.mark.sitl
@@ -256,7 +257,8 @@ def test_ctrl_c_stops_every_process_and_writes_no_result_for_the_missions_in_fli
 
         with contextlib.suppress(AssertionError):
             wait_until(lambda: not left(), 30, "every process of the campaign to exit", poll_s=0.2)
-        assert not left(), f"still running 30 s after the campaign ended: {left()}"
+        logs = "".join(f"\n--- {log}:\n{log_tail(log, 15)}" for log in sorted(wait_for.glob("*/*/*/companion.log")))
+        assert not left(), f"still running 30 s after the campaign ended: {left()}{logs}"
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(run.pid, signal.SIGKILL)

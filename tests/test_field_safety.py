@@ -241,6 +241,39 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     assert reported.returncode == 0, reported.stderr[-2000:]
 
 
+def test_a_service_stopped_before_its_vehicle_answers_ends_at_once_not_at_the_connect_timeout(
+    tmp_path: Path, instance: int
+) -> None:
+    import signal
+
+    # A campaign interrupted as a mission starts: the worker's SITL died with it, its companion is still looking for
+    # the vehicle. Here the camera is up and no autopilot listens on the vehicle's port; the connect would wait 120 s.
+    sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port())
+    mission = tmp_path / "mission.yaml"
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path)
+    text = text.replace(f"udpin://0.0.0.0:{14540 + instance}", f"udpin://0.0.0.0:{free_udp_port()}")
+    assert "connect_timeout_s: 20.0" in text
+    mission.write_text(text.replace("connect_timeout_s: 20.0", "connect_timeout_s: 120.0"))
+    log = tmp_path / "flight" / "flight.jsonl"
+    fly = subprocess.Popen(
+        [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_until(lambda: log.is_file() and '"kind":"start"' in log.read_text(), 120, "the run's start")
+        fly.send_signal(signal.SIGTERM)  # what a worker's death sends (sitl.harness.process.die_with_parent)
+        out, err = fly.communicate(timeout=30)  # a quarter of the connect timeout
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        sitl.stop()
+    assert "SIGTERM received: no vehicle tick within 3 s, ending without the last resort" in out, err[-3000:]
+    assert [r["kind"] for r in read_log(log)][-3:] == ["start", "supervision", "end"]
+
+
 def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_failsafe(
     tmp_path: Path, instance: int
 ) -> None:

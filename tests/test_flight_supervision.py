@@ -493,3 +493,43 @@ def test_a_stop_that_no_tick_takes_ends_without_the_last_resort_within_its_bound
     assert app.outcome.reason == "SIGTERM received: no vehicle tick within 0.2 s, ending without the last resort"
     events = [r for r in read_log(app.recorder.path) if r["kind"] == "supervision"]
     assert [(r["event"], r["reason"]) for r in events] == [("stopped", app.outcome.reason)]
+
+
+class SilentLink(FakeLink):
+    """A vehicle that never answers: its connect waits out its whole timeout (a SITL stopped with us)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.connecting = asyncio.Event()
+        self.connect_cancelled = False
+
+    async def connect(self, timeout_s: float) -> None:
+        self.connecting.set()
+        try:
+            await asyncio.wait_for(asyncio.Event().wait(), timeout_s)
+        except asyncio.CancelledError:
+            self.connect_cancelled = True
+            raise
+        raise VehicleError(self.name, f"no autopilot answered within {timeout_s:g} s")
+
+
+def test_a_stop_while_the_vehicle_is_not_yet_found_ends_the_run_without_waiting_out_the_connect(
+    tmp_path: Path, config: PerceptionConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A campaign interrupted as its companion starts: the SITL died with the worker, the connect would wait 20 s.
+    link = SilentLink()
+    app = field_flight(tmp_path, config, link)
+    monkeypatch.setattr("companion.app.run_end.STOP_UNHEARD_S", 0.2)
+
+    async def flight() -> None:
+        run = asyncio.create_task(app.run())
+        await asyncio.wait_for(link.connecting.wait(), timeout=10.0)
+        app.request_stop("SIGTERM received")
+        await asyncio.wait_for(run, timeout=10.0)  # the connect's own timeout is 20 s
+
+    asyncio.run(flight())
+    assert link.connect_cancelled
+    assert link.commands == []
+    assert app.outcome.reason == "SIGTERM received: no vehicle tick within 0.2 s, ending without the last resort"
+    kinds = [r["kind"] for r in read_log(app.recorder.path)]
+    assert kinds == ["start", "supervision", "end"]

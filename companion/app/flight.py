@@ -49,7 +49,7 @@ from companion.app.run_end import RunEnd
 from companion.app.stall_watchdog import StallWatchdog
 from companion.app.start_sequence import StartAction, StartSequence, StartStage, StartStep
 from companion.app.supervision import Supervision
-from companion.app.task_group import run_until_first_ends
+from companion.app.task_group import run_until_first_ends, unless_done
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import Pose, polygon_centroid_ne_m
 from companion.guidance.energy import EnergyBudget
@@ -83,6 +83,17 @@ def state_of(t_s: float, pose: Pose) -> VehicleState:
     """The landing logic's view of a pose at vehicle time ``t_s``."""
     n, e, d = (float(v) for v in pose.position_ned_m)
     return VehicleState(t_s, n, e, d, yaw_deg_of(pose))
+
+
+async def fence_in_local_ned(config: MissionConfig, link: VehicleLink, recorder: FlightRecorder) -> MissionConfig:
+    """The config with its fence in latitude and longitude projected into local NED from the autopilot's EKF origin,
+    as PX4 does, then every cross-check of the config again (ConfigError before anything is commanded)."""
+    assert config.geofence.polygon_latlon_deg is not None
+    lat0, lon0 = await link.global_origin(config.vehicle.connect_timeout_s)
+    polygon_ne_m = [latlon_to_ne_m(lat, lon, lat0, lon0) for lat, lon in config.geofence.polygon_latlon_deg]
+    recorder.write(RecordKind.FENCE, None, polygon_ne_m=polygon_ne_m, origin_lat_deg=lat0, origin_lon_deg=lon0)
+    logger.info("geofence: %d vertices from latitude and longitude around the EKF origin", len(polygon_ne_m))
+    return with_fence_ne_m(config, polygon_ne_m)
 
 
 class FlightApp:
@@ -321,14 +332,10 @@ class FlightApp:
         took_off = self.start_sequence.takes_off and self.start_sequence.stage is not StartStage.WAITING
         return self.commands.offboard or took_off
 
-    async def _localize_fence(self, polygon_latlon_deg: list[tuple[float, float]]) -> None:
-        """A fence given in latitude and longitude: projected into local NED from the autopilot's EKF origin, as PX4
-        does, then every cross-check of the config again (ConfigError before anything is commanded)."""
-        lat0, lon0 = await self.link.global_origin(self.config.vehicle.connect_timeout_s)
-        polygon_ne_m = [latlon_to_ne_m(lat, lon, lat0, lon0) for lat, lon in polygon_latlon_deg]
-        self.config = with_fence_ne_m(self.config, polygon_ne_m)
-        self.recorder.write(RecordKind.FENCE, None, polygon_ne_m=polygon_ne_m, origin_lat_deg=lat0, origin_lon_deg=lon0)
-        logger.info("geofence: %d vertices from latitude and longitude around the EKF origin", len(polygon_ne_m))
+    async def _localize_fence(self) -> None:
+        """The fence in latitude and longitude, in local NED (:func:`fence_in_local_ned`), and what follows it."""
+        self.config = await fence_in_local_ned(self.config, self.link, self.recorder)
+        polygon_ne_m = self.config.geofence.polygon_ne_m
         self.guidance = self._new_guidance()
         self._area_centre_ne_m = polygon_centroid_ne_m(polygon_ne_m)
         self.pipeline.zone_finder = ZoneFinder(self.config.perception.zones, polygon_ne_m)
@@ -399,18 +406,24 @@ class FlightApp:
         self.done.set()
 
     # -- the flight ------------------------------------------------------------------------------------------------
+    async def _open(self) -> None:
+        """The camera (missing: no vehicle touched), the vehicle, the fence, the lockstep; a stop ends it (run)."""
+        await self.source.open()
+        await self.link.connect(self.config.vehicle.connect_timeout_s)
+        if self.config.geofence.polygon_latlon_deg is not None:
+            await self._localize_fence()
+        if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
+            self.lockstep = None
+
     async def run(self) -> FlightOutcome:
         """Connect, (take off,) land safely or end in a defined failsafe (and, with ``supervision``, stay until the
         vehicle is on the ground or the pilot has it)."""
         cfg = self.config
         wall0, cpu0 = time.monotonic(), time.process_time()
         self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
-        await self.source.open()  # a missing camera fails the start, before the vehicle is touched
-        await self.link.connect(cfg.vehicle.connect_timeout_s)
-        if cfg.geofence.polygon_latlon_deg is not None:
-            await self._localize_fence(cfg.geofence.polygon_latlon_deg)
-        if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
-            self.lockstep = None
+        if not await unless_done(self._open(), self.done, CANCEL_GRACE_S):  # stopped before the vehicle was found
+            self.recorder.write(RecordKind.END, None, outcome=self.outcome)
+            return self.outcome
         self.outcome.lockstep = self.lockstep is not None
         self.recorder.write(RecordKind.CLOCK, None, lockstep=self.outcome.lockstep)
         if self.lockstep is None:

@@ -38,3 +38,26 @@ async def run_until_first_ends(coroutines: list[Coroutine[Any, Any, Any]], done:
         _, pending = await asyncio.wait(tasks, timeout=grace_s)
         for task in pending:
             logger.error("task %s did not stop within %g s of its cancellation", task.get_name(), grace_s)
+
+
+async def unless_done(coroutine: Coroutine[Any, Any, Any], done: asyncio.Event, grace_s: float) -> bool:
+    """Run ``coroutine`` until it ends, or until ``done`` is set first: then cancel it and wait for it, ``grace_s``
+    wall seconds at most. True when it ended by itself (its exception raised here), False when ``done`` came first.
+
+    For a wait that has its own deadline but must not outlive the run: a start sequence looking for a vehicle that
+    went away with a stopped SITL would otherwise hold the process for its whole connect timeout."""
+    work = asyncio.create_task(coroutine, name="work")
+    ended = asyncio.create_task(done.wait(), name="done")
+    try:
+        await asyncio.wait({work, ended}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        ended.cancel()
+        if not work.done():
+            work.cancel()
+            _, pending = await asyncio.wait({work}, timeout=grace_s)
+            if pending:
+                logger.error("%s did not stop within %g s of its cancellation", work.get_name(), grace_s)
+    if work.cancelled() or not work.done():
+        return False
+    work.result()
+    return True

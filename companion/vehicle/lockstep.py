@@ -91,8 +91,12 @@ class LockstepClient:
         except OSError as exc:
             raise LockstepError(self.url, f"cannot open a socket: {exc}") from None
         self._transport, self._protocol = transport, protocol
-        self._send(subscribe_request(1, frames))
-        reply = await self._next(lambda e: e.get("id") == 1, "the reply to lockstep_subscribe")
+        try:  # an open that does not finish (no reply, cancelled) leaves no socket behind
+            self._send(subscribe_request(1, frames))
+            reply = await self._next(lambda e: e.get("id") == 1, "the reply to lockstep_subscribe")
+        except BaseException:
+            self.close()
+            raise
         if reply.get("event") == Event.ERROR:
             logger.info("%s runs free (%s): no lockstep", self.url, reply.get("error"))
             self.close()
