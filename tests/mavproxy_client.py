@@ -14,23 +14,24 @@ from pathlib import Path
 
 # The modules a user's session needs here: parameters (with the FTP attempt first), missions, fence and rally, modes
 # and arming. The map, console and log modules would need a display or a disk of their own.
-MODULES = "ftp,param,wp,rally,fence,arm,mode,cmdlong,misc"
+MODULES = "ftp,param,wp,rally,fence,arm,mode,cmdlong,misc,signing"
 
 
 class MavProxy:
-    """A MAVProxy process listening for a vehicle on ``udpin:127.0.0.1:<port>``.
+    """A MAVProxy process listening for a vehicle on ``udpin:127.0.0.1:<port>`` (or on the link ``link_args`` give:
+    its ``--master`` and target options as a user types them).
 
     Use as a context manager; :meth:`expect` waits for a console line matching a pattern.
     """
 
-    def __init__(self, port: int, workdir: Path) -> None:
+    def __init__(self, port: int, workdir: Path, link_args: list[str] | None = None) -> None:
         executable = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent))
         if executable is None:
             raise FileNotFoundError("mavproxy.py is not installed (the `dev` extra brings it)")
         self.command = [
             sys.executable,
             executable,
-            f"--master=udpin:127.0.0.1:{port}",
+            *(link_args if link_args is not None else [f"--master=udpin:127.0.0.1:{port}"]),
             "--no-state",
             "--dialect=common",
             f"--default-modules={MODULES}",
@@ -43,6 +44,10 @@ class MavProxy:
         self._reader: threading.Thread | None = None
 
     def __enter__(self) -> MavProxy:
+        return self.start()
+
+    def start(self) -> MavProxy:
+        """Start the process and its console reader."""
         self._proc = subprocess.Popen(
             self.command,
             cwd=self.workdir,

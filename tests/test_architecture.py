@@ -27,6 +27,7 @@ FLOORS: dict[str, int] = {
     "companion.geometry": 0,
     "companion.camera": 1,
     "companion.vehicle": 1,
+    "companion.ground": 1,
     "companion.perception": 1,
     "companion.guidance": 2,
     "companion.app": 3,

@@ -43,6 +43,7 @@ from companion.app.frame_intake import FrameIntake
 from companion.app.ground_report import GroundReport
 from companion.app.journal import FlightJournal
 from companion.app.mission import MissionConfig, OperatingMode, with_fence_ne_m
+from companion.app.operator_desk import OperatorDesk
 from companion.app.outcome import FlightOutcome
 from companion.app.recorder import FlightRecorder
 from companion.app.run_end import RunEnd
@@ -58,7 +59,7 @@ from companion.guidance.geofence import Geofence, latlon_to_ne_m
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent
-from companion.perception.pipeline import SlzPipeline
+from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.zones import ZoneFinder
 from companion.vehicle.link import VehicleError, VehicleLink
 from companion.vehicle.lockstep import LockstepClient
@@ -94,6 +95,22 @@ async def fence_in_local_ned(config: MissionConfig, link: VehicleLink, recorder:
     recorder.write(RecordKind.FENCE, None, polygon_ne_m=polygon_ne_m, origin_lat_deg=lat0, origin_lon_deg=lon0)
     logger.info("geofence: %d vertices from latitude and longitude around the EKF origin", len(polygon_ne_m))
     return with_fence_ne_m(config, polygon_ne_m)
+
+
+def observed_at_target(
+    result: FrameResult, decision: Decision, state: VehicleState, min_altitude_m: float
+) -> dict[str, Any] | None:
+    """What a map that decides (taken at or above ``min_altitude_m``) showed around the landing point of a descent or a
+    landing: the landing report's "nearest person seen" (m; None: nobody on the map). None for other decisions."""
+    target = decision.target
+    if (
+        target is None
+        or decision.phase not in (LandingPhase.DESCENT, LandingPhase.LAND)
+        or state.altitude_m < min_altitude_m
+    ):
+        return None
+    nearest = nearest_occupied_m(result.head_plane, target.north_m, target.east_m)
+    return {"nearest_occupied_m": None if nearest is None else round(nearest, 3)}
 
 
 class FlightApp:
@@ -156,6 +173,7 @@ class FlightApp:
         self.supervision = Supervision(config.supervision.stay_after_failsafe, wall_limit_s, wall_clock)
         self.energy = EnergyBudget(config.guidance.energy) if config.guidance.energy.enabled else None
         self.ending = RunEnd(self.supervision, recorder, self.outcome, self.done)
+        self.desk = OperatorDesk.from_config(config, recorder)
 
     def _new_guidance(self) -> LandingGuidance:
         zones = self.config.perception.zones
@@ -224,12 +242,7 @@ class FlightApp:
             self.outcome.frames_dropped_old += 1
             return
         decision = self.guidance.on_frame(result, state)
-        observed = None
-        trusted = state.altitude_m >= self.config.guidance.perception_min_altitude_m  # maps that decide
-        if decision.target is not None and decision.phase in (LandingPhase.DESCENT, LandingPhase.LAND) and trusted:
-            # What the map showed around the landing point: the landing report's "nearest person seen".
-            nearest = nearest_occupied_m(result.head_plane, decision.target.north_m, decision.target.east_m)
-            observed = {"nearest_occupied_m": None if nearest is None else round(nearest, 3)}
+        observed = observed_at_target(result, decision, state, self.config.guidance.perception_min_altitude_m)
         await self.apply(decision, "frame", state, observed, seq=frame.seq)
         await self.report.decision_values(result.t_s, len(result.tracks), decision.target, state)
         if self.commands.commanding and decision.kind is not CommandKind.NONE and math.isfinite(frame.arrival_wall_s):
@@ -266,6 +279,8 @@ class FlightApp:
         if limit is not None:
             await self._wall_limit(state, limit)
             return
+        for taken in self.desk.take(self.guidance, state, self.intake.last_result):
+            await self.apply(taken.decision, "operator", state, **taken.inputs)
         if not self.start_sequence.started:
             pose = self.link.poses.pose_at(state.t_s) if self.dry_run else None
             visible = not self.dry_run or (pose is not None and self.pipeline.sees_head_plane(pose))
@@ -414,6 +429,7 @@ class FlightApp:
             await self._localize_fence()
         if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
             self.lockstep = None
+        await self.desk.open()
 
     async def run(self) -> FlightOutcome:
         """Connect, (take off,) land safely or end in a defined failsafe (and, with ``supervision``, stay until the
@@ -422,6 +438,7 @@ class FlightApp:
         wall0, cpu0 = time.monotonic(), time.process_time()
         self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
         if not await unless_done(self._open(), self.done, CANCEL_GRACE_S):  # stopped before the vehicle was found
+            self.desk.close()
             self.recorder.write(RecordKind.END, None, outcome=self.outcome)
             return self.outcome
         self.outcome.lockstep = self.lockstep is not None
@@ -438,6 +455,7 @@ class FlightApp:
         finally:
             self.watchdog.stop()
             self.intake.close()
+            self.desk.close()
             if self.lockstep is not None:
                 self.lockstep.release()
                 self.lockstep.close()

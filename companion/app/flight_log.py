@@ -67,6 +67,9 @@ class RecordKind(str, enum.Enum):
     ERROR = "error"
     LATENCY = "latency"
     """Frame arrival to command sent, ms."""
+    GROUND_COMMAND = "ground_command"
+    """A ground station's landing command (:mod:`companion.app.operator_desk`): ``command``, ``mav_cmd``, ``sender``,
+    ``signed``, ``force``, ``person_seen``, ``result`` (accepted, denied) and ``reason``."""
     END = "end"
     """The flight's outcome."""
 

@@ -52,6 +52,8 @@ class FrameIntake:
         self.recorder = recorder
         self.outcome = outcome
         self.max_frame_age_s = max_frame_age_s
+        self.last_result: FrameResult | None = None
+        """The newest frame perceived (None: none yet)."""
         self._executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="perception")
 
     def pose_reaches(self, t_s: float) -> bool:
@@ -99,6 +101,7 @@ class FrameIntake:
             self.recorder.write(RecordKind.FRAME_ERROR, frame.t_capture_s, seq=frame.seq, error=str(exc))
             return None
         self.outcome.frames_processed += 1
+        self.last_result = result
         self.recorder.frame(frame.seq, frame.t_capture_s, frame.image_bgr)
         self.recorder.write(
             RecordKind.FRAME_RESULT,

@@ -14,6 +14,7 @@ from urllib.parse import urlparse
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from companion.config import ConfigError, StrictModel, format_validation_error, load_yaml_config
+from companion.ground.config import GroundStationConfig
 from companion.guidance.config import GuidanceConfig
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.perception.config import MODEL_PATH_FIELDS, PerceptionConfig
@@ -193,6 +194,7 @@ class MissionConfig(StrictModel):
     recorder: RecorderConfig = Field(default_factory=RecorderConfig)
     simulator: SimulatorConfig = Field(default_factory=SimulatorConfig)
     supervision: SupervisionConfig = Field(default_factory=SupervisionConfig)
+    ground_station: GroundStationConfig = Field(default_factory=GroundStationConfig)
 
     @model_validator(mode="after")
     def _inside_the_fence(self) -> MissionConfig:

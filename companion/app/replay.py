@@ -25,6 +25,7 @@ from companion.app.mission import MissionConfig, with_fence_ne_m
 from companion.app.recorder import plain
 from companion.errors import SlzError
 from companion.geometry import GeometryError, Pose
+from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import Decision, LandingGuidance, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
@@ -222,6 +223,7 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
         "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
         "limit": lambda: guidance.give_up(state, str(inputs["reason"])),
         "stop": lambda: guidance.give_up(state, str(inputs["reason"])),
+        "operator": lambda: _operator(guidance, state, inputs),
     }
     if source == "frame":
         result = results.get(int(inputs["seq"]))
@@ -230,3 +232,12 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
     if call is None:
         raise ReplayError(f"decision at t = {record['t_s']} s has no known source ({source!r})")
     return call()
+
+
+def _operator(guidance: LandingGuidance, state: VehicleState, inputs: dict[str, Any]) -> Decision:
+    """A ground station's command as the flight decided it (an accepted one: denied ones made no decision)."""
+    command = OperatorCommand(str(inputs["command"]))
+    decided = guidance.on_command(command, state, bool(inputs["person_seen"]), bool(inputs["force"]))
+    if isinstance(decided, str):
+        raise ReplayError(f"the ground station's {command.value} at t = {state.t_s} s is denied now: {decided}")
+    return decided

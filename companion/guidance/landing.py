@@ -48,10 +48,13 @@ import enum
 import math
 from dataclasses import dataclass
 
+from companion.ground.operator_commands import OperatorCommand
+from companion.guidance.climb_back import ClimbBack
 from companion.guidance.commitment import TargetCommitment
 from companion.guidance.config import FailsafeAction, GuidanceConfig
 from companion.guidance.descent import Descent, StepKind
 from companion.guidance.geofence import Geofence
+from companion.guidance.safety_filter import filtered_setpoint
 from companion.guidance.search_pattern import ExpandingSquare
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import CommitmentEvent, DecisionEvent, RefusalCause
@@ -80,6 +83,12 @@ class LandingPhase(str, enum.Enum):
 
 
 ACTIVE_PHASES = frozenset({LandingPhase.SEARCH, LandingPhase.APPROACH, LandingPhase.DESCENT})
+OPERATOR_EVENTS: dict[OperatorCommand, tuple[DecisionEvent, str]] = {
+    OperatorCommand.GO_AROUND: (DecisionEvent.OPERATOR_GO_AROUND, "go-around from the ground station"),
+    OperatorCommand.REJECT_ZONE: (DecisionEvent.OPERATOR_REJECT, "zone rejected from the ground station"),
+    OperatorCommand.LAND_NOW: (DecisionEvent.OPERATOR_LAND, "land now, from the ground station"),
+}
+"""What each ground-station command is, as a decision: its event and its words."""
 
 
 class CommandKind(str, enum.Enum):
@@ -149,13 +158,12 @@ class LandingGuidance:
         self._last_target_s: float | None = None
         self._hold: Setpoint | None = None
         self.search = ExpandingSquare(config.search_leg_m, config.search_timeout_s, geofence)
-        self._search_altitude_m = config.search_altitude_m
-        self._start_altitude_m = config.search_altitude_m  # the altitude the search started from
-        self._reclimb_m: float | None = None  # after an aborted descent: climbing back to it, no choice below it
-        self._reclimb_ne_m: tuple[float, float] | None = None  # where the climb back holds (the refused point)
+        self.climb = ClimbBack(config)
         self._resume_phase = LandingPhase.SEARCH
         self._heading_deg: float | None = None
         self._started_s: float | None = None
+        self.target: Target | None = None
+        """The target of the newest setpoint (None: none)."""
 
     @property
     def walkers(self) -> WalkerWatch:
@@ -171,22 +179,13 @@ class LandingGuidance:
     def safe_setpoint(
         self, state: VehicleState, north_m: float, east_m: float, altitude_m: float, yaw_deg: float | None = None
     ) -> Setpoint:
-        """The safety filter every setpoint goes through (geofence, step, descent rate).
-
-        The heading is held: ``yaw_deg``, else the heading at :meth:`start`, else the vehicle's (a setpoint never
-        chases the vehicle's own slow yaw drift, so consecutive setpoints differ only where the logic moved them).
-        """
-        c = self.config
-        dn, de = north_m - state.north_m, east_m - state.east_m
-        dist = math.hypot(dn, de)
-        if dist > c.max_step_m:
-            north_m, east_m = state.north_m + dn * c.max_step_m / dist, state.east_m + de * c.max_step_m / dist
-        lowest = state.altitude_m - c.descent_rate_limit_mps * c.autopilot_z_time_constant_s
-        altitude_m = max(altitude_m, lowest)
-        north_m, east_m, altitude_m = self.geofence.clamp(north_m, east_m, altitude_m)
+        """The safety filter every setpoint goes through (:func:`~companion.guidance.safety_filter.filtered_setpoint`:
+        step, descent rate, geofence). The heading is held: ``yaw_deg``, else the heading at :meth:`start`, else the
+        vehicle's (a setpoint never chases the vehicle's slow yaw drift: consecutive setpoints differ only where the
+        logic moved them)."""
         if yaw_deg is None:
             yaw_deg = self._heading_deg if self._heading_deg is not None else state.yaw_deg
-        return Setpoint(north_m, east_m, -altitude_m, yaw_deg)
+        return filtered_setpoint(self.config, self.geofence, state, north_m, east_m, altitude_m, yaw_deg)
 
     def _setpoint(
         self,
@@ -202,10 +201,13 @@ class LandingGuidance:
         zone_changes: tuple[CommitmentEvent, ...] = (),
     ) -> Decision:
         self._enter(phase, state.t_s)
+        self.target = target
         setpoint = self.safe_setpoint(state, n, e, alt)
         return Decision(state.t_s, phase, CommandKind.SETPOINT, setpoint, target, reason, event, cause, zone_changes)
 
-    def _abort_descent(self, state: VehicleState, reason: str, cause: RefusalCause) -> Decision:
+    def _abort_descent(
+        self, state: VehicleState, reason: str, cause: RefusalCause, event: DecisionEvent = DecisionEvent.ABORT
+    ) -> Decision:
         self.reselections += 1
         locked = self.descent.locked
         if locked is not None:
@@ -218,16 +220,7 @@ class LandingGuidance:
             # return), and the pilot decides.
             used = f"{reason}; {self.reselections - 1} re-selections used up"
             return self._failsafe(state, used, DecisionEvent.RESELECTIONS_USED_UP, self.config.last_resort, cause)
-        climb_back_m = self.config.climb_back_m
-        if climb_back_m is None:
-            climb_to = self._start_altitude_m
-        else:
-            climb_to = min(state.altitude_m + climb_back_m, self.config.search_altitude_m)
-        self._search_altitude_m = max(climb_to, state.altitude_m)
-        # The next descent starts from there, not from here: low down the camera sees a few metres around the
-        # footprint, and a zone next to the one just refused would be captured at once, again and again.
-        self._reclimb_m = climb_to if climb_to > state.altitude_m else None
-        self._reclimb_ne_m = (state.north_m, state.east_m)
+        climb_to = self.climb.after_abort(state)
         return self._setpoint(
             state,
             LandingPhase.SEARCH,
@@ -236,7 +229,7 @@ class LandingGuidance:
             state.north_m,
             state.east_m,
             climb_to,
-            DecisionEvent.ABORT,
+            event,
             cause,
         )
 
@@ -267,8 +260,7 @@ class LandingGuidance:
         self._started_s = state.t_s
         self._heading_deg = state.yaw_deg
         altitude = max(state.altitude_m, self.config.search_altitude_m)
-        self._search_altitude_m = altitude
-        self._start_altitude_m = altitude
+        self.climb.start(altitude)
         return self._setpoint(
             state,
             LandingPhase.SEARCH,
@@ -296,22 +288,14 @@ class LandingGuidance:
             self._enter(self._resume_phase, state.t_s)
         if self.phase is LandingPhase.DESCENT:
             return self._descent(result, state)
-        if self._reclimb_m is not None and c.climb_back_m is None:  # all the way back up, and choose only there
-            if state.altitude_m < self._reclimb_m - c.land_tolerance_m:
-                self._last_target_s = state.t_s  # no search pattern while climbing back
-                assert self._reclimb_ne_m is not None  # set with _reclimb_m by every abort
-                north_m, east_m = self._reclimb_ne_m
-                return self._setpoint(
-                    state,
-                    LandingPhase.SEARCH,
-                    None,
-                    f"{CLIMBING_BACK} {self._reclimb_m:.1f} m before choosing again",
-                    north_m,
-                    east_m,
-                    self._reclimb_m,
-                    DecisionEvent.CLIMB_BACK,
-                )
-            self._reclimb_m = None  # climbed back (within the slack position control leaves)
+        climbing = self.climb.below_choosing(state)  # all the way back up, and choose only there
+        if climbing is not None:
+            self._last_target_s = state.t_s  # no search pattern while climbing back
+            north_m, east_m, to_m = climbing
+            reason = f"{CLIMBING_BACK} {to_m:.1f} m before choosing again"
+            return self._setpoint(
+                state, LandingPhase.SEARCH, None, reason, north_m, east_m, to_m, DecisionEvent.CLIMB_BACK
+            )
         target, said, changes = self._choose(result, state)
         note = "" if said is None else f"; {said}"
         if target is None:
@@ -324,11 +308,11 @@ class LandingGuidance:
                     "no target yet: hold" + note,
                     state.north_m,
                     state.east_m,
-                    self._search_altitude_m,
+                    self.climb.search_altitude_m,
                     DecisionEvent.HOLD_NO_TARGET,
                     zone_changes=changes,
                 )
-            n, e = self.search.waypoint(state.t_s, state.north_m, state.east_m, self._search_altitude_m)
+            n, e = self.search.waypoint(state.t_s, state.north_m, state.east_m, self.climb.search_altitude_m)
             return self._setpoint(
                 state,
                 LandingPhase.SEARCH,
@@ -336,19 +320,18 @@ class LandingGuidance:
                 "no target: search pattern" + note,
                 n,
                 e,
-                self._search_altitude_m,
+                self.climb.search_altitude_m,
                 DecisionEvent.SEARCH_PATTERN,
                 zone_changes=changes,
             )
         self._last_target_s = state.t_s
         self.search.reset()
-        if self._reclimb_m is not None and state.altitude_m >= self._reclimb_m - c.land_tolerance_m:
-            self._reclimb_m = None  # climbed back (within the slack position control leaves)
+        self.climb.observe(state)
         offset = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
         if (
             offset <= c.capture_radius_m
             and (target.radius_m >= self.min_zone_radius_m or c.blind_landing)
-            and self._reclimb_m is None
+            and self.climb.to_m is None
         ):
             self.descent.lock(target)
             self._enter(LandingPhase.DESCENT, state.t_s)
@@ -358,11 +341,11 @@ class LandingGuidance:
             LandingPhase.APPROACH,
             target,
             f"approach target {target.track_id} ({offset:.1f} m away, r={target.radius_m:.1f} m)"
-            + ("" if self._reclimb_m is None else f", climbing back to {self._reclimb_m:.1f} m first")
+            + ("" if self.climb.to_m is None else f", climbing back to {self.climb.to_m:.1f} m first")
             + note,
             target.north_m,
             target.east_m,
-            max(state.altitude_m, c.land_altitude_m, self._reclimb_m or 0.0),
+            max(state.altitude_m, c.land_altitude_m, self.climb.to_m or 0.0),
             DecisionEvent.APPROACH,
             zone_changes=changes,
         )
@@ -442,6 +425,33 @@ class LandingGuidance:
         if self.phase is LandingPhase.HOLD and silent_s >= c.failsafe_after_silence_s:
             return self._failsafe(state, f"perception silent {silent_s:.1f} s", DecisionEvent.PERCEPTION_FAILSAFE)
         return None
+
+    def on_command(
+        self, command: OperatorCommand, state: VehicleState, person_seen: bool, force: bool
+    ) -> Decision | str:
+        """A ground station's command at ``state``: its decision, or why it is denied (in words). ``person_seen``: the
+        newest map sees a person in the footprint at the target; ``force``: land even so (the decision says it)."""
+        target = self.target
+        if self.phase not in (LandingPhase.APPROACH, LandingPhase.DESCENT) or target is None:
+            return f"no approach or descent to act on (phase {self.phase.value})"
+        if command not in OPERATOR_EVENTS:
+            return f"{command.value} is not supported"
+        event, said = OPERATOR_EVENTS[command]
+        descending = self.phase is LandingPhase.DESCENT
+        if command is OperatorCommand.GO_AROUND or (command is OperatorCommand.REJECT_ZONE and descending):
+            return self._abort_descent(state, said, RefusalCause.OPERATOR, event)
+        if command is OperatorCommand.REJECT_ZONE:  # approaching: refuse the zone, choose another from here
+            self.commitment.refuse(target.north_m, target.east_m, state.t_s, said)
+            n, e, alt = state.north_m, state.east_m, max(state.altitude_m, self.climb.search_altitude_m)
+            return self._setpoint(state, LandingPhase.SEARCH, None, said, n, e, alt, event, RefusalCause.OPERATOR)
+        offset_m = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
+        if offset_m > self.config.capture_radius_m:
+            return f"{offset_m:.1f} m from the target: land-now lands where the vehicle is; wait until over it"
+        if person_seen and not force:
+            return "a person in the footprint on the newest map (param1 = 1 forces the landing)"
+        said += " (forced: a person in the footprint on the newest map)" if person_seen else ""
+        self._enter(LandingPhase.LAND, state.t_s)
+        return Decision(state.t_s, LandingPhase.LAND, CommandKind.LAND, None, target, said, event)
 
     def landed(self, t_s: float) -> Decision:
         """The autopilot reports the vehicle on the ground."""

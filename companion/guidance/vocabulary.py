@@ -54,6 +54,12 @@ class DecisionEvent(str, enum.Enum):
     """A frame in a phase that takes none."""
     TRANSIT = "transit"
     """Flying to the search area before the mission starts."""
+    OPERATOR_GO_AROUND = "operator_go_around"
+    """The ground station's go-around: climb back and search again."""
+    OPERATOR_REJECT = "operator_reject"
+    """The ground station rejected the zone flown to (``cause``: operator): choose another."""
+    OPERATOR_LAND = "operator_land"
+    """The ground station's land-now: the landing command at once."""
 
 
 class RefusalCause(str, enum.Enum):
@@ -73,6 +79,8 @@ class RefusalCause(str, enum.Enum):
     """The committed zone was not seen for the commitment's lost time."""
     LEFT_GEOFENCE = "left_geofence"
     """The committed zone's footprint left the geofence."""
+    OPERATOR = "operator"
+    """The ground station rejected it (or sent a go-around)."""
 
 
 class ZoneChange(str, enum.Enum):

@@ -1,0 +1,122 @@
+"""The ground station's landing commands in a flight (:mod:`companion.ground.command_channel`): taken at the
+vehicle's ticks, decided by the landing logic, answered and logged.
+
+A command is taken at the first tick after it arrived, so it is decided at a vehicle time like every decision. Its
+decision goes through the flight's one path (recorded with source ``operator`` and its inputs, so a replay decides
+the same; reported; sent), and the ground station gets ``ACCEPTED``; a command the logic denies gets ``DENIED`` and
+the reason as ``STATUSTEXT``. Every command is a ``ground_command`` record: what, from whom, signed or not, forced or
+not, the answer and why.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+from companion.app.flight_log import RecordKind
+from companion.app.mission import MissionConfig
+from companion.app.recorder import FlightRecorder
+from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand
+from companion.guidance.footprint import nearest_occupied_m
+from companion.guidance.landing import Decision, LandingGuidance
+from companion.guidance.vehicle_state import VehicleState
+from companion.perception.pipeline import FrameResult
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class OperatorDecision:
+    """A command the logic accepted: its decision and the inputs it was decided on (for the record and replay)."""
+
+    decision: Decision
+    inputs: dict[str, Any]
+    command: GroundCommand
+
+
+class OperatorDesk:
+    """Commands from the channel, decided at ticks (see the module docstring).
+
+    Parameters
+    ----------
+    channel : CommandChannel or None
+        Where commands come from (None: no ground-station commands; the desk does nothing).
+    recorder : FlightRecorder
+        The ``ground_command`` records.
+    footprint_radius_m : float
+        A person seen nearer than this to the target makes a land-now a landing on a person.
+    """
+
+    def __init__(self, channel: CommandChannel | None, recorder: FlightRecorder, footprint_radius_m: float) -> None:
+        self.channel = channel
+        self.recorder = recorder
+        self.footprint_radius_m = footprint_radius_m
+
+    @classmethod
+    def from_config(cls, config: MissionConfig, recorder: FlightRecorder) -> OperatorDesk:
+        """The desk of a mission (its ``ground_station`` section; no channel without a ``command_url``): commands to
+        the vehicle's system id; the footprint is the zones' smallest radius, as the landing logic's."""
+        ground = config.ground_station
+        channel = None
+        if ground.command_url is not None:
+            key = ground.signing_key
+            channel = CommandChannel(ground.command_url, config.vehicle.system_id, key, ground.stale_signature_s)
+        return cls(channel, recorder, config.perception.zones.min_radius_m)
+
+    async def open(self) -> None:
+        """Listen for commands (nothing without a channel)."""
+        if self.channel is not None:
+            await self.channel.open()
+
+    def close(self) -> None:
+        """Deny the commands no tick took (the flight is over), and stop listening."""
+        if self.channel is not None:
+            for command in self.channel.pending():
+                self.channel.answer(command, AckResult.DENIED, f"{command.command.value} denied: the flight is over")
+            self.channel.close()
+
+    def take(
+        self, guidance: LandingGuidance, state: VehicleState, newest: FrameResult | None
+    ) -> list[OperatorDecision]:
+        """The commands that arrived since the last tick, decided at ``state`` over the ``newest`` map: the accepted
+        ones' decisions (answered ``ACCEPTED``); the denied ones answered and recorded here."""
+        if self.channel is None:
+            return []
+        accepted = []
+        for command in self.channel.pending():
+            person_seen = self._person_seen(guidance, newest)
+            decided = guidance.on_command(command.command, state, person_seen, command.force)
+            inputs = {"command": command.command.value, "force": command.force, "person_seen": person_seen}
+            if isinstance(decided, str):
+                self._answer(command, state, AckResult.DENIED, f"{command.command.value} denied: {decided}", inputs)
+                continue
+            self._answer(command, state, AckResult.ACCEPTED, decided.reason, inputs)
+            accepted.append(OperatorDecision(decided, inputs, command))
+        return accepted
+
+    def _person_seen(self, guidance: LandingGuidance, newest: FrameResult | None) -> bool:
+        """The newest map sees a person within the footprint of the target (or there is no map or no target)."""
+        target = guidance.target
+        if newest is None or target is None:
+            return True
+        nearest = nearest_occupied_m(newest.head_plane, target.north_m, target.east_m)
+        return nearest is not None and nearest < self.footprint_radius_m
+
+    def _answer(
+        self, command: GroundCommand, state: VehicleState, result: AckResult, reason: str, inputs: dict[str, Any]
+    ) -> None:
+        assert self.channel is not None
+        denied = result is AckResult.DENIED
+        self.channel.answer(command, result, reason if denied else None)
+        (logger.warning if denied or command.force else logger.info)("ground station: %s", reason)
+        self.recorder.write(
+            RecordKind.GROUND_COMMAND,
+            state.t_s,
+            mav_cmd=command.mav_cmd,
+            sender=list(command.sender),
+            signed=command.signed,
+            result=result.name.lower(),
+            reason=reason,
+            **inputs,
+        )

@@ -1,0 +1,33 @@
+"""The landing commands a ground station may send the companion, and their MAVLink command numbers (the table is in
+:mod:`companion.ground.command_channel`)."""
+
+from __future__ import annotations
+
+import enum
+
+MAV_COMP_ID_ONBOARD_COMPUTER = 191
+MAV_CMD_DO_GO_AROUND = 191
+MAV_CMD_USER_1 = 31010
+MAV_CMD_USER_2 = 31011
+MAV_CMD_USER_3 = 31012
+
+
+class OperatorCommand(str, enum.Enum):
+    """A landing command from the ground station."""
+
+    GO_AROUND = "go_around"
+    """Climb back and search again."""
+    REJECT_ZONE = "reject_zone"
+    """Refuse the zone flown to; choose another."""
+    LAND_NOW = "land_now"
+    """Land on the current target now."""
+    NEXT_FALLBACK = "next_fallback"
+    """Go to the next fallback site."""
+
+
+COMMAND_OF_MAV_CMD = {
+    MAV_CMD_DO_GO_AROUND: OperatorCommand.GO_AROUND,
+    MAV_CMD_USER_1: OperatorCommand.REJECT_ZONE,
+    MAV_CMD_USER_2: OperatorCommand.LAND_NOW,
+    MAV_CMD_USER_3: OperatorCommand.NEXT_FALLBACK,
+}
