@@ -398,7 +398,7 @@ def test_a_descent_looks_at_the_gate_above_the_blind_last_metres_then_lands() ->
     at_gate = [d.t_s for d in decisions if d.setpoint is not None and -d.setpoint.down_m == pytest.approx(gate_m)]
     assert at_gate[-1] - at_gate[0] >= c.walkers.window_s - 0.1 - 1e-9  # watched that long, nobody walking
     assert at_gate[-1] - at_gate[0] <= c.walkers.window_s + 0.5
-    assert g.walkers.waits == 0
+    assert g.descent.walkers.waits == 0
 
 
 def test_someone_walking_in_at_the_gate_holds_the_descent_there_until_they_have_passed() -> None:
@@ -410,7 +410,7 @@ def test_someone_walking_in_at_the_gate_holds_the_descent_there_until_they_have_
     assert decisions[-1].kind is CommandKind.LAND
     waited = [d for d in decisions if "walking" in d.reason or "closing" in d.reason]
     assert waited, "the walker was not seen coming"
-    assert g.walkers.waits == 1
+    assert g.descent.walkers.waits == 1
     for d in decisions:  # never below the gate before the walker has gone by
         if d.t_s <= waited[-1].t_s:
             assert d.setpoint is not None
@@ -474,7 +474,7 @@ def test_a_person_seen_in_the_footprint_after_the_gate_and_above_the_floor_sends
     state = _descending_over(g, gate_m)
     zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
     t = 0.1
-    while not g.walkers.passed:  # a free footprint at the gate: the look, then the gate is passed
+    while not g.descent.walkers.passed:  # a free footprint at the gate: the look, then the gate is passed
         t += 0.1
         state = VehicleState(t, 0.0, 0.0, -gate_m, 0.0)
         g.on_frame(_frame(t, [zone], target, _map()), state)
@@ -486,7 +486,7 @@ def test_a_person_seen_in_the_footprint_after_the_gate_and_above_the_floor_sends
     assert d.phase is LandingPhase.DESCENT
     assert d.setpoint is not None
     assert -d.setpoint.down_m == pytest.approx(gate_m)  # back up to the gate, not an abort
-    assert not g.walkers.passed
+    assert not g.descent.walkers.passed
     since = t
     while d.phase is LandingPhase.DESCENT:  # still there: the wait is bounded like any wait at the gate
         t += 0.1

@@ -1,4 +1,4 @@
-"""The ground station's commands in the landing logic (LandingGuidance.on_command) and at the flight's desk
+"""The ground station's commands in the landing logic (companion.guidance.operator) and at the flight's desk
 (OperatorDesk: the person check on the newest map), on hand-made maps and tracks. The same commands sent over
 MAVLink to a companion flying the SITL are in tests/test_ground_commands_flight.py."""
 
@@ -15,6 +15,7 @@ from companion.app.recorder import FlightRecorder, read_log
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand
 from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
+from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause
 from companion.perception.selection import Target
@@ -39,9 +40,9 @@ def test_a_command_with_nothing_to_act_on_is_denied_and_changes_nothing() -> Non
     g = _guidance()
     state = VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)
     for command in (OperatorCommand.GO_AROUND, OperatorCommand.REJECT_ZONE, OperatorCommand.LAND_NOW):
-        assert g.on_command(command, state, False, False) == "no approach or descent to act on (phase idle)"
+        assert operator_decision(g, command, state, False, False) == "no approach or descent to act on (phase idle)"
     g.start(state)
-    denied = g.on_command(OperatorCommand.GO_AROUND, state, False, False)
+    denied = operator_decision(g, OperatorCommand.GO_AROUND, state, False, False)
     assert denied == "no approach or descent to act on (phase search)"
     assert g.phase is LandingPhase.SEARCH
     assert g.reselections == 0
@@ -50,7 +51,7 @@ def test_a_command_with_nothing_to_act_on_is_denied_and_changes_nothing() -> Non
 def test_a_go_around_in_the_descent_climbs_back_and_searches_again() -> None:
     g = _guidance()
     state = _descending_over(g, 8.0)
-    d = g.on_command(OperatorCommand.GO_AROUND, state, False, False)
+    d = operator_decision(g, OperatorCommand.GO_AROUND, state, False, False)
     assert isinstance(d, Decision)
     assert (d.phase, d.event, d.cause) == (LandingPhase.SEARCH, DecisionEvent.OPERATOR_GO_AROUND, RefusalCause.OPERATOR)
     assert d.setpoint is not None
@@ -61,7 +62,7 @@ def test_a_go_around_in_the_descent_climbs_back_and_searches_again() -> None:
 def test_a_rejected_zone_in_the_approach_is_refused_and_another_is_chosen() -> None:
     g = _guidance()
     state = approaching(g)
-    d = g.on_command(OperatorCommand.REJECT_ZONE, state, False, False)
+    d = operator_decision(g, OperatorCommand.REJECT_ZONE, state, False, False)
     assert isinstance(d, Decision)
     assert (d.phase, d.event, d.cause) == (LandingPhase.SEARCH, DecisionEvent.OPERATOR_REJECT, RefusalCause.OPERATOR)
     assert d.setpoint is not None
@@ -76,13 +77,13 @@ def test_a_rejected_zone_in_the_approach_is_refused_and_another_is_chosen() -> N
 def test_land_now_lands_over_the_target_is_denied_away_from_it_or_over_a_person_unless_forced() -> None:
     g = _guidance()
     state = approaching(g)
-    far = g.on_command(OperatorCommand.LAND_NOW, state, False, False)
+    far = operator_decision(g, OperatorCommand.LAND_NOW, state, False, False)
     assert far == "10.0 m from the target: land-now lands where the vehicle is; wait until over it"
     over = VehicleState(1.0, 6.2, 8.1, -12.0, 0.0)
-    person = g.on_command(OperatorCommand.LAND_NOW, over, True, False)
+    person = operator_decision(g, OperatorCommand.LAND_NOW, over, True, False)
     assert person == "a person in the footprint on the newest map (param1 = 1 forces the landing)"
     assert g.phase is LandingPhase.APPROACH  # a denial changes nothing
-    forced = g.on_command(OperatorCommand.LAND_NOW, over, True, True)
+    forced = operator_decision(g, OperatorCommand.LAND_NOW, over, True, True)
     assert isinstance(forced, Decision)
     assert (forced.phase, forced.kind, forced.event) == (
         LandingPhase.LAND,
@@ -92,7 +93,7 @@ def test_land_now_lands_over_the_target_is_denied_away_from_it_or_over_a_person_
     assert "forced" in forced.reason
     clear = _guidance()
     approaching(clear)
-    landed = clear.on_command(OperatorCommand.LAND_NOW, over, False, False)
+    landed = operator_decision(clear, OperatorCommand.LAND_NOW, over, False, False)
     assert isinstance(landed, Decision)
     assert landed.kind is CommandKind.LAND
     assert "forced" not in landed.reason

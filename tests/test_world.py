@@ -226,3 +226,26 @@ def test_the_scene_light_comes_from_the_seed_within_the_scenario_ranges() -> Non
     assert scene_light(SitlConfig(seed=7, scenario=low_sun)).key == lights[7].key
     assert len({light.key for light in lights}) == 20
     assert math.isclose(Light.from_angles(25.0, 140.0, 0.3).elevation_deg, 25.0)
+
+
+def test_ground_kept_clear_gets_no_object_and_an_empty_list_changes_nothing() -> None:
+    sites = [(20.0, 20.0, 4.0), (-20.0, -20.0, 4.0), (12.0, -12.0, 3.0)]
+    solid_on_a_site = 0  # scenes whose plain park has a solid object on a site
+    for seed in range(6):
+        plain, empty = Park(seed, paint=False), Park(seed, paint=False, clear_ne_m=[])
+        assert plain.objects == empty.objects  # the draws of every existing scene are unchanged
+        solid_on_a_site += any(
+            o.footprint_distance_m(n, e) <= r and o.kind not in (ObjectKind.DARK_BLOB, ObjectKind.BRIGHT_BLOB)
+            for o in plain.objects
+            for n, e, r in sites
+        )
+        cleared = Park(seed, paint=False, clear_ne_m=sites)
+        for o in cleared.objects:
+            for north_m, east_m, radius_m in sites:
+                assert o.footprint_distance_m(north_m, east_m) > radius_m - 1e-9 or o.kind in (
+                    ObjectKind.DARK_BLOB,
+                    ObjectKind.BRIGHT_BLOB,
+                ), (seed, o)
+    assert solid_on_a_site > 0  # without the clear ground, sites are built over
+    scenario = ScenarioConfig.model_validate({"clear_ne_m": [[20.0, 20.0, 4.0]]})
+    assert scenario.clear_ne_m == [(20.0, 20.0, 4.0)]

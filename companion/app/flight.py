@@ -293,9 +293,9 @@ class FlightApp:
             return
         low = self.energy.check(state, status) if self.energy is not None else None
         reason = None if low is None else low.reason()
-        used_up = self.guidance.time_used_up(state, reason)
+        used_up = self.guidance.time_used_up(state, reason, None if low is None else low.home_m)
         if used_up is not None:
-            inputs: dict[str, Any] = {} if low is None else {"reason": reason, "remaining": low.remaining}
+            inputs: dict[str, Any] = {} if low is None else low.inputs()
             await self.apply(used_up, "time" if low is None else "energy", state, **inputs)
             return
         silent_s = state.t_s - self._last_frame_t_s

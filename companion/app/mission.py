@@ -218,6 +218,18 @@ def fence_contradictions(config: MissionConfig) -> list[str]:
                 f"perception.zones.landing_area_ne_m vertex ({north_m}, {east_m}) lies outside "
                 "geofence.polygon_ne_m: the companion could not fly to a zone there"
             )
+    footprint_m = config.perception.zones.min_radius_m
+    for site in config.guidance.fallback.sites:
+        if localized and fence.distance_inside_m(site.north_m, site.east_m) < footprint_m:
+            problems.append(
+                f"guidance.fallback.sites {site.name!r} ({site.north_m}, {site.east_m}): its footprint "
+                f"({footprint_m:g} m) reaches outside geofence.polygon_ne_m"
+            )
+        if site.radius_m < footprint_m:
+            problems.append(
+                f"guidance.fallback.sites {site.name!r}: radius_m {site.radius_m:g} m is smaller than the footprint "
+                f"(perception.zones, {footprint_m:g} m)"
+            )
     start = config.start
     n0, e0 = start.start_north_m, start.start_east_m
     if n0 is not None and e0 is not None and localized and not fence.contains_ne(n0, e0):

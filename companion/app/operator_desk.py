@@ -20,6 +20,7 @@ from companion.app.recorder import FlightRecorder
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand
 from companion.guidance.footprint import nearest_occupied_m
 from companion.guidance.landing import Decision, LandingGuidance
+from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
 from companion.perception.pipeline import FrameResult
 
@@ -86,7 +87,7 @@ class OperatorDesk:
         accepted = []
         for command in self.channel.pending():
             person_seen = self._person_seen(guidance, newest)
-            decided = guidance.on_command(command.command, state, person_seen, command.force)
+            decided = operator_decision(guidance, command.command, state, person_seen, command.force)
             inputs = {"command": command.command.value, "force": command.force, "person_seen": person_seen}
             if isinstance(decided, str):
                 self._answer(command, state, AckResult.DENIED, f"{command.command.value} denied: {decided}", inputs)

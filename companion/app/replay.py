@@ -28,6 +28,7 @@ from companion.geometry import GeometryError, Pose
 from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.geofence import Geofence
 from companion.guidance.landing import Decision, LandingGuidance, LandingPhase
+from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
@@ -219,7 +220,7 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
         "silence": lambda: guidance.perception_silent(state, float(inputs["silent_s"])),
         "landed": lambda: guidance.landed(state.t_s),
         "time": lambda: guidance.time_used_up(state),
-        "energy": lambda: guidance.time_used_up(state, str(inputs["reason"])),
+        "energy": lambda: guidance.time_used_up(state, str(inputs["reason"]), inputs.get("reach_m")),
         "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
         "limit": lambda: guidance.give_up(state, str(inputs["reason"])),
         "stop": lambda: guidance.give_up(state, str(inputs["reason"])),
@@ -237,7 +238,7 @@ def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int
 def _operator(guidance: LandingGuidance, state: VehicleState, inputs: dict[str, Any]) -> Decision:
     """A ground station's command as the flight decided it (an accepted one: denied ones made no decision)."""
     command = OperatorCommand(str(inputs["command"]))
-    decided = guidance.on_command(command, state, bool(inputs["person_seen"]), bool(inputs["force"]))
+    decided = operator_decision(guidance, command, state, bool(inputs["person_seen"]), bool(inputs["force"]))
     if isinstance(decided, str):
         raise ReplayError(f"the ground station's {command.value} at t = {state.t_s} s is denied now: {decided}")
     return decided

@@ -56,6 +56,36 @@ class EnergyConfig(StrictModel):
         return self
 
 
+class FallbackSiteConfig(StrictModel):
+    """One place surveyed by the operator where a landing is acceptable (local NED, as the fence)."""
+
+    name: str = Field(min_length=1, max_length=40, description="For the log and the ground station.")
+    north_m: float = Field(ge=-100_000.0, le=100_000.0)
+    east_m: float = Field(ge=-100_000.0, le=100_000.0)
+    radius_m: float = Field(
+        default=3.0, gt=0.0, le=100.0, description="The surveyed area around the point: the landing's zone radius."
+    )
+
+
+class FallbackConfig(StrictModel):
+    """The mission config's ``guidance.fallback``: where to land when the search's budget ends without a zone
+    (companion/guidance/fallback.py); none by default."""
+
+    sites: list[FallbackSiteConfig] = Field(
+        default_factory=list, description="Surveyed sites, tried nearest first; each checked by the map on arrival."
+    )
+    site_time_s: float = Field(
+        default=120.0, gt=0.0, le=3600.0, description="From choosing a site to its landing; past it, the next site."
+    )
+
+    @model_validator(mode="after")
+    def _unique(self) -> FallbackConfig:
+        names = [site.name for site in self.sites]
+        if len(set(names)) != len(names):
+            raise ValueError(f"sites: every site needs its own name (got {names})")
+        return self
+
+
 class GuidanceConfig(StrictModel):
     """Landing logic parameters (metres, seconds, vehicle clock)."""
 
@@ -150,6 +180,10 @@ class GuidanceConfig(StrictModel):
     energy: EnergyConfig = Field(
         default_factory=EnergyConfig,
         description="The search's budget from the battery (companion/guidance/energy.py); off by default.",
+    )
+    fallback: FallbackConfig = Field(
+        default_factory=FallbackConfig,
+        description="Surveyed fallback sites for when the search's budget ends (companion/guidance/fallback.py).",
     )
     blind_landing: bool = Field(
         default=False,

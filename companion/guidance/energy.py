@@ -34,17 +34,24 @@ class EnergyEstimate:
         Vehicle seconds of flight above the reserve at that current.
     needed_s : float
         Seconds home and down, with the margin.
+    home_m : float
+        Horizontal distance home (a fallback site no farther costs no more than the return the budget keeps).
     """
 
     remaining: float
     current_a: float
     seconds_left: float
     needed_s: float
+    home_m: float
 
     @property
     def used_up(self) -> bool:
         """What is left no longer covers getting home and down."""
         return self.seconds_left <= self.needed_s
+
+    def inputs(self) -> dict[str, float | str]:
+        """What a decision on it was made from (the flight log's inputs, which a replay decides again from)."""
+        return {"reason": self.reason(), "remaining": self.remaining, "reach_m": self.home_m}
 
     def reason(self) -> str:
         """In words, for the decision and the ground station."""
@@ -102,4 +109,4 @@ class EnergyBudget:
         seconds_left = (remaining - c.reserve_fraction) * self._capacity_mah * 3.6 / current_a
         home_m = math.hypot(state.north_m - home_ne_m[0], state.east_m - home_ne_m[1])
         needed_s = c.margin * (home_m / c.return_speed_mps + max(0.0, state.altitude_m) / c.descent_speed_mps)
-        return EnergyEstimate(remaining, current_a, seconds_left, needed_s)
+        return EnergyEstimate(remaining, current_a, seconds_left, needed_s, home_m)

@@ -48,17 +48,16 @@ import enum
 import math
 from dataclasses import dataclass
 
-from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.climb_back import ClimbBack
 from companion.guidance.commitment import TargetCommitment
 from companion.guidance.config import FailsafeAction, GuidanceConfig
 from companion.guidance.descent import Descent, StepKind
+from companion.guidance.fallback import BudgetEnd, FallbackPlan
 from companion.guidance.geofence import Geofence
 from companion.guidance.safety_filter import filtered_setpoint
 from companion.guidance.search_pattern import ExpandingSquare
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import CommitmentEvent, DecisionEvent, RefusalCause
-from companion.guidance.walker_watch import WalkerWatch
 from companion.perception.pipeline import FrameResult
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target
 from companion.vehicle.link import Setpoint
@@ -83,12 +82,6 @@ class LandingPhase(str, enum.Enum):
 
 
 ACTIVE_PHASES = frozenset({LandingPhase.SEARCH, LandingPhase.APPROACH, LandingPhase.DESCENT})
-OPERATOR_EVENTS: dict[OperatorCommand, tuple[DecisionEvent, str]] = {
-    OperatorCommand.GO_AROUND: (DecisionEvent.OPERATOR_GO_AROUND, "go-around from the ground station"),
-    OperatorCommand.REJECT_ZONE: (DecisionEvent.OPERATOR_REJECT, "zone rejected from the ground station"),
-    OperatorCommand.LAND_NOW: (DecisionEvent.OPERATOR_LAND, "land now, from the ground station"),
-}
-"""What each ground-station command is, as a decision: its event and its words."""
 
 
 class CommandKind(str, enum.Enum):
@@ -99,6 +92,14 @@ class CommandKind(str, enum.Enum):
     LAND = "land"
     HOLD = "hold"
     RETURN = "return"
+
+
+COMMAND_OF_ACTION = {
+    FailsafeAction.HOLD: CommandKind.HOLD,
+    FailsafeAction.LAND: CommandKind.LAND,
+    FailsafeAction.RETURN: CommandKind.RETURN,
+}
+"""What the vehicle link is asked for each failsafe action."""
 
 
 @dataclass(frozen=True)
@@ -159,19 +160,16 @@ class LandingGuidance:
         self._hold: Setpoint | None = None
         self.search = ExpandingSquare(config.search_leg_m, config.search_timeout_s, geofence)
         self.climb = ClimbBack(config)
+        self.fallback = FallbackPlan(config.fallback)
         self._resume_phase = LandingPhase.SEARCH
         self._heading_deg: float | None = None
         self._started_s: float | None = None
         self.target: Target | None = None
         """The target of the newest setpoint (None: none)."""
 
-    @property
-    def walkers(self) -> WalkerWatch:
-        """The descent's walker watch (its waits and whether its gate was passed)."""
-        return self.descent.walkers
-
     # -- helpers -------------------------------------------------------------------------------------------------
-    def _enter(self, phase: LandingPhase, t_s: float) -> None:
+    def enter(self, phase: LandingPhase, t_s: float) -> None:
+        """Be in ``phase`` from vehicle time ``t_s`` (the parts built on the machine use these primitives)."""
         if phase is not self.phase:
             self.phase = phase
             self._phase_since_s = t_s
@@ -187,7 +185,7 @@ class LandingGuidance:
             yaw_deg = self._heading_deg if self._heading_deg is not None else state.yaw_deg
         return filtered_setpoint(self.config, self.geofence, state, north_m, east_m, altitude_m, yaw_deg)
 
-    def _setpoint(
+    def steer(
         self,
         state: VehicleState,
         phase: LandingPhase,
@@ -200,14 +198,17 @@ class LandingGuidance:
         cause: RefusalCause | None = None,
         zone_changes: tuple[CommitmentEvent, ...] = (),
     ) -> Decision:
-        self._enter(phase, state.t_s)
+        self.enter(phase, state.t_s)
         self.target = target
         setpoint = self.safe_setpoint(state, n, e, alt)
         return Decision(state.t_s, phase, CommandKind.SETPOINT, setpoint, target, reason, event, cause, zone_changes)
 
-    def _abort_descent(
+    def abort_descent(
         self, state: VehicleState, reason: str, cause: RefusalCause, event: DecisionEvent = DecisionEvent.ABORT
     ) -> Decision:
+        if self.fallback.current is not None:  # the map refused the site: the next one, or the last resort
+            self.descent.refuse()
+            return self.next_site(state, f"{reason}: site {self.fallback.current.name} refused", cause)
         self.reselections += 1
         locked = self.descent.locked
         if locked is not None:
@@ -219,9 +220,9 @@ class LandingGuidance:
             # Never the configured "land": the map has just refused a landing here. The last resort (hold or
             # return), and the pilot decides.
             used = f"{reason}; {self.reselections - 1} re-selections used up"
-            return self._failsafe(state, used, DecisionEvent.RESELECTIONS_USED_UP, self.config.last_resort, cause)
+            return self.failsafe(state, used, DecisionEvent.RESELECTIONS_USED_UP, self.config.last_resort, cause)
         climb_to = self.climb.after_abort(state)
-        return self._setpoint(
+        return self.steer(
             state,
             LandingPhase.SEARCH,
             None,
@@ -233,7 +234,7 @@ class LandingGuidance:
             cause,
         )
 
-    def _failsafe(
+    def failsafe(
         self,
         state: VehicleState,
         reason: str,
@@ -243,12 +244,8 @@ class LandingGuidance:
     ) -> Decision:
         """Enter the failsafe phase with ``action`` (the configured one when None)."""
         action = action or self.config.failsafe_action
-        self._enter(LandingPhase.FAILSAFE, state.t_s)
-        kind = {
-            FailsafeAction.HOLD: CommandKind.HOLD,
-            FailsafeAction.LAND: CommandKind.LAND,
-            FailsafeAction.RETURN: CommandKind.RETURN,
-        }[action]
+        self.enter(LandingPhase.FAILSAFE, state.t_s)
+        kind = COMMAND_OF_ACTION[action]
         return Decision(state.t_s, LandingPhase.FAILSAFE, kind, None, None, f"{reason}: {action.value}", event, cause)
 
     # -- events ----------------------------------------------------------------------------------------------------
@@ -261,7 +258,7 @@ class LandingGuidance:
         self._heading_deg = state.yaw_deg
         altitude = max(state.altitude_m, self.config.search_altitude_m)
         self.climb.start(altitude)
-        return self._setpoint(
+        return self.steer(
             state,
             LandingPhase.SEARCH,
             None,
@@ -285,7 +282,7 @@ class LandingGuidance:
             ignored = f"frame ignored in {self.phase.value}"
             return Decision(state.t_s, self.phase, CommandKind.NONE, None, None, ignored, DecisionEvent.FRAME_IGNORED)
         if self.phase is LandingPhase.HOLD:  # perception is back
-            self._enter(self._resume_phase, state.t_s)
+            self.enter(self._resume_phase, state.t_s)
         if self.phase is LandingPhase.DESCENT:
             return self._descent(result, state)
         climbing = self.climb.below_choosing(state)  # all the way back up, and choose only there
@@ -293,15 +290,13 @@ class LandingGuidance:
             self._last_target_s = state.t_s  # no search pattern while climbing back
             north_m, east_m, to_m = climbing
             reason = f"{CLIMBING_BACK} {to_m:.1f} m before choosing again"
-            return self._setpoint(
-                state, LandingPhase.SEARCH, None, reason, north_m, east_m, to_m, DecisionEvent.CLIMB_BACK
-            )
+            return self.steer(state, LandingPhase.SEARCH, None, reason, north_m, east_m, to_m, DecisionEvent.CLIMB_BACK)
         target, said, changes = self._choose(result, state)
         note = "" if said is None else f"; {said}"
         if target is None:
             since = state.t_s - (self._last_target_s if self._last_target_s is not None else state.t_s)
             if since < c.search_timeout_s:
-                return self._setpoint(
+                return self.steer(
                     state,
                     LandingPhase.SEARCH,
                     None,
@@ -313,7 +308,7 @@ class LandingGuidance:
                     zone_changes=changes,
                 )
             n, e = self.search.waypoint(state.t_s, state.north_m, state.east_m, self.climb.search_altitude_m)
-            return self._setpoint(
+            return self.steer(
                 state,
                 LandingPhase.SEARCH,
                 None,
@@ -334,9 +329,9 @@ class LandingGuidance:
             and self.climb.to_m is None
         ):
             self.descent.lock(target)
-            self._enter(LandingPhase.DESCENT, state.t_s)
+            self.enter(LandingPhase.DESCENT, state.t_s)
             return self._descent(result, state)
-        return self._setpoint(
+        return self.steer(
             state,
             LandingPhase.APPROACH,
             target,
@@ -356,6 +351,8 @@ class LandingGuidance:
         """The committed target after this frame, and what changed in the commitment: in words (for the log) and
         as events."""
         c = self.config
+        if self.fallback.current is not None:  # flying to a fallback site: the site is the target
+            return self.fallback.current.target, None, ()
         proposed = result.target
         if proposed is not None and proposed.track_id is None:  # the blind baseline's point: drawn once, kept
             inside = self.geofence.contains_ne(proposed.north_m, proposed.east_m)
@@ -377,32 +374,62 @@ class LandingGuidance:
         step = self.descent.step(result, state)
         if step.kind is StepKind.ABORT:
             assert step.cause is not None
-            return self._abort_descent(state, step.reason, step.cause)
+            return self.abort_descent(state, step.reason, step.cause)
         locked = self.descent.locked
         assert locked is not None
         if step.kind is StepKind.LAND:
-            self._enter(LandingPhase.LAND, state.t_s)
+            self.enter(LandingPhase.LAND, state.t_s)
             return Decision(state.t_s, LandingPhase.LAND, CommandKind.LAND, None, locked, step.reason, step.event)
         n, e, alt = locked.north_m, locked.east_m, step.goal_altitude_m
-        return self._setpoint(state, LandingPhase.DESCENT, locked, step.reason, n, e, alt, step.event, step.cause)
+        return self.steer(state, LandingPhase.DESCENT, locked, step.reason, n, e, alt, step.event, step.cause)
 
-    def time_used_up(self, state: VehicleState, energy_low: str | None = None) -> Decision | None:
-        """The last resort once ``mission_time_limit_s`` has passed since :meth:`start` without a landing, or the energy
-        budget's action once it says ``energy_low`` (why, in words: :mod:`companion.guidance.energy`)."""
+    def time_used_up(
+        self, state: VehicleState, energy_low: str | None = None, reach_m: float | None = None
+    ) -> Decision | None:
+        """The search's budget: once ``mission_time_limit_s`` has passed since :meth:`start` without a landing, or the
+        energy budget says ``energy_low`` (why, in words: :mod:`companion.guidance.energy`), the nearest fallback site
+        within ``reach_m`` (None: any), else the last resort (or the energy budget's action); at a site, its time."""
         if self._started_s is None or self.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
             return None
+        site = self.fallback.current
+        if site is not None:
+            if not self.fallback.overdue(state.t_s):
+                return None
+            late = f"not landed at site {site.name} within {self.fallback.config.site_time_s:g} s"
+            return self.next_site(state, late, RefusalCause.SITE_TIMED_OUT)
+        limit_s = self.config.mission_time_limit_s
         if energy_low is not None:
-            return self._failsafe(state, energy_low, DecisionEvent.ENERGY_LOW, self.config.energy.action)
-        if state.t_s - self._started_s < self.config.mission_time_limit_s:
+            end = BudgetEnd(energy_low, DecisionEvent.ENERGY_LOW, self.config.energy.action)
+        elif state.t_s - self._started_s >= limit_s:
+            end = BudgetEnd(
+                f"no landing within {limit_s:g} s of the start", DecisionEvent.TIME_LIMIT, self.config.last_resort
+            )
+        else:
             return None
-        limit = f"no landing within {self.config.mission_time_limit_s:g} s of the start"
-        return self.give_up(state, limit, DecisionEvent.TIME_LIMIT)
+        self.fallback.ended_by, self.fallback.reach_m = end, reach_m
+        return self.next_site(state, end.reason, None)
+
+    def next_site(self, state: VehicleState, reason: str, cause: RefusalCause | None) -> Decision:
+        """Fly to the nearest fallback site left in reach (:mod:`companion.guidance.fallback`), climbing first to the
+        search's altitude; with none left, the last resort the search's end named."""
+        end = self.fallback.ended_by
+        assert end is not None  # set by time_used_up before any site is chosen
+        site = self.fallback.next(state)
+        if site is None:
+            said = f"{reason}; no fallback site left in reach" if self.fallback.sites else reason
+            return self.failsafe(state, said, end.event, end.action, cause)
+        self.descent.drop()
+        alt = max(state.altitude_m, self.climb.search_altitude_m)
+        self.climb.to_m, self.climb.over_ne_m = alt, (state.north_m, state.east_m)
+        said = f"{reason}: fallback site {site.name}, {self.fallback.distance_m(state):.0f} m away"
+        n, e, event = site.north_m, site.east_m, DecisionEvent.FALLBACK_SITE
+        return self.steer(state, LandingPhase.APPROACH, site.target, said, n, e, alt, event, cause)
 
     def give_up(self, state: VehicleState, reason: str, event: DecisionEvent = DecisionEvent.LIMIT) -> Decision:
         """End the mission before a landing, for a limit that ``reason`` names (``event``: the mission's own time
         limit, or a limit of the program): the failsafe phase with ``last_resort`` (hold or return; never land where
         the map has not chosen)."""
-        return self._failsafe(state, reason, event, self.config.last_resort)
+        return self.failsafe(state, reason, event, self.config.last_resort)
 
     def perception_silent(self, state: VehicleState, silent_s: float) -> Decision | None:
         """No processed frame for ``silent_s`` (wall or vehicle time, the caller's watchdog): T1 hold, T2 failsafe."""
@@ -412,7 +439,7 @@ class LandingGuidance:
             if self.phase is LandingPhase.DESCENT:
                 self.descent.drop()
             self._hold = self.safe_setpoint(state, state.north_m, state.east_m, state.altitude_m)
-            self._enter(LandingPhase.HOLD, state.t_s)
+            self.enter(LandingPhase.HOLD, state.t_s)
             return Decision(
                 state.t_s,
                 LandingPhase.HOLD,
@@ -423,45 +450,18 @@ class LandingGuidance:
                 DecisionEvent.PERCEPTION_HOLD,
             )
         if self.phase is LandingPhase.HOLD and silent_s >= c.failsafe_after_silence_s:
-            return self._failsafe(state, f"perception silent {silent_s:.1f} s", DecisionEvent.PERCEPTION_FAILSAFE)
+            return self.failsafe(state, f"perception silent {silent_s:.1f} s", DecisionEvent.PERCEPTION_FAILSAFE)
         return None
-
-    def on_command(
-        self, command: OperatorCommand, state: VehicleState, person_seen: bool, force: bool
-    ) -> Decision | str:
-        """A ground station's command at ``state``: its decision, or why it is denied (in words). ``person_seen``: the
-        newest map sees a person in the footprint at the target; ``force``: land even so (the decision says it)."""
-        target = self.target
-        if self.phase not in (LandingPhase.APPROACH, LandingPhase.DESCENT) or target is None:
-            return f"no approach or descent to act on (phase {self.phase.value})"
-        if command not in OPERATOR_EVENTS:
-            return f"{command.value} is not supported"
-        event, said = OPERATOR_EVENTS[command]
-        descending = self.phase is LandingPhase.DESCENT
-        if command is OperatorCommand.GO_AROUND or (command is OperatorCommand.REJECT_ZONE and descending):
-            return self._abort_descent(state, said, RefusalCause.OPERATOR, event)
-        if command is OperatorCommand.REJECT_ZONE:  # approaching: refuse the zone, choose another from here
-            self.commitment.refuse(target.north_m, target.east_m, state.t_s, said)
-            n, e, alt = state.north_m, state.east_m, max(state.altitude_m, self.climb.search_altitude_m)
-            return self._setpoint(state, LandingPhase.SEARCH, None, said, n, e, alt, event, RefusalCause.OPERATOR)
-        offset_m = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
-        if offset_m > self.config.capture_radius_m:
-            return f"{offset_m:.1f} m from the target: land-now lands where the vehicle is; wait until over it"
-        if person_seen and not force:
-            return "a person in the footprint on the newest map (param1 = 1 forces the landing)"
-        said += " (forced: a person in the footprint on the newest map)" if person_seen else ""
-        self._enter(LandingPhase.LAND, state.t_s)
-        return Decision(state.t_s, LandingPhase.LAND, CommandKind.LAND, None, target, said, event)
 
     def landed(self, t_s: float) -> Decision:
         """The autopilot reports the vehicle on the ground."""
-        self._enter(LandingPhase.DONE, t_s)
+        self.enter(LandingPhase.DONE, t_s)
         locked = self.descent.locked
         return Decision(t_s, LandingPhase.DONE, CommandKind.NONE, None, locked, "landed", DecisionEvent.LANDED)
 
     def pilot_took_over(self, t_s: float, mode: str) -> Decision:
         """The flight mode left OFFBOARD without us: yield at once, for the rest of the flight."""
-        self._enter(LandingPhase.YIELDED, t_s)
+        self.enter(LandingPhase.YIELDED, t_s)
         took_over = f"pilot took over (mode {mode})"
         return Decision(
             t_s, LandingPhase.YIELDED, CommandKind.NONE, None, None, took_over, DecisionEvent.PILOT_TOOK_OVER

@@ -54,6 +54,8 @@ class DecisionEvent(str, enum.Enum):
     """A frame in a phase that takes none."""
     TRANSIT = "transit"
     """Flying to the search area before the mission starts."""
+    FALLBACK_SITE = "fallback_site"
+    """The search's budget ended (or the site before was given up): fly to a fallback site and check it there."""
     OPERATOR_GO_AROUND = "operator_go_around"
     """The ground station's go-around: climb back and search again."""
     OPERATOR_REJECT = "operator_reject"
@@ -79,6 +81,8 @@ class RefusalCause(str, enum.Enum):
     """The committed zone was not seen for the commitment's lost time."""
     LEFT_GEOFENCE = "left_geofence"
     """The committed zone's footprint left the geofence."""
+    SITE_TIMED_OUT = "site_timed_out"
+    """A fallback site not landed on within its time."""
     OPERATOR = "operator"
     """The ground station rejected it (or sent a go-around)."""
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -298,7 +299,9 @@ def mission_metrics(
     reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)
     aborts = sum(1 for d in decisions if d.event is DecisionEvent.ABORT)
     obstacle_m, obstacle_kind = (
-        nearest_obstacle(park_layout(sitl.seed, sitl.scenario.roi_side_m), *down.position_ned_m[:2])
+        nearest_obstacle(
+            park_layout(sitl.seed, sitl.scenario.roi_side_m, sitl.scenario.clear_ne_m), *down.position_ned_m[:2]
+        )
         if down is not None
         else (nan, None)
     )
@@ -351,9 +354,12 @@ def _people_cells(header: TruthHeader, record: TruthRecord | None) -> list[list[
     return [[row, col, count] for (row, col), count in sorted(cells.items())]
 
 
-def park_layout(seed: int, roi_side_m: float) -> list[ParkObject]:
-    """The objects of the park a SITL with this seed and ROI renders (its layout only: no texture is painted)."""
-    return Park(seed, roi_side_m=roi_side_m, paint=False).objects
+def park_layout(
+    seed: int, roi_side_m: float, clear_ne_m: Sequence[tuple[float, float, float]] = ()
+) -> list[ParkObject]:
+    """The objects of the park a SITL with this seed, ROI and clear ground renders (its layout only: no texture is
+    painted)."""
+    return Park(seed, roi_side_m=roi_side_m, paint=False, clear_ne_m=clear_ne_m).objects
 
 
 def nearest_obstacle(objects: list[ParkObject], north_m: float, east_m: float) -> tuple[float, str | None]:

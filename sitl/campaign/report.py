@@ -128,7 +128,7 @@ def completed(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[dict[st
     touchdown, from the mission's seed (:func:`sitl.campaign.metrics.with_obstacles`)."""
     plans = {plan.mission_id: plan for plan in spec.missions()}
     radii: dict[str, float] = {}
-    layouts: dict[tuple[int, float], list[ParkObject]] = {}
+    layouts: dict[tuple[int, float, tuple[tuple[float, float, float], ...]], list[ParkObject]] = {}
     out = []
     for r in results:
         plan = plans.get(r["mission_id"])
@@ -137,7 +137,8 @@ def completed(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[dict[st
             continue
         objects: list[ParkObject] = []
         if r.get("touchdown_north_m") is not None:
-            key = (plan.seed, plan.scenario().roi_side_m)
+            scenario = plan.scenario()
+            key = (plan.seed, scenario.roi_side_m, tuple(scenario.clear_ne_m))
             if key not in layouts:
                 layouts[key] = park_layout(*key)
             objects = layouts[key]

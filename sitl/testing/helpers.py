@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import socket
 import threading
@@ -67,12 +68,22 @@ async def wait_until_async(condition: Callable[[], T | None], timeout_s: float, 
         await asyncio.sleep(poll_s)
 
 
-def start_camera_sitl(tmp_path: Path, instance: int, seed: int, gcs_port: int, lockstep: bool = False) -> SitlProcess:
+def start_camera_sitl(
+    tmp_path: Path,
+    instance: int,
+    seed: int,
+    gcs_port: int,
+    lockstep: bool = False,
+    scenario: dict[str, Any] | None = None,
+) -> SitlProcess:
     """A SITL instance with its camera on, seeded, its ground-station link on ``gcs_port`` (``tmp_path/sitl.yaml``);
-    in lockstep (``speed_factor`` 0: the companion's acknowledgements pace it) or running free."""
+    in lockstep (``speed_factor`` 0: the companion's acknowledgements pace it) or running free; ``scenario``: its
+    scenario's settings (the defaults otherwise)."""
     lines = ["sitl:", "  camera:", "    enabled: true", f"  seed: {seed}", f"  gcs_port_remote: {gcs_port}"]
     if lockstep:
         lines += ["  lockstep: true", "  speed_factor: 0.0"]
+    if scenario is not None:
+        lines.append(f"  scenario: {json.dumps(scenario)}")  # JSON is YAML's flow style
     config = tmp_path / "sitl.yaml"
     config.write_text("\n".join(lines) + "\n")
     return SitlProcess(["--config", str(config)], instance, tmp_path).start()

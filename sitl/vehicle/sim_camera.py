@@ -28,7 +28,13 @@ PARKS: KeyedCache[Park] = KeyedCache("parks", capacity=2)
 
 def _park(config: SitlConfig) -> Park:
     scenario = config.scenario
-    park = Park(config.seed, roi_side_m=scenario.roi_side_m, ground=scenario.ground, ground_site=scenario.ground_site)
+    park = Park(
+        config.seed,
+        roi_side_m=scenario.roi_side_m,
+        ground=scenario.ground,
+        ground_site=scenario.ground_site,
+        clear_ne_m=scenario.clear_ne_m,
+    )
     park.ground_bgr.setflags(write=False)  # shared by the missions of one scene: nobody may paint on it
     return park
 
@@ -51,7 +57,7 @@ class SimCamera:
         cam = config.camera
         scenario = config.scenario
         self.light = scene_light(config)
-        park_key = (config.seed, scenario.roi_side_m, scenario.ground, scenario.ground_site)
+        park_key = (config.seed, scenario.roi_side_m, scenario.ground, scenario.ground_site, str(scenario.clear_ne_m))
         self.park = PARKS.get(park_key, lambda: _park(config))
         self.crowd = Crowd(scenario, config.seed)
         self.weather = WeatherSchedule(scenario, config.seed)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -126,6 +127,9 @@ class Park:
         for both (the procedural texture's random draws are made either way).
     ground_site : RealSite
         Real ground: the site whose photographs paint it.
+    clear_ne_m : sequence of (north_m, east_m, radius_m)
+        Discs no object is placed on (an operator's surveyed sites): a position drawn there is drawn again. Empty,
+        the draws (and so the park) are the same as without it.
     """
 
     def __init__(
@@ -138,10 +142,12 @@ class Park:
         paint: bool = True,
         ground: GroundKind = GroundKind.PROCEDURAL,
         ground_site: RealSite = RealSite.CALITERRA,
+        clear_ne_m: Sequence[tuple[float, float, float]] = (),
     ) -> None:
         rng = np.random.default_rng([seed, 5])
         site = ground_site if ground is GroundKind.REAL else None
-        self.key = (seed, roi_side_m, extent_m, texture_res_m, style, paint, ground, site)
+        self.clear_ne_m = tuple(tuple(float(v) for v in disc) for disc in clear_ne_m)
+        self.key = (seed, roi_side_m, extent_m, texture_res_m, style, paint, ground, site, self.clear_ne_m)
         """Everything this park is made from (a cache key: two parks with one key are the same park)."""
         self.style = style
         self.extent_m = extent_m
@@ -221,7 +227,8 @@ class Park:
             for _ in range(count):
                 while True:
                     n, e = rng.uniform(-self.extent_m + 3, self.extent_m - 3, size=2)
-                    if inside_roi or max(abs(n), abs(e)) > roi_half_m + 1.0:
+                    clear = all(math.hypot(n - cn, e - ce) >= cr + size[1] / 2 for cn, ce, cr in self.clear_ne_m)
+                    if (inside_roi or max(abs(n), abs(e)) > roi_half_m + 1.0) and clear:
                         break
                 colour = tuple(int(v) for v in rng.integers(20, 235, size=3))
                 objects.append(

@@ -105,6 +105,11 @@ class ScenarioConfig(StrictModel):
     """All randomization ranges of one scenario family."""
 
     roi_side_m: float = Field(default=30.0, gt=0.0, le=500.0, description="Side of the square region of interest.")
+    clear_ne_m: list[tuple[float, float, float]] = Field(
+        default_factory=list,
+        description="Ground no park object is placed on: discs [north_m, east_m, radius_m], as an operator's surveyed "
+        "landing sites (fallback sites); people may still stand or walk there. Empty: the park as always.",
+    )
     people_min: int = Field(default=80, ge=0, le=5000)
     people_max: int = Field(default=120, ge=0, le=5000)
     person_radius_m: Range = Field(default_factory=lambda: _range(0.2, 0.3), description="Body radius seen from above.")

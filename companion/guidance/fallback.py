@@ -1,0 +1,94 @@
+"""Fallback sites: places the operator surveyed where a landing is acceptable, for when the search's budget ends.
+
+When the mission's time limit or the energy budget ends the search without a landing, the landing logic
+(:mod:`companion.guidance.landing`) does not go straight to its last resort: it flies to the nearest fallback site it
+can still reach (with the energy budget on: no farther than home, whose return the budget keeps energy for), and
+checks it with its own map as it checks a zone: the descent over the site's centre is refused for a person in the
+footprint, a walker at the gate or no free map, exactly as over a zone. A refused site, or one not landed on within
+``site_time_s``, is given up for the next site in reach; with none left, the last resort the budget's end named
+(``guidance.last_resort``, or the energy budget's action). Every choice is a decision with its reason.
+
+No I/O; times are the vehicle's clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from companion.guidance.config import FailsafeAction, FallbackConfig
+from companion.guidance.vehicle_state import VehicleState
+from companion.guidance.vocabulary import DecisionEvent
+from companion.perception.selection import Target
+
+
+@dataclass(frozen=True)
+class FallbackSite:
+    """A site, with its index in the config (its target's track id is ``-1 - index``: no tracked zone has it)."""
+
+    index: int
+    name: str
+    north_m: float
+    east_m: float
+    radius_m: float
+
+    @property
+    def target(self) -> Target:
+        """The site as a landing target: its centre, its radius."""
+        return Target(self.north_m, self.east_m, self.radius_m, -1 - self.index)
+
+
+@dataclass(frozen=True)
+class BudgetEnd:
+    """What ended the search: its words, its event, and the last resort it names once no site is left."""
+
+    reason: str
+    event: DecisionEvent
+    action: FailsafeAction
+
+
+class FallbackPlan:
+    """The sites of one flight and the one being tried.
+
+    Parameters
+    ----------
+    config : FallbackConfig
+        The sites and the time each may take.
+    """
+
+    def __init__(self, config: FallbackConfig) -> None:
+        self.config = config
+        self.sites = [FallbackSite(k, s.name, s.north_m, s.east_m, s.radius_m) for k, s in enumerate(config.sites)]
+        self.current: FallbackSite | None = None
+        """The site flown to now (None: none)."""
+        self.ended_by: BudgetEnd | None = None
+        """What ended the search (set once, when the first site is chosen or none is)."""
+        self.reach_m: float | None = None
+        """How far a site may lie from the vehicle (None: any; the energy budget's home distance)."""
+        self._tried: set[int] = set()
+        self._since_s = 0.0
+
+    def next(self, state: VehicleState) -> FallbackSite | None:
+        """Choose the nearest untried site in reach of ``state`` (it becomes :attr:`current`), or None."""
+        self.current = None
+        in_reach = [
+            (math.hypot(s.north_m - state.north_m, s.east_m - state.east_m), s.index, s)
+            for s in self.sites
+            if s.index not in self._tried
+        ]
+        in_reach = [entry for entry in in_reach if self.reach_m is None or entry[0] <= self.reach_m]
+        if not in_reach:
+            return None
+        _, _, site = min(in_reach)
+        self._tried.add(site.index)
+        self.current, self._since_s = site, state.t_s
+        return site
+
+    def overdue(self, t_s: float) -> bool:
+        """The current site's time is used up."""
+        return self.current is not None and t_s - self._since_s >= self.config.site_time_s
+
+    def distance_m(self, state: VehicleState) -> float:
+        """From the vehicle to the current site's centre (horizontal)."""
+        assert self.current is not None
+        return math.hypot(self.current.north_m - state.north_m, self.current.east_m - state.east_m)
