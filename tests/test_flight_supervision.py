@@ -91,6 +91,10 @@ class FakeLink:
         """The EKF origin these tests fly from (Zurich, PX4's SITL default)."""
         return 47.397742, 8.545594
 
+    async def rally_points(self, timeout_s: float) -> list[tuple[float, float]]:
+        """None uploaded."""
+        return []
+
     async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
         """Kept, as a ground station would see them."""
         self.mavlink.append((name, fields))

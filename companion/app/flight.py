@@ -38,6 +38,7 @@ from typing import Any
 
 from companion.app.commands import VehicleCommands
 from companion.app.drivers import FreeRunningDriver, LockstepDriver
+from companion.app.fallback_sites import with_rally_sites
 from companion.app.flight_log import RecordKind
 from companion.app.frame_intake import FrameIntake
 from companion.app.ground_report import GroundReport
@@ -60,6 +61,7 @@ from companion.guidance.landing import CommandKind, Decision, LandingGuidance, L
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent
 from companion.perception.pipeline import FrameResult, SlzPipeline
+from companion.perception.selection import SelectionPolicy
 from companion.perception.zones import ZoneFinder
 from companion.vehicle.link import VehicleError, VehicleLink
 from companion.vehicle.lockstep import LockstepClient
@@ -113,6 +115,13 @@ def observed_at_target(
     return {"nearest_occupied_m": None if nearest is None else round(nearest, 3)}
 
 
+def landing_guidance(config: MissionConfig, policy: SelectionPolicy) -> LandingGuidance:
+    """The landing logic of a mission: its fence, its footprint (the zones' smallest radius) and selection policy."""
+    zones = config.perception.zones
+    fence = Geofence(config.geofence)
+    return LandingGuidance(config.guidance, fence, zones.min_radius_m, zones.min_radius_m, policy)
+
+
 class FlightApp:
     """One flight (see the module docstring).
 
@@ -157,7 +166,7 @@ class FlightApp:
         self.lockstep = lockstep
         self.dry_run = config.mode is OperatingMode.DRY_RUN
         self.report = GroundReport(link, self.dry_run)
-        self.guidance = self._new_guidance()
+        self.guidance = landing_guidance(self.config, self.pipeline.policy)
         # The search area's centre for the blind random baseline (the paper's ROI): the geofence's centroid.
         self._area_centre_ne_m = polygon_centroid_ne_m(config.geofence.polygon_ne_m)
         self.outcome = FlightOutcome()
@@ -174,16 +183,6 @@ class FlightApp:
         self.energy = EnergyBudget(config.guidance.energy) if config.guidance.energy.enabled else None
         self.ending = RunEnd(self.supervision, recorder, self.outcome, self.done)
         self.desk = OperatorDesk.from_config(config, recorder)
-
-    def _new_guidance(self) -> LandingGuidance:
-        zones = self.config.perception.zones
-        return LandingGuidance(
-            self.config.guidance,
-            Geofence(self.config.geofence),
-            zones.min_radius_m,
-            zones.min_radius_m,
-            self.pipeline.policy,
-        )
 
     def vehicle_state(self) -> VehicleState | None:
         """The vehicle at its newest stamped pose."""
@@ -308,7 +307,7 @@ class FlightApp:
         started again once the vehicle is in the air and sees the head plane."""
         logger.info("[dry run] decisions ended in %s; deciding again once the start holds again", self.outcome.phase)
         self.recorder.write(RecordKind.WAITING, state.t_s, waiting_for="a new start (the last decisions ended)")
-        self.guidance = self._new_guidance()
+        self.guidance = landing_guidance(self.config, self.pipeline.policy)
         self.start_sequence = StartSequence(self.config.start, self.dry_run)
         self.journal.reset()
 
@@ -347,11 +346,18 @@ class FlightApp:
         took_off = self.start_sequence.takes_off and self.start_sequence.stage is not StartStage.WAITING
         return self.commands.offboard or took_off
 
-    async def _localize_fence(self) -> None:
-        """The fence in latitude and longitude, in local NED (:func:`fence_in_local_ned`), and what follows it."""
-        self.config = await fence_in_local_ned(self.config, self.link, self.recorder)
+    async def _localize(self) -> None:
+        """The fence in latitude and longitude in local NED (:func:`fence_in_local_ned`), the autopilot's rally points
+        as fallback sites (:func:`~companion.app.fallback_sites.with_rally_sites`), and what follows them."""
+        before = self.config
+        if self.config.geofence.polygon_latlon_deg is not None:
+            self.config = await fence_in_local_ned(self.config, self.link, self.recorder)
+        if self.config.guidance.fallback.rally_points:
+            self.config = await with_rally_sites(self.config, self.link, self.recorder)
+        if self.config is before:
+            return
         polygon_ne_m = self.config.geofence.polygon_ne_m
-        self.guidance = self._new_guidance()
+        self.guidance = landing_guidance(self.config, self.pipeline.policy)
         self._area_centre_ne_m = polygon_centroid_ne_m(polygon_ne_m)
         self.pipeline.zone_finder = ZoneFinder(self.config.perception.zones, polygon_ne_m)
 
@@ -425,8 +431,7 @@ class FlightApp:
         """The camera (missing: no vehicle touched), the vehicle, the fence, the lockstep; a stop ends it (run)."""
         await self.source.open()
         await self.link.connect(self.config.vehicle.connect_timeout_s)
-        if self.config.geofence.polygon_latlon_deg is not None:
-            await self._localize_fence()
+        await self._localize()
         if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
             self.lockstep = None
         await self.desk.open()

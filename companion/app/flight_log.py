@@ -67,6 +67,8 @@ class RecordKind(str, enum.Enum):
     ERROR = "error"
     LATENCY = "latency"
     """Frame arrival to command sent, ms."""
+    FALLBACK_SITES = "fallback_sites"
+    """The fallback sites a flight used, the autopilot's rally points among them (``sites``, ``rally_points``)."""
     GROUND_COMMAND = "ground_command"
     """A ground station's landing command (:mod:`companion.app.operator_desk`): ``command``, ``mav_cmd``, ``sender``,
     ``signed``, ``force``, ``person_seen``, ``result`` (accepted, denied) and ``reason``."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 import enum
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlparse
 
 from pydantic import Field, ValidationError, field_validator, model_validator
@@ -254,6 +254,19 @@ def fence_contradictions(config: MissionConfig) -> list[str]:
 
 REQUIRED_FOR_FLIGHT = (("polygon_ne_m", "polygon_latlon_deg"), ("max_altitude_m",))
 """The geofence fields a config must give for ``slz fly`` (one of each group): no flight on a default fence."""
+
+
+def with_fallback_sites(config: MissionConfig, sites: list[dict[str, Any]]) -> MissionConfig:
+    """``config`` with ``sites`` as its fallback sites (``guidance.fallback.sites``, the rally points downloaded at the
+    start among them), validated again with every cross-check; raises ConfigError naming what they contradict."""
+    data = config.model_dump(mode="json")
+    data["guidance"]["fallback"]["sites"] = sites
+    try:
+        return MissionConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(
+            "the fallback sites with the autopilot's rally points", format_validation_error(exc)
+        ) from None
 
 
 def with_fence_ne_m(config: MissionConfig, polygon_ne_m: list[tuple[float, float]]) -> MissionConfig:

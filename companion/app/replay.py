@@ -20,13 +20,13 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.app.flight import landing_guidance
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
-from companion.app.mission import MissionConfig, with_fence_ne_m
+from companion.app.mission import MissionConfig, with_fallback_sites, with_fence_ne_m
 from companion.app.recorder import plain
 from companion.errors import SlzError
 from companion.geometry import GeometryError, Pose
 from companion.ground.operator_commands import OperatorCommand
-from companion.guidance.geofence import Geofence
 from companion.guidance.landing import Decision, LandingGuidance, LandingPhase
 from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
@@ -120,11 +120,15 @@ def config_from_header(raw: object) -> MissionConfig:
 
 def flight_config(flight: FlightLog, header: dict[str, Any]) -> MissionConfig:
     """The config the flight ran with: its header's (:func:`config_from_header`), with a fence given in latitude and
-    longitude as the flight projected it (its ``fence`` record)."""
+    longitude as the flight projected it (its ``fence`` record) and the fallback sites it used, the autopilot's rally
+    points among them (its ``fallback_sites`` record)."""
     config = config_from_header(header["config"])
     fence = flight.first(RecordKind.FENCE)
     if fence is not None:
         config = with_fence_ne_m(config, [(float(n), float(e)) for n, e in fence["polygon_ne_m"]])
+    sites = flight.first(RecordKind.FALLBACK_SITES)
+    if sites is not None:
+        config = with_fallback_sites(config, list(sites["sites"]))
     return config
 
 
@@ -146,12 +150,9 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
     config = flight_config(flight, header)
     frame_paths = {int(r["seq"]): log_dir / str(r["path"]) for r in flight.of(RecordKind.FRAME)}
     pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
-    zones = config.perception.zones
 
     def new_guidance() -> LandingGuidance:
-        return LandingGuidance(
-            config.guidance, Geofence(config.geofence), zones.min_radius_m, zones.min_radius_m, pipeline.policy
-        )
+        return landing_guidance(config, pipeline.policy)
 
     guidance = new_guidance()
     report = ReplayReport()

@@ -77,6 +77,14 @@ class FallbackConfig(StrictModel):
     site_time_s: float = Field(
         default=120.0, gt=0.0, le=3600.0, description="From choosing a site to its landing; past it, the next site."
     )
+    rally_points: bool = Field(
+        default=False,
+        description="Also the autopilot's rally points (a ground station uploads them with the rally protocol), "
+        "downloaded at the start; one whose footprint leaves the fence is dropped (logged).",
+    )
+    rally_radius_m: float = Field(
+        default=3.0, gt=0.0, le=100.0, description="The radius of a rally point's site (rally points carry none)."
+    )
 
     @model_validator(mode="after")
     def _unique(self) -> FallbackConfig:

@@ -132,6 +132,11 @@ class VehicleLink(Protocol):
         frame starts; :class:`VehicleError` when it gives none within ``timeout_s`` (wall)."""
         ...
 
+    async def rally_points(self, timeout_s: float) -> list[tuple[float, float]]:
+        """The autopilot's rally points (uploaded by a ground station with the rally protocol): latitude and longitude
+        in degrees each; :class:`VehicleError` when the list does not come within ``timeout_s`` (wall)."""
+        ...
+
     async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
         """Send one MAVLink message by name (``"STATUSTEXT"``) with its fields (names as in the MAVLink XML) over the
         vehicle link; the autopilot forwards it to the ground station. Raises :class:`VehicleError` when refused."""

@@ -314,6 +314,20 @@ class MavsdkVehicleLink:
             raise VehicleError(self.url, "GPS_GLOBAL_ORIGIN not set (no GPS fix yet?)")
         return lat, lon
 
+    async def rally_points(self, timeout_s: float) -> list[tuple[float, float]]:
+        """The autopilot's rally points, latitude and longitude in degrees (see VehicleLink)."""
+        if self._system is None:
+            raise VehicleError(self.url, "not connected")
+        from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+
+        try:
+            items = await asyncio.wait_for(MissionRawAsync(self._system).download_rallypoints(), timeout_s)
+        except asyncio.TimeoutError:
+            raise VehicleError(self.url, f"no rally point list within {timeout_s:g} s") from None
+        except Exception as exc:  # MissionRawError: the autopilot refused or timed out the download
+            raise VehicleError(self.url, f"rally points not downloaded: {exc}") from None
+        return [(item.x * 1e-7, item.y * 1e-7) for item in items]
+
     async def read_parameters(self, timeout_s: float = 15.0) -> dict[str, float] | None:
         """Every parameter of the autopilot by name (integers as floats), from one list request; None when the list
         does not arrive within ``timeout_s``. Asking for the list, not for names it may lack, leaves no retries and
