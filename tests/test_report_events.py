@@ -82,6 +82,41 @@ def test_the_landing_report_names_the_site_the_zone_and_the_nearest_occupied_gro
     assert report["zone_when_descent_began"]["seen_from_altitude_m"] == 20.0
     assert report["nearest_occupied_m"] == 2.9  # the last map that decided, at the gate
     assert [e["event"] for e in report["decisions"]] == ["target none -> zone 7 (r = 5.10 m)"]
+    assert report["fallback_site"] is None  # a zone
+    assert report["ground_commands"] == []
+
+
+def test_the_landing_report_names_the_fallback_site_landed_at_and_the_ground_stations_commands(tmp_path: Path) -> None:
+    from companion.app.landing_report import REPORT_NAME, write_landing_report
+
+    sites = [{"name": "roi_corner", "north_m": 12.0, "east_m": 12.0, "radius_m": 3.0}]
+    sites.append({"name": "rally_1", "north_m": 21.0, "east_m": -4.0, "radius_m": 3.0})
+    recorder = FlightRecorder(tmp_path)
+    recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0", model="m.onnx", model_sha256="ab")
+    recorder.write(RecordKind.FALLBACK_SITES, None, sites=sites, rally_points=1)
+    recorder.write(
+        RecordKind.GROUND_COMMAND, 20.0, command="reject_zone", result="accepted", reason="zone rejected", force=False
+    )
+    low = VehicleState(90.0, 21.0, -4.0, -2.0, 0.0)
+    site = Target(21.0, -4.0, 3.0, -2)  # the second site
+    landing = Decision(90.0, LandingPhase.LAND, CommandKind.LAND, None, site, "land on the site", DecisionEvent.LAND)
+    recorder.write(RecordKind.DECISION, 90.0, decision=landing, source="frame", state=low, inputs={})
+    recorder.write(RecordKind.END, None, outcome={"phase": "done", "reason": "landed"})
+    recorder.close()
+    write_landing_report(tmp_path)
+    report = json.loads((tmp_path / REPORT_NAME).read_text())
+    assert report["version"] == 2
+    assert report["fallback_site"] == "rally_1"
+    assert report["ground_commands"] == [
+        {
+            "t_s": 20.0,
+            "command": "reject_zone",
+            "result": "accepted",
+            "reason": "zone rejected",
+            "force": False,
+            "signed": None,
+        }
+    ]
 
 
 def test_the_nearest_occupied_cell_is_measured_from_the_point() -> None:

@@ -5,8 +5,9 @@ log that has none): how the flight ended, where it landed or was to land (the la
 the autopilot reported), when, the zone (its id, and its free radius when the descent began and at the land decision),
 the nearest ground the map called occupied around the landing point in the last map that decided (taken at or above
 ``guidance.perception_min_altitude_m``; a person, or a false positive, with the map's safety dilation: a lower bound of
-the distance to a body), and the decisions on the way (phase changes, switches of
-target, failsafes, with their reasons). Everything comes from the flight log: a report of an older log simply lacks
+the distance to a body), the fallback site it landed at when it was one (issue 53: by name), the ground station's
+commands and their answers, and the decisions on the way (phase changes, switches of target, failsafes, with their
+reasons). Everything comes from the flight log: a report of an older log simply lacks
 what that log did not record (``null``).
 """
 
@@ -24,7 +25,7 @@ from companion.app.timeline import flight_events
 logger = logging.getLogger(__name__)
 
 REPORT_NAME = "landing_report.json"
-VERSION = 1
+VERSION = 2  # 2: fallback_site, ground_commands
 
 
 def _zone(target: dict[str, Any] | None) -> dict[str, Any] | None:
@@ -36,6 +37,18 @@ def _zone(target: dict[str, Any] | None) -> dict[str, Any] | None:
         "east_m": target["east_m"],
         "radius_m": target["radius_m"],
     }
+
+
+def _fallback_site(log: FlightLog, config: dict[str, Any], target: dict[str, Any] | None) -> str | None:
+    """The name of the fallback site ``target`` is (a site's target has track id ``-1 - index`` among the flight's
+    sites: its ``fallback_sites`` record, else its config's), None for a zone."""
+    track_id = None if target is None else target.get("track_id")
+    if not isinstance(track_id, int) or track_id >= 0:
+        return None
+    record = log.first(RecordKind.FALLBACK_SITES)
+    sites = record["sites"] if record else config.get("guidance", {}).get("fallback", {}).get("sites") or []
+    index = -1 - track_id
+    return str(sites[index]["name"]) if index < len(sites) else None
 
 
 def landing_report(log: FlightLog) -> dict[str, Any]:
@@ -86,6 +99,7 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
             "by": "the autopilot's landing detection",
         },
         "zone": _zone(land["decision"].get("target") if land else None),
+        "fallback_site": _fallback_site(log, config, land["decision"].get("target") if land else None),
         "zone_when_descent_began": None
         if descent is None
         else {
@@ -94,6 +108,10 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
             "seen_from_altitude_m": -descent["state"]["down_m"] if descent.get("state") else None,
         },
         "nearest_occupied_m": None if observed is None else observed.get("nearest_occupied_m"),
+        "ground_commands": [
+            {k: r.get(k) for k in ("t_s", "command", "result", "reason", "force", "signed")}
+            for r in log.of(RecordKind.GROUND_COMMAND)
+        ],
         "decisions": flight_events(log),
     }
 

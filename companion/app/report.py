@@ -283,7 +283,8 @@ def _contact_sheet(views: list[tuple[float, np.ndarray, str]], path: Path) -> No
 
 
 def _landing_lines(landing: dict[str, Any]) -> list[str]:
-    """The landing report's zone and nearest occupied ground, for the page."""
+    """The landing report's zone (or fallback site), the ground station's commands and the nearest occupied ground,
+    for the page."""
     lines = []
     zone, first = landing.get("zone"), landing.get("zone_when_descent_began") or {}
     if zone is not None:
@@ -292,9 +293,12 @@ def _landing_lines(landing: dict[str, Any]) -> list[str]:
             seen = (
                 f"{first['radius_m']:.2f} m as seen from {first['seen_from_altitude_m']:.1f} m when the descent began, "
             )
-        lines.append(
-            f"- landing zone {zone['track_id']}: free radius {seen}{zone['radius_m']:.2f} m at the land decision"
-        )
+        site = landing.get("fallback_site")
+        where = f"fallback site {site}" if site is not None else f"landing zone {zone['track_id']}"
+        lines.append(f"- {where}: free radius {seen}{zone['radius_m']:.2f} m at the land decision")
+    for command in landing.get("ground_commands") or []:
+        forced = " (forced)" if command.get("force") else ""
+        lines.append(f"- ground station at {command['t_s']:.1f} s: {command['command']}{forced}, {command['result']}")
     if landing.get("nearest_occupied_m") is not None:
         lines.append(
             f"- nearest ground the map called occupied, from the landing point: {landing['nearest_occupied_m']:.2f} m "

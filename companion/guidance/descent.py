@@ -159,16 +159,16 @@ class Descent:
             if age > c.landing_map_max_age_s:
                 no_map = f"no map saw the footprint free in the last {c.landing_map_max_age_s:g} s"
                 return _abort(no_map, RefusalCause.NO_FREE_MAP)
-            land = f"land on zone {locked.track_id} (map {age:.1f} s old)"
+            land = f"land on {_named(locked)} (map {age:.1f} s old)"
             return DescentStep(StepKind.LAND, land, DecisionEvent.LAND)
         goal_alt = c.approach_height_m if offset <= c.capture_radius_m else state.altitude_m
-        reason = f"descend over zone {locked.track_id} (offset {offset:.2f} m)"
+        reason = f"descend over {_named(locked)} (offset {offset:.2f} m)"
         event, cause = DecisionEvent.DESCEND, None
         if gate is not None:
             gate_m, watch_says, cause = gate
             goal_alt = max(goal_alt, gate_m)
             if watch_says:
-                reason = f"{WAITING_AT_GATE} {gate_m:.1f} m over zone {locked.track_id}: {watch_says}"
+                reason = f"{WAITING_AT_GATE} {gate_m:.1f} m over {_named(locked)}: {watch_says}"
                 event = DecisionEvent.WAIT_AT_GATE
         return DescentStep(StepKind.SETPOINT, reason, event, cause, goal_alt)
 
@@ -218,6 +218,13 @@ class Descent:
         if blocked is not None:
             return gate_m, blocked[1], blocked[0]
         return gate_m, approach.describe() if approach is not None else "watching", None
+
+
+def _named(target: Target) -> str:
+    """A landing point in words: its zone, or a fallback site (whose target has a negative track id)."""
+    if target.track_id is not None and target.track_id < 0:
+        return "the fallback site"
+    return f"zone {target.track_id}"
 
 
 def _abort(reason: str, cause: RefusalCause) -> DescentStep:
