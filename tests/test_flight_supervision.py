@@ -537,3 +537,32 @@ def test_a_stop_while_the_vehicle_is_not_yet_found_ends_the_run_without_waiting_
     assert app.outcome.reason == "SIGTERM received: no vehicle tick within 0.2 s, ending without the last resort"
     kinds = [r["kind"] for r in read_log(app.recorder.path)]
     assert kinds == ["start", "supervision", "end"]
+
+
+def test_every_fallback_site_chosen_is_said_to_the_ground_station_even_without_a_phase_change(
+    tmp_path: Path, config: PerceptionConfig
+) -> None:
+    link = FakeLink()
+    mission = MissionConfig.model_validate(
+        {
+            "start": {"arm_and_takeoff": False},
+            "guidance": {
+                "mission_time_limit_s": 30.0,
+                "fallback": {"sites": [{"name": "north_lawn", "north_m": 10.0, "east_m": 0.0}]},
+            },
+            "perception": config.model_dump(mode="json"),
+            "recorder": {"directory": str(tmp_path), "frame_every": 0},
+        }
+    )
+    app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        app.guidance.enter(LandingPhase.APPROACH, 2.0)  # approaching a zone when the time runs out
+        app.outcome.phase = LandingPhase.APPROACH.value
+        await tick(app, link, 31.5)
+
+    asyncio.run(flight())
+    assert app.guidance.phase is LandingPhase.APPROACH
+    texts = [fields["text"] for name, fields in link.mavlink if name == "STATUSTEXT"]
+    assert "fallback site north_lawn" in "".join(texts), texts  # (chunked at 50 characters)

@@ -204,7 +204,7 @@ class FlightApp:
         self.outcome.phase = decision.phase.value
         self.outcome.reason = decision.reason
         self.journal.decision(decision, previous, source, state, observed, inputs)
-        if decision.phase.value != previous:
+        if decision.phase.value != previous or decision.event is DecisionEvent.FALLBACK_SITE:  # every site said
             await self.report.phase(decision.phase, decision.reason)
         if decision.phase is LandingPhase.FAILSAFE:
             self.outcome.failsafes.append(decision.reason)
