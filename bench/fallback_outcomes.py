@@ -22,9 +22,11 @@ from sitl.campaign.runner import read_results
 
 
 def site_names(folder: Path) -> dict[tuple[float, float], str]:
-    """The fallback sites of the campaign's spec (its common mission overrides), by their north and east (m)."""
+    """The fallback sites of the campaign's spec (its common mission overrides and its strategies'), by their north
+    and east (m)."""
     spec = yaml.safe_load((folder / "spec.yaml").read_text())  # the spec as the campaign flew it
-    sites = spec.get("mission", {}).get("guidance", {}).get("fallback", {}).get("sites", [])
+    missions = [spec.get("mission", {})] + [s.get("mission", {}) for s in spec.get("strategies", [])]
+    sites = [site for m in missions for site in m.get("guidance", {}).get("fallback", {}).get("sites", [])]
     return {(float(s["north_m"]), float(s["east_m"])): str(s["name"]) for s in sites}
 
 
