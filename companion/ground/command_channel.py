@@ -26,7 +26,7 @@ import asyncio
 import enum
 import logging
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlparse
@@ -175,14 +175,6 @@ class CommandChannel:
         if self._transport is not None:
             self._transport.close()
             self._transport = None
-
-    async def commands(self) -> AsyncIterator[GroundCommand]:
-        """The commands taken, as they come (the channel is closed when the stream ends)."""
-        try:
-            while True:
-                yield await self._queue.get()
-        finally:
-            self.close()
 
     def pending(self) -> list[GroundCommand]:
         """The commands taken and not yet handed out, oldest first (taken from the channel)."""
