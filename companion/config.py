@@ -17,6 +17,7 @@ import math
 import os
 from pathlib import Path
 from typing import Any, TypeVar
+from urllib.parse import urlparse
 
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -72,6 +73,18 @@ def quote(value: Any, limit: int = MAX_QUOTE_CHARS) -> str:
     else:
         text = repr(value)
     return cut(text, limit)
+
+
+def host_port(url: str, scheme: str) -> tuple[str, int]:
+    """The host and port of ``scheme://HOST:PORT``; ValueError saying the form expected when ``url`` is not one."""
+    parsed = urlparse(url)
+    try:
+        port = parsed.port
+    except ValueError:
+        port = None
+    if parsed.scheme != scheme or not parsed.hostname or port is None:
+        raise ValueError(f"must be {scheme}://HOST:PORT, got {url!r}")
+    return parsed.hostname, port
 
 
 def format_validation_error(error: ValidationError, prefix: str = "") -> list[str]:

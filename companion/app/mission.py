@@ -9,11 +9,10 @@ import enum
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-from urllib.parse import urlparse
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from companion.config import ConfigError, StrictModel, format_validation_error, load_yaml_config
+from companion.config import ConfigError, StrictModel, format_validation_error, host_port, load_yaml_config
 from companion.ground.config import GroundStationConfig
 from companion.guidance.config import GuidanceConfig
 from companion.guidance.geofence import Geofence, GeofenceConfig
@@ -129,13 +128,7 @@ class SimulatorConfig(StrictModel):
     @classmethod
     def _udp(cls, url: str | None) -> str | None:
         if url is not None:
-            parsed = urlparse(url)
-            try:
-                port = parsed.port
-            except ValueError:
-                port = None
-            if parsed.scheme != "udp" or not parsed.hostname or port is None:
-                raise ValueError(f"must be udp://HOST:PORT, got {url!r}")
+            host_port(url, "udp")
         return url
 
 

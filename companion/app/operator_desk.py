@@ -33,7 +33,6 @@ class OperatorDecision:
 
     decision: Decision
     inputs: dict[str, Any]
-    command: GroundCommand
 
 
 class OperatorDesk:
@@ -93,7 +92,7 @@ class OperatorDesk:
                 self._answer(command, state, AckResult.DENIED, f"{command.command.value} denied: {decided}", inputs)
                 continue
             self._answer(command, state, AckResult.ACCEPTED, decided.reason, inputs)
-            accepted.append(OperatorDecision(decided, inputs, command))
+            accepted.append(OperatorDecision(decided, inputs))
         return accepted
 
     def _person_seen(self, guidance: LandingGuidance, newest: FrameResult | None) -> bool:

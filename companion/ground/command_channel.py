@@ -29,8 +29,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
-from urllib.parse import urlparse
 
+from companion.config import host_port
 from companion.errors import SlzError
 from companion.ground.mavlink_frames import (
     COMMAND_ACK,
@@ -138,14 +138,15 @@ class CommandChannel:
         stale_signature_s: float = 60.0,
         wall_clock: Callable[[], float] = time.time,
     ) -> None:
-        parsed = urlparse(url)
-        if parsed.scheme != "udpin" or not parsed.hostname or parsed.port is None:
-            raise CommandChannelError(url, "expected udpin://HOST:PORT")
-        self.url, self.host, self.port = url, parsed.hostname, parsed.port
+        try:
+            self.host, self.port = host_port(url, "udpin")
+        except ValueError as exc:
+            raise CommandChannelError(url, str(exc)) from None
+        self.url = url
         self.system_id, self.key, self.stale_signature_s = system_id, key, stale_signature_s
         self.wall_clock = wall_clock
         self.counts = ChannelCounts()
-        self._queue: asyncio.Queue[GroundCommand] = asyncio.Queue()
+        self._taken: list[GroundCommand] = []
         self._transport: asyncio.DatagramTransport | None = None
         self._seq = 0
         self._last_stamp: dict[tuple[int, int, int], int] = {}  # per signed stream: its newest timestamp
@@ -178,10 +179,8 @@ class CommandChannel:
 
     def pending(self) -> list[GroundCommand]:
         """The commands taken and not yet handed out, oldest first (taken from the channel)."""
-        out = []
-        while not self._queue.empty():
-            out.append(self._queue.get_nowait())
-        return out
+        taken, self._taken = self._taken, []
+        return taken
 
     # -- receiving ---------------------------------------------------------------------------------------------------
     def _received(self, data: bytes, address: tuple[str, int]) -> None:
@@ -216,7 +215,7 @@ class CommandChannel:
         taken = GroundCommand(command, mav_cmd, force, sender, address, frame.link_id is not None)
         self.counts.taken += 1
         self._reply(frame, address, mav_cmd, AckResult.IN_PROGRESS)
-        self._queue.put_nowait(taken)
+        self._taken.append(taken)
 
     def _signature_refusal(self, frame: Frame) -> str | None:
         """Why a command must be refused for its signature (None: it may be taken)."""

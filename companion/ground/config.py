@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-from urllib.parse import urlparse
-
 from pydantic import Field, field_validator
 
-from companion.config import StrictModel
+from companion.config import StrictModel, host_port
 from companion.ground.mavlink_frames import key_from_hex
 
 
@@ -37,13 +35,7 @@ class GroundStationConfig(StrictModel):
     @classmethod
     def _udpin(cls, url: str | None) -> str | None:
         if url is not None:
-            parsed = urlparse(url)
-            try:
-                port = parsed.port
-            except ValueError:
-                port = None
-            if parsed.scheme != "udpin" or not parsed.hostname or port is None:
-                raise ValueError(f"must be udpin://HOST:PORT, got {url!r}")
+            host_port(url, "udpin")
         return url
 
     @field_validator("signing_key_hex")
