@@ -29,8 +29,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int, gcs_port: int) -> SitlProcess:
     """A SITL instance with its camera, its ground-station link on ``gcs_port``, and ``tmp_path/mission.yaml``:
     mission_configs/sitl.yaml on its ports."""
-    mission = sitl_mission_yaml(instance)  # the SITL runs free: no lockstep
-    mission = mission.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
+    mission = sitl_mission_yaml(instance, replayable=True)  # the SITL runs free: no lockstep
     (tmp_path / "mission.yaml").write_text(mission)
     return start_camera_sitl(tmp_path, instance, seed, gcs_port)
 

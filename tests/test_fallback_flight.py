@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,7 +15,14 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.app.replay import replay
 from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
-from sitl.testing.helpers import GroundStation, free_udp_port, sitl_mission_yaml, start_camera_sitl, wait_until
+from sitl.testing.helpers import (
+    GroundStation,
+    free_udp_port,
+    sitl_mission_yaml,
+    slz_fly_argv,
+    start_camera_sitl,
+    wait_until,
+)
 from tests.test_sitl_gcs import geo, upload
 
 pytestmark = pytest.mark.sitl
@@ -41,15 +47,14 @@ def test_when_the_search_time_is_used_up_the_vehicle_lands_at_the_ground_station
         assert upload(station, rally, mission_type=mavlink.MAV_MISSION_TYPE_RALLY) == mavlink.MAV_MISSION_ACCEPTED
     finally:
         station.close()
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path)
-    text = text.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
     assert "\nguidance:\n" in text
     text = text.replace("\nguidance:\n", "\nguidance:\n  mission_time_limit_s: 4.0\n  fallback: {rally_points: true}\n")
     mission = tmp_path / "mission.yaml"
     mission.write_text(text)
     try:
         fly = subprocess.run(
-            [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+            slz_fly_argv(mission, tmp_path / "flight"),
             cwd=REPO_ROOT,
             capture_output=True,
             text=True,

@@ -31,6 +31,7 @@ from sitl.testing.helpers import (
     free_udp_port,
     pilot_takes_off,
     sitl_mission_yaml,
+    slz_fly_argv,
     start_camera_sitl,
     state_when,
     wait_until,
@@ -195,17 +196,16 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     corners_ne = [(-25.0, -25.0), (-25.0, 25.0), (25.0, 25.0), (25.0, -25.0)]  # sitl.yaml's fence, as a surveyor
     lat0, lon0 = origin.origin_lat_deg, origin.origin_lon_deg
     corners_latlon = [ned_to_geodetic(n, e, 0.0, lat0, lon0, 0.0)[:2] for n, e in corners_ne]
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path)
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
     fence_ne = "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]\n"
     assert fence_ne in text
     latlon = ", ".join(f"[{lat:.9f}, {lon:.9f}]" for lat, lon in corners_latlon)
     text = text.replace(fence_ne, f"  polygon_latlon_deg: [{latlon}]\n")
-    text = text.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
     mission = tmp_path / "mission.yaml"
     mission.write_text(text)
     try:
         fly = subprocess.run(
-            [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+            slz_fly_argv(mission, tmp_path / "flight"),
             cwd=REPO_ROOT,
             capture_output=True,
             text=True,
@@ -256,7 +256,7 @@ def test_a_service_stopped_before_its_vehicle_answers_ends_at_once_not_at_the_co
     mission.write_text(text.replace("connect_timeout_s: 20.0", "connect_timeout_s: 120.0"))
     log = tmp_path / "flight" / "flight.jsonl"
     fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+        slz_fly_argv(mission, tmp_path / "flight"),
         cwd=REPO_ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -284,7 +284,7 @@ def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_f
     mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
     log = tmp_path / "flight" / "flight.jsonl"
     fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+        slz_fly_argv(mission, tmp_path / "flight"),
         cwd=REPO_ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

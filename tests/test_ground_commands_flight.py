@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 import re
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +16,7 @@ from companion.app.recorder import read_log
 from companion.app.replay import replay
 from companion.ground import mavlink_frames as frames
 from companion.ground.command_channel import AckResult
-from sitl.testing.helpers import free_udp_port, sitl_mission_yaml, start_camera_sitl, wait_until
+from sitl.testing.helpers import free_udp_port, sitl_mission_yaml, slz_fly_argv, start_camera_sitl, wait_until
 from tests.mavproxy_client import MavProxy
 from tests.test_ground_channel import Gcs
 
@@ -61,8 +60,7 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
 ) -> None:
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
     port = free_udp_port()
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path)
-    text = text.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
     text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n  signing_key_hex: {KEY.hex()}\n"
     mission = tmp_path / "mission.yaml"
     mission.write_text(text)
@@ -71,7 +69,7 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
     assert console[:2] == ["signing key secret", "long DO_GO_AROUND"]
     pilot, stranger = Gcs(port, KEY, link_id=1, reply_key=KEY), Gcs(port, reply_key=KEY)
     fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(tmp_path / "flight")],
+        slz_fly_argv(mission, tmp_path / "flight"),
         cwd=REPO_ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

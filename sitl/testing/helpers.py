@@ -6,6 +6,7 @@ import asyncio
 import json
 import math
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -23,10 +24,15 @@ T = TypeVar("T")
 SITL_MISSION_CONFIG = Path(__file__).resolve().parents[2] / "mission_configs" / "sitl.yaml"
 
 
-def sitl_mission_yaml(instance: int, flights_dir: Path | None = None) -> str:
+def sitl_mission_yaml(instance: int, flights_dir: Path | None = None, replayable: bool = False) -> str:
     """mission_configs/sitl.yaml on SITL instance ``instance``'s ports (MAVSDK, camera, control channel). A SITL
-    started without ``--lockstep`` answers the control channel with "running free": the companion runs free too."""
+    started without ``--lockstep`` answers the control channel with "running free": the companion runs free too.
+    ``replayable``: every frame saved, losslessly (PNG), so that ``slz replay`` can re-run the flight."""
     text = SITL_MISSION_CONFIG.read_text()
+    if replayable:
+        assert "frame_every: 10" in text
+        assert "frame_format: jpeg" in text
+        text = text.replace("frame_every: 10", "frame_every: 1").replace("frame_format: jpeg", "frame_format: png")
     # Written elsewhere, its relative paths would be taken from there: the flights go to ``flights_dir``, or where the
     # shipped file says.
     flights = flights_dir or SITL_MISSION_CONFIG.parent.parent / "runs" / "flights"
@@ -35,6 +41,11 @@ def sitl_mission_yaml(instance: int, flights_dir: Path | None = None) -> str:
     text = text.replace("udpin://0.0.0.0:14540", f"udpin://0.0.0.0:{14540 + instance}")
     text = text.replace("sitl://127.0.0.1:5600", f"sitl://127.0.0.1:{5600 + instance}")
     return text.replace("udp://127.0.0.1:4560", f"udp://127.0.0.1:{4560 + instance}")
+
+
+def slz_fly_argv(mission: Path, out_dir: Path) -> list[str]:
+    """The command line of ``slz fly --config MISSION --out OUT_DIR`` in this interpreter (a real companion process)."""
+    return [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(out_dir)]
 
 
 def free_udp_port() -> int:
