@@ -87,6 +87,9 @@ class FakeLink:
     async def return_to_launch(self) -> None:
         self.commands.append(("return", None))
 
+    async def set_actuator(self, index: int, value: float) -> None:
+        self.commands.append(("actuator", (index, value)))
+
     async def global_origin(self, timeout_s: float) -> tuple[float, float]:
         """The EKF origin these tests fly from (Zurich, PX4's SITL default)."""
         return 47.397742, 8.545594

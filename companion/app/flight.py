@@ -52,6 +52,7 @@ from companion.app.stall_watchdog import StallWatchdog
 from companion.app.start_sequence import StartAction, StartSequence, StartStage, StartStep
 from companion.app.supervision import Supervision
 from companion.app.task_group import run_until_first_ends, unless_done
+from companion.app.warning_device import WarningDevice
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.geometry import Pose, polygon_centroid_ne_m
 from companion.guidance.energy import EnergyBudget
@@ -183,6 +184,7 @@ class FlightApp:
         self.energy = EnergyBudget(config.guidance.energy) if config.guidance.energy.enabled else None
         self.ending = RunEnd(self.supervision, recorder, self.outcome, self.done)
         self.desk = OperatorDesk.from_config(config, recorder)
+        self.warning = WarningDevice(config.guidance.warning, self.commands, recorder)
 
     def vehicle_state(self) -> VehicleState | None:
         """The vehicle at its newest stamped pose."""
@@ -211,6 +213,7 @@ class FlightApp:
         sent = False
         try:
             sent = await self.commands.send(decision)
+            await self.warning.follow(decision)
         finally:
             if decision.phase in TERMINAL and not self.dry_run:  # a dry run decides again while the pilot flies
                 if self.supervision.stays_after(decision, sent):

@@ -72,6 +72,9 @@ class RecordKind(str, enum.Enum):
     GROUND_COMMAND = "ground_command"
     """A ground station's landing command (:mod:`companion.app.operator_desk`): ``command``, ``mav_cmd``, ``sender``,
     ``signed``, ``force``, ``person_seen``, ``result`` (accepted, denied) and ``reason``."""
+    WARNING = "warning"
+    """The warning device for the people below switched (:mod:`companion.app.warning_device`): ``on``, ``sent``
+    (False in a dry run or after the pilot took over), the decision's ``phase`` and ``event``, ``actuator``."""
     END = "end"
     """The flight's outcome."""
 
@@ -92,6 +95,7 @@ REQUIRED_FIELDS: dict[RecordKind, tuple[str, ...]] = {
     RecordKind.WAITING: ("waiting_for",),
     RecordKind.ERROR: ("error",),
     RecordKind.LATENCY: ("frame_to_command_ms",),
+    RecordKind.WARNING: ("on", "sent"),
     RecordKind.END: ("outcome",),
 }
 

@@ -94,6 +94,38 @@ class FallbackConfig(StrictModel):
         return self
 
 
+class WarnWhen(str, enum.Enum):
+    """When the warning device sounds."""
+
+    DESCENT = "descent"
+    """From the final descent's start to the touchdown: over the landing point, the walker gate's waits included."""
+    WALKER_GATE = "walker_gate"
+    """Only while the descent waits at the walker gate for someone to leave or pass."""
+
+
+class WarningConfig(StrictModel):
+    """The mission config's ``guidance.warning``: a siren or strobe for the people below, on an actuator output of
+    the autopilot (companion/app/warning_device.py); off by default."""
+
+    enabled: bool = Field(default=False, description="Sound the warning device during the landing.")
+    actuator: int = Field(
+        default=1,
+        ge=1,
+        le=6,
+        description="The autopilot output the device is wired to: PX4's 'Offboard Actuator Set N' function "
+        "(MAV_CMD_DO_SET_ACTUATOR's param N of set 0; MAVSDK's set_actuator index N).",
+    )
+    on_value: float = Field(default=1.0, ge=-1.0, le=1.0, description="The output's value that sounds it.")
+    off_value: float = Field(default=-1.0, ge=-1.0, le=1.0, description="The output's value that silences it.")
+    when: WarnWhen = Field(default=WarnWhen.DESCENT, description="During the whole final descent, or at the gate.")
+
+    @model_validator(mode="after")
+    def _distinct(self) -> WarningConfig:
+        if self.on_value == self.off_value:
+            raise ValueError(f"on_value and off_value must differ (both {self.on_value})")
+        return self
+
+
 class GuidanceConfig(StrictModel):
     """Landing logic parameters (metres, seconds, vehicle clock)."""
 
@@ -192,6 +224,10 @@ class GuidanceConfig(StrictModel):
     fallback: FallbackConfig = Field(
         default_factory=FallbackConfig,
         description="Surveyed fallback sites for when the search's budget ends (companion/guidance/fallback.py).",
+    )
+    warning: WarningConfig = Field(
+        default_factory=WarningConfig,
+        description="A siren or strobe for the people below during the landing (an autopilot output); off by default.",
     )
     blind_landing: bool = Field(
         default=False,

@@ -127,6 +127,11 @@ class VehicleLink(Protocol):
         """Return to launch."""
         ...
 
+    async def set_actuator(self, index: int, value: float) -> None:
+        """Set the autopilot's actuator output ``index`` (1-6: PX4's "Offboard Actuator Set N") to ``value`` in [-1,
+        1] (MAV_CMD_DO_SET_ACTUATOR), once it acknowledges; :class:`VehicleError` when refused or unanswered."""
+        ...
+
     async def global_origin(self, timeout_s: float) -> tuple[float, float]:
         """The autopilot's EKF origin (GPS_GLOBAL_ORIGIN): latitude and longitude in degrees, where its local NED
         frame starts; :class:`VehicleError` when it gives none within ``timeout_s`` (wall)."""

@@ -299,6 +299,11 @@ class MavsdkVehicleLink:
         action, _ = self._plugins()
         await self._call("return to launch", action.return_to_launch)
 
+    async def set_actuator(self, index: int, value: float) -> None:
+        """An actuator output (see VehicleLink): MAVSDK's ``set_actuator``, which waits for the COMMAND_ACK."""
+        action, _ = self._plugins()
+        await self._call(f"actuator {index} to {value:g}", lambda: action.set_actuator(index, value), timeout_s=5.0)
+
     async def global_origin(self, timeout_s: float) -> tuple[float, float]:
         """The EKF origin (GPS_GLOBAL_ORIGIN), latitude and longitude in degrees (see VehicleLink)."""
         if self._system is None:

@@ -15,6 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl.autopilot.actuators import ActuatorOutputs
 from sitl.autopilot.battery import Battery
 from sitl.autopilot.commander import FORCE_MAGIC, Commander
 from sitl.autopilot.controller import CascadedController
@@ -82,6 +83,7 @@ class AutopilotHost(Protocol):
     schedules: dict[int, StreamSchedule]
     """Each link's telemetry schedule, by the link's ``id()``."""
     lockstep: LockstepGate
+    actuators: ActuatorOutputs
 
     def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
         """A STATUSTEXT on every link."""
@@ -152,6 +154,7 @@ class CommandHandlers:
             mavlink.MAV_CMD_DO_SET_MISSION_CURRENT: self._set_mission_current,
             mavlink.MAV_CMD_DO_PAUSE_CONTINUE: self._pause_continue,
             mavlink.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
+            mavlink.MAV_CMD_DO_SET_ACTUATOR: self._set_actuator,
         }
 
     # -- the commands ------------------------------------------------------------------------------------------------
@@ -167,6 +170,12 @@ class CommandHandlers:
         if math.isfinite(r.p7):
             above_home = r.p7 - (self.v.config.origin_alt_m - float(cmd.home_ned_m[2]))  # param7 is AMSL
         return cmd.takeoff(above_home)
+
+    def _set_actuator(self, r: CommandRequest) -> MavResult:
+        m = r.msg
+        five_six = [float(m.x), float(m.y)] if r.is_int else [m.param5, m.param6]  # COMMAND_INT: x and y
+        n, e, _ = (float(v) for v in self.v.dynamics.state().position_ned_m)
+        return self.v.actuators.command([*r.p, *five_six], r.p7, self.v.clock.now_s, n, e)
 
     def _set_message_interval(self, r: CommandRequest) -> MavResult:
         msg_id = whole(r.p[0], 0, 0xFFFFFF)

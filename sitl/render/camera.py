@@ -32,15 +32,14 @@ from companion.perception.config import ProjectionConfig
 from companion.perception.projection import HeadPlaneProjector
 from sitl.render.bodies.figure import (
     DETAIL_CELLS_M,
-    WALK_PHASES,
     crowd_figures,
     detail_level,
     figure_head_height_m,
-    figure_topology,
     figure_trimesh,
-    walk_phase_at,
 )
 from sitl.render.meshes import bake_lighting, head_height_m, object_mesh, person_mesh, shadow_mesh
+from sitl.render.movers import WALK_MESHES as WALK_MESHES
+from sitl.render.movers import MoverBodies, stacked_faces
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
 
@@ -138,9 +137,6 @@ OBJECT_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("park objects", capacity
 PERSON_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("person meshes", capacity=1024)
 SHADOW_MESHES: KeyedCache[trimesh.Trimesh] = KeyedCache("shadow meshes", capacity=512)
 SHADOW_SCALE_MAKEHUMAN = 0.6
-WALK_MESHES: KeyedCache[tuple[F64Array, F64Array, F64Array]] = KeyedCache("walking bodies", capacity=4096)
-"""MakeHuman walkers: per figure, step of the walk cycle and level of detail, the body facing north (vertices, vertex
-normals, RGB colours before light); each frame turns it to the walker's heading and lights it."""
 
 
 def _patch_pyrender(pyrender: Any, GL: Any) -> None:
@@ -318,36 +314,6 @@ class WorldRenderer:
         height_m = -float((pose.T_world_body @ self.T_body_camera)[2, 3])  # NED: the camera's height over z = 0
         return detail_level(max(height_m, 0.0) / self.camera.fx_px)
 
-    def _walking_body(self, index: int, detail: int) -> tuple[F64Array, F64Array, F64Array]:
-        """MakeHuman walker ``index`` at the origin now: vertices, vertex normals and RGB before light, each (N, 3).
-
-        The step of the walk cycle follows the distance walked and the body faces its last step; each step of the
-        cycle is built once, then turned per frame (and lit with the other walkers, :meth:`_light_walkers`).
-        """
-        assert self.figures is not None
-        figure = self.figures[index]
-        phase = walk_phase_at(float(self.crowd.walked_m[index]), figure.height_m)
-
-        def build() -> tuple[F64Array, F64Array, F64Array]:
-            mesh = figure_trimesh(figure, 0.0, walk_phase=phase, detail=detail)
-            rgb = np.asarray(mesh.visual.vertex_colors[:, :3], dtype=np.float64)
-            return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.vertex_normals, dtype=np.float64), rgb
-
-        vertices, normals, rgb = WALK_MESHES.get((figure, round(phase * WALK_PHASES), detail), build)
-        heading = float(self.crowd.step_heading_rad[index])
-        c, s = math.cos(heading), math.sin(heading)
-        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # (row vectors) about z by -heading, ENU
-        return vertices @ turn, normals @ turn, rgb
-
-    def _light_walkers(self, normals: F64Array, rgb: F64Array) -> npt.NDArray[np.uint8]:
-        """RGBA (N, 4) of walking bodies: Lambert on their normals (N, 3), as :func:`bake_lighting` bakes the rest."""
-        light = self.light
-        diffuse = np.maximum(normals @ (-light.sun_dir_enu), 0.0)[:, None]
-        lit = rgb * (light.ambient + (1.0 - light.ambient) * diffuse * light.sun_rgb[None, :])
-        colours = np.full((len(rgb), 4), 255, dtype=np.uint8)
-        colours[:, :3] = np.minimum(lit, 255.0)
-        return colours
-
     def _shadow(self, index: int, north_m: float, east_m: float) -> trimesh.Trimesh:
         """Person ``index``'s shadow on the ground at (``north_m``, ``east_m``), lit (shared: never modified)."""
         a = self.crowd.appearances[index]
@@ -365,7 +331,8 @@ class WorldRenderer:
         # People who stand still: one mesh per level of detail, and one mesh of their shadows. Every level is built
         # here, with the scene, not at the first frame that draws it: a SITL's first frames must not wait on it (a
         # camera check times their age on the vehicle clock).
-        self._still_ids = [i for i in range(len(crowd)) if not crowd.moving[i]]
+        mobile = crowd.mobile  # walkers, and those who would step away from the vehicle's warning
+        self._still_ids = [i for i in range(len(crowd)) if not mobile[i]]
         self._still_nodes: dict[int, Any] = {}
         if self._still_ids:
             shadows = [self._shadow(i, *map(float, crowd.positions_ne_m[i])) for i in self._still_ids]
@@ -377,31 +344,19 @@ class WorldRenderer:
         # Walking people: one mesh per level of detail (and one of their shadows) built at the first frame from
         # cached local vertices, then moved by rewriting its vertex buffer in place each frame (one draw call, no new
         # GL objects).
-        self._mover_ids = [int(i) for i in np.nonzero(crowd.moving)[0]]
+        self._mover_ids = [int(i) for i in np.nonzero(mobile)[0]]
+        light = self.light
+        self._movers = MoverBodies(
+            crowd, self._mover_ids, self.figures, self._person, light.sun_dir_enu, light.ambient, light.sun_rgb
+        )
         self._mover_shadows = [np.asarray(self._shadow(i, 0.0, 0.0).vertices) for i in self._mover_ids]
-        # A procedural walker's body never changes shape: its vertices at the origin, and the colours of them all.
-        self._mover_rest: list[F64Array] = []
-        self._mover_rest_colours: npt.NDArray[np.uint8] | None = None
-        if self.figures is None and self._mover_ids:
-            bodies = [self._person(i) for i in self._mover_ids]
-            self._mover_rest = [np.asarray(b.vertices) for b in bodies]
-            self._mover_rest_colours = np.concatenate([np.asarray(b.visual.vertex_colors) for b in bodies])
-            self._procedural_mover_faces = self._stacked_faces([(np.asarray(b.faces), len(b.vertices)) for b in bodies])
         self._mover_nodes: dict[int, Any] = {}
         self._mover_shadow_node: Any = None
         if self._mover_ids:
             template = self._shadow(self._mover_ids[0], 0.0, 0.0)  # every shadow is the same 10-sided disc mesh
-            self._shadow_faces_all = self._stacked_faces(
-                [(np.asarray(template.faces), len(s)) for s in self._mover_shadows]
-            )
+            self._shadow_faces_all = stacked_faces([(np.asarray(template.faces), len(s)) for s in self._mover_shadows])
             shadow_count = sum(len(s) for s in self._mover_shadows)
             self._shadow_colours_all = np.tile(np.asarray(template.visual.vertex_colors[:1]), (shadow_count, 1))
-
-    @staticmethod
-    def _stacked_faces(parts: list[tuple[npt.NDArray[np.int64], int]]) -> npt.NDArray[np.int64]:
-        """The faces of meshes concatenated in order: each (faces (F, 3), vertex count) offset by those before it."""
-        starts = np.cumsum([0, *[count for _, count in parts[:-1]]])
-        return np.concatenate([faces + start for (faces, _), start in zip(parts, starts, strict=True)])
 
     def _still_people(self, detail: int) -> Any:
         """The node of every person who stands still at level of ``detail`` (built once)."""
@@ -451,44 +406,26 @@ class WorldRenderer:
     def _update_movers(self, detail: int) -> Any:
         """Move the walkers to their places now, drawn at level of ``detail``; returns the node of their bodies."""
         pr = self._pyrender
-        bodies, shadows, walk_normals, walk_rgb = [], [], [], []
-        for k, i in enumerate(self._mover_ids):
-            north, east = self.crowd.positions_ne_m[i]
-            shift = np.array([east, north, 0.0])
-            if self.figures is not None:  # a MakeHuman walker: at its step of the walk, facing its last step
-                body, normals, rgb = self._walking_body(i, detail)
-                walk_normals.append(normals)
-                walk_rgb.append(rgb)
-            else:
-                body = self._mover_rest[k]
-            bodies.append(body + shift)
-            shadows.append(self._mover_shadows[k] + shift)
-        if walk_rgb:
-            colours = self._light_walkers(np.concatenate(walk_normals), np.concatenate(walk_rgb))
-        else:
-            assert self._mover_rest_colours is not None
-            colours = self._mover_rest_colours
+        vertices, colours, shifts = self._movers.frame(detail)
+        shadows = np.concatenate([shadow + shift for shadow, shift in zip(self._mover_shadows, shifts, strict=True)])
         node = self._mover_nodes.get(detail)
         if node is not None:
             # In place: rewrite the interleaved [x y z r g b a] float32 vertex buffers pyrender uploaded.
             body_primitive = node.mesh.primitives[0]
-            if walk_rgb:  # MakeHuman walkers are lit anew each frame; a procedural walker's colours never change
+            if self.figures is not None:  # MakeHuman walkers are lit anew each frame; procedural colours never change
                 body_primitive.color_0 = colours
-            self._rewrite_positions(body_primitive, np.concatenate(bodies))
-            self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], np.concatenate(shadows))
+            self._rewrite_positions(body_primitive, vertices)
+            self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], shadows)
             return node
-        if self.figures is not None:  # the walk's topology at this level, the same at every step
-            faces = self._stacked_faces([figure_topology(self.figures[i], detail) for i in self._mover_ids])
-        else:
-            faces = self._procedural_mover_faces
-        primitive = pr.Primitive(positions=np.concatenate(bodies), indices=faces, color_0=colours, mode=4)
+        faces = self._movers.faces(detail)  # the same at every step of a walk
+        primitive = pr.Primitive(positions=vertices, indices=faces, color_0=colours, mode=4)
         node = self._add(pr.Mesh([primitive]), DrawSlot.WALKERS, detail)
         self._mover_nodes[detail] = node
         if self._mover_shadow_node is None:
             shadow_mesh_ = pr.Mesh(
                 [
                     pr.Primitive(
-                        positions=np.concatenate(shadows),
+                        positions=shadows,
                         indices=self._shadow_faces_all,
                         color_0=self._shadow_colours_all,
                         mode=4,
@@ -498,7 +435,7 @@ class WorldRenderer:
             self._mover_shadow_node = self._add(shadow_mesh_, DrawSlot.WALKER_SHADOWS)
             self._black[self._mover_shadow_node] = (0, 0, 0)
         else:
-            self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], np.concatenate(shadows))
+            self._rewrite_positions(self._mover_shadow_node.mesh.primitives[0], shadows)
         return node
 
     def _rewrite_positions(self, primitive: Any, positions: F64Array) -> None:

@@ -21,6 +21,7 @@ import numpy as np
 from companion.config import quote
 from companion.errors import SlzError
 from companion.vehicle.sim_control import Event, Tick
+from sitl.autopilot.actuators import ActuatorOutputs
 from sitl.autopilot.battery import Battery, BatteryMonitor
 from sitl.autopilot.broadcast import HEARTBEAT_PERIOD_S, Broadcaster
 from sitl.autopilot.commander import Commander
@@ -106,6 +107,7 @@ class SitlVehicle:
         )
         self.battery = Battery(config.battery.capacity_mah, config.battery.initial_fraction)
         self.battery_monitor = BatteryMonitor()
+        self.actuators = ActuatorOutputs(config.scenario.reaction.warning_actuator)
         self.links: list[MavlinkLink] = []
         self.control: ControlChannel | None = None
         self.camera: SimCamera | None = None
@@ -131,6 +133,7 @@ class SitlVehicle:
 
             try:
                 self.camera = SimCamera(config)
+                self.actuators.listeners.append(self.camera.crowd.warn)  # people below may hear it
             except (RenderError, OSError) as exc:
                 self.close()
                 raise SitlError("camera", str(exc)) from None
@@ -319,26 +322,15 @@ class SitlVehicle:
         t_s = self.clock.now_s
         s, cmd = self.dynamics.state(), self.commander
         n, e, d = (float(v) for v in s.position_ned_m)
-        vehicle = TruthRecord(t_s, (n, e, d), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, bool(s.on_ground))
+        state = (cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, bool(s.on_ground))
+        vehicle = TruthRecord(t_s, (n, e, d), *state, warning=self.actuators.warning_on)
         self.truth.write(t_s, self.camera.people_at(t_s), vehicle)
 
     # -- the physics step ----------------------------------------------------------------------------------------
-    def _inject_faults(self, t_s: float) -> None:
-        for fault in self.faults.due(t_s):
-            logger.warning("fault injected at %.3f s: %s", t_s, fault.kind.value)
-            if fault.kind is FaultKind.CAMERA_FAIL:
-                self.camera_failed = True
-            elif fault.kind is FaultKind.CAMERA_DISCONNECT:
-                self.camera_failed = True
-                if self.camera is not None:
-                    self.camera.server.disconnect()
-            elif fault.kind is FaultKind.LINK_LOSS:
-                self.links[0].cut = True
-
     def _step(self) -> None:
         t_s = self.clock.now_s
         if self.faults:
-            self._inject_faults(t_s)
+            inject_faults(self, t_s)
         dt_s = self.clock.step_s
         state = self.dynamics.state()
         if self.clock.steps % self._outer_every == 0:
@@ -416,6 +408,20 @@ class SitlVehicle:
             self._last_handler_error_wall = now
             name = type(exc).__name__
             logger.error("%s dropped: %s: %s (%d so far)", what, name, quote(str(exc)), self.handler_errors)
+
+
+def inject_faults(vehicle: SitlVehicle, t_s: float) -> None:
+    """The faults of ``vehicle``'s schedule due at simulated ``t_s``, injected."""
+    for fault in vehicle.faults.due(t_s):
+        logger.warning("fault injected at %.3f s: %s", t_s, fault.kind.value)
+        if fault.kind is FaultKind.CAMERA_FAIL:
+            vehicle.camera_failed = True
+        elif fault.kind is FaultKind.CAMERA_DISCONNECT:
+            vehicle.camera_failed = True
+            if vehicle.camera is not None:
+                vehicle.camera.server.disconnect()
+        elif fault.kind is FaultKind.LINK_LOSS:
+            vehicle.links[0].cut = True
 
 
 def install_signal_handlers(vehicle: SitlVehicle) -> None:

@@ -133,12 +133,15 @@ class SimCamera:
         return self.people()
 
     def people(self) -> dict[str, Any]:
-        """Ground truth: every person's head-plane position, body radius and whether they walk, now."""
+        """Ground truth: every person's head-plane position, body radius, whether they walk and whether they would
+        step away from a warning, now, and how many reactions to warnings there were so far."""
         return {
             "t_s": self.crowd.t_s,
             "positions_ne_m": self.crowd.positions_ne_m.tolist(),
             "radii_m": self.crowd.radii_m.tolist(),
             "moving": self.crowd.moving.tolist(),
+            "reactive": self.crowd.reaction.reactive.tolist(),
+            "reactions": self.crowd.reaction.reactions,
         }
 
     def close(self) -> None:

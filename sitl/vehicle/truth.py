@@ -5,7 +5,8 @@
 One JSON object per line: first the header (``kind: header``: the scene's seed, every person's head-plane position
 at the start, body radius and whether they walk, and the schema version), then one record per camera frame or
 lockstep tick (``kind: truth``: the vehicle's true position, arming, mode, landed state and ground contact, and the
-people's positions when some walk). Positions are local NED (north, east, down), m. A header without
+people's positions when some walk or may step away from the vehicle's warning; whether the warning sounded and how many
+people reacted to it, when they did). Positions are local NED (north, east, down), m. A header without
 ``schema_version`` is version 1 (the same fields).
 """
 
@@ -79,6 +80,10 @@ class TruthRecord:
     landed_state: str
     on_ground: bool
     people_ne_m: F64Array | None = None
+    warning: bool = False
+    """The vehicle's warning device (siren, strobe) sounded (written only when it did)."""
+    reactions: int = 0
+    """People who reacted to a warning so far, in all (written only once someone did)."""
 
     def to_json(self) -> dict[str, Any]:
         """The record line as written (positions rounded to 0.1 mm)."""
@@ -91,6 +96,10 @@ class TruthRecord:
             "landed_state": self.landed_state,
             "on_ground": self.on_ground,
         }
+        if self.warning:
+            record["warning"] = True
+        if self.reactions:
+            record["reactions"] = self.reactions
         if self.people_ne_m is not None:
             rows = np.asarray(self.people_ne_m, dtype=np.float64).tolist()  # Python floats: the same values
             record["positions_ne_m"] = [[round(n, 4), round(e, 4)] for n, e in rows]
@@ -108,6 +117,8 @@ class TruthRecord:
             str(line["landed_state"]),
             bool(line["on_ground"]),
             None if people is None else np.asarray(people, dtype=np.float64).reshape(-1, 2),
+            bool(line.get("warning", False)),
+            int(line.get("reactions", 0)),
         )
 
 
@@ -131,7 +142,8 @@ class TruthWriter:
 
     def write(self, t_s: float, people: dict[str, Any], vehicle: TruthRecord) -> None:
         """The record at ``t_s``: ``vehicle`` (its people left out) and the people the world reports (``people``:
-        ``t_s``, ``positions_ne_m``, ``radii_m``, ``moving``; positions recorded only when some walk)."""
+        ``t_s``, ``positions_ne_m``, ``radii_m``, ``moving``, and optionally ``reactive`` and ``reactions``; positions
+        recorded only when some walk or would step away from a warning)."""
         positions = np.asarray(people["positions_ne_m"], dtype=np.float64).reshape(-1, 2)
         if not self._header_written:
             self._header_written = True
@@ -146,7 +158,9 @@ class TruthWriter:
             vehicle.mode,
             vehicle.landed_state,
             vehicle.on_ground,
-            positions if any(people["moving"]) else None,
+            positions if any(people["moving"]) or any(people.get("reactive", ())) else None,
+            vehicle.warning,
+            int(people.get("reactions", 0)),
         )
         self._file.write(json.dumps(record.to_json()) + "\n")
         self._file.flush()

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.errors import SlzError
+from sitl.world.reaction import Reaction
 from sitl.world.scenario import ScenarioConfig, Style, WalkerKind
 
 F64Array = npt.NDArray[np.float64]
@@ -111,9 +112,22 @@ class Crowd:
         """Distance each person has walked (a walking body's step follows it)."""
         self.step_heading_rad = np.random.default_rng([seed, 8]).uniform(-math.pi, math.pi, size=n)
         """Direction of each person's last step, from north towards east (a walking body faces it)."""
+        self.reaction = Reaction(config.reaction, config.walking_speed_mps, n, seed)
+        """Who steps away from the vehicle's warning, and how (nobody, unless ``config.reaction`` is enabled)."""
 
     def __len__(self) -> int:
         return len(self.radii_m)
+
+    @property
+    def mobile(self) -> npt.NDArray[np.bool_]:
+        """Who may move during the scene (N,): the walkers and those who would step away from a warning."""
+        return np.asarray(self.moving | self.reaction.reactive)
+
+    def warn(self, t_s: float, north_m: float, east_m: float, on: bool) -> None:
+        """The vehicle's warning starts (``on``; the vehicle over (``north_m``, ``east_m``), NED) or stops at
+        simulated ``t_s``: the crowd walks up to then first (:class:`~sitl.world.reaction.Reaction`)."""
+        self.advance_to(t_s)
+        self.reaction.warn(north_m, east_m, on)
 
     # -- generation --------------------------------------------------------------------------------------------
     def _place(self, rng: np.random.Generator, radii: F64Array) -> F64Array:
@@ -183,6 +197,9 @@ class Crowd:
         movers = np.nonzero(self.moving)[0]
         while self._ticks < target_ticks:
             self._ticks += 1
+            warned = self.reaction.anchor_ne_m is not None
+            if warned:
+                before, walked_before = self.positions_ne_m.copy(), self.walked_m.copy()
             if len(movers):
                 if self.config.walker is WalkerKind.LATTICE:
                     alpha = self._walk_rng.integers(-1, 2, size=(len(movers), 2))
@@ -198,7 +215,24 @@ class Crowd:
                 over = np.abs(new) > self._bound_m
                 new[over] = np.sign(new[over]) * (2 * self._bound_m - np.abs(new[over]))
                 self.positions_ne_m[movers] = new
+            if warned:
+                self._react(before, walked_before, self._ticks * period, period)
         self.t_s = t_s
+
+    def _react(self, before: F64Array, walked_before: F64Array, t_s: float, dt_s: float) -> None:
+        """Those reacting to the warning at the tick ending at ``t_s`` step away or stand instead of their walk
+        (``before``: everyone's positions before this tick's walk, ``walked_before`` their distances walked)."""
+        stepped_to = before.copy()
+        reacting = self.reaction.step(stepped_to, t_s, dt_s)
+        if not reacting.any():
+            return
+        delta = stepped_to[reacting] - before[reacting]
+        length = np.hypot(delta[:, 0], delta[:, 1])
+        self.walked_m[reacting] = walked_before[reacting] + length
+        who = np.nonzero(reacting)[0]
+        stepped = length > 0
+        self.step_heading_rad[who[stepped]] = np.arctan2(delta[stepped, 1], delta[stepped, 0])
+        self.positions_ne_m[reacting] = stepped_to[reacting]
 
     def _persistent_step(self, dt_s: float) -> F64Array:
         # Heading follows an Ornstein-Uhlenbeck turn: its direction decorrelates over heading_persistence_s.

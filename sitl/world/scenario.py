@@ -101,6 +101,39 @@ def _range(low: float, high: float) -> Range:
     return Range(low=low, high=high)
 
 
+class ReactionConfig(StrictModel):
+    """People who notice the vehicle's warning (a siren or strobe) and step away from it (issue 53; off by default).
+
+    While the warning sounds, each person within ``notice_radius_m`` of the point under the vehicle who is one of the
+    ``notice_share`` who notice (a seeded draw per person, the same in every run of the scene) starts, after their
+    reaction time, to walk straight away from that point at walking speed until ``keep_away_m`` from it, then stands
+    (or walks on, a walker). Each reacts once per warning.
+    """
+
+    enabled: bool = Field(default=False, description="Model people's reaction to the vehicle's warning.")
+    warning_actuator: int = Field(
+        default=1,
+        ge=1,
+        le=6,
+        description="The vehicle's actuator output the warning device is wired to (MAV_CMD_DO_SET_ACTUATOR's param "
+        "1-6 of actuator set 0: MAVSDK's set_actuator index); a value above 0 sounds it.",
+    )
+    notice_share: float = Field(default=0.7, ge=0.0, le=1.0, description="Share of people who notice the warning.")
+    notice_radius_m: float = Field(default=12.0, gt=0.0, le=100.0, description="How far away the warning is noticed.")
+    keep_away_m: float = Field(
+        default=6.0, gt=0.0, le=50.0, description="How far from the point under the vehicle a noticer steps."
+    )
+    reaction_time_s: Range = Field(
+        default_factory=lambda: _range(1.0, 3.0), description="From the warning to the first step, per person."
+    )
+
+    @model_validator(mode="after")
+    def _sane(self) -> ReactionConfig:
+        if self.reaction_time_s.low < 0.0 or self.reaction_time_s.high > 60.0:
+            raise ValueError(f"reaction_time_s must lie in [0, 60] s, got {self.reaction_time_s}")
+        return self
+
+
 class ScenarioConfig(StrictModel):
     """All randomization ranges of one scenario family."""
 
@@ -134,6 +167,9 @@ class ScenarioConfig(StrictModel):
     ground: GroundKind = Field(default=GroundKind.PROCEDURAL, description="The park's ground texture.")
     ground_site: RealSite = Field(default=RealSite.CALITERRA, description="Real ground: the site it is painted from.")
     people: PeopleModel = Field(default=PeopleModel.PROCEDURAL, description="How people are drawn.")
+    reaction: ReactionConfig = Field(
+        default_factory=ReactionConfig, description="People stepping away from the vehicle's warning (off by default)."
+    )
     bright_clothing_share: float = Field(
         default=0.25, ge=0.0, le=1.0, description="MakeHuman people: share of tops in a bright colour (the rest muted)."
     )
