@@ -98,6 +98,17 @@ def test_the_report_is_written_and_every_metric_is_in_its_range(one_worker: Path
     for cell in summary["cells"].values():
         s = cell["success"]
         assert 0.0 <= s["low"] <= s["value"] <= s["high"] <= 1.0
+    # The paired time to land is over the scenes both strategies landed in.
+    by_id = {r["mission_id"]: r for r in results}
+    for pair in summary["paired"]:
+        times = [
+            (by_id[f"{pair['condition']}/{pair['a']}/0000"]["time_to_land_s"]),
+            (by_id[f"{pair['condition']}/{pair['b']}/0000"]["time_to_land_s"]),
+        ]
+        landing = pair["time_to_land_difference_s"]
+        assert landing["n"] == (1 if None not in times else 0)
+        if landing["n"]:
+            assert landing["value"] == pytest.approx(times[0] - times[1])
     report = (one_worker / "report.md").read_text()
     assert "The paper's Table I beside ours" in report
     assert "Paired comparisons" in report

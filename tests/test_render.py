@@ -14,7 +14,7 @@ from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park
-from sitl.world.scenario import ScenarioConfig
+from sitl.world.scenario import PeopleModel, ReactionConfig, ScenarioConfig
 
 pytestmark = pytest.mark.integration
 
@@ -112,3 +112,28 @@ def test_a_frame_does_not_depend_on_the_order_pyrender_keeps_its_nodes_in(still_
         scene._mesh_nodes = kept
     for k, (a, b) in enumerate(zip(forward, backward, strict=True)):
         assert np.array_equal(a, b), f"view {k}: {int((a != b).any(axis=2).sum())} pixels differ"
+
+
+@pytest.mark.parametrize("people", [PeopleModel.PROCEDURAL, PeopleModel.MAKEHUMAN])
+def test_people_who_step_away_from_the_warning_are_drawn_where_they_went(people: PeopleModel) -> None:
+    crowd = Crowd(ScenarioConfig(people=people, reaction=ReactionConfig(enabled=True)), 21)
+    world = WorldRenderer(Park(21), crowd, CAMERA, NADIR, Light.from_angles(50.0, 120.0, 0.45))
+    try:
+        before = world.render(POSE, 0.0)
+        start = crowd.positions_ne_m.copy()
+        crowd.warn(0.0, 1.0, -2.0, on=True)  # under the camera
+        after = world.render(POSE, 12.0)
+        moved = np.hypot(*(crowd.positions_ne_m - start).T) > 1.0
+        assert moved.sum() >= 3
+        pixels, front = world.head_pixels(POSE)
+        hits, checked = 0, 0
+        for i in np.nonzero(moved)[0]:
+            u, v = (round(float(c)) for c in pixels[i])
+            if front[i] and 3 <= u < 317 and 3 <= v < 237:
+                checked += 1
+                hits += bool(after.person_mask[v - 1 : v + 2, u - 1 : u + 2].any())
+        assert checked >= 3
+        assert hits / checked >= 0.8  # a head may hide under a crown or another person
+        assert not np.array_equal(before.person_mask, after.person_mask)
+    finally:
+        world.close()

@@ -181,6 +181,9 @@ def build_report(
                 [by_run_b[i].nearest_person_mean_m for i in runs],
                 seed=7,
             )
+            landing = paired_mean_difference(  # over the pairs where both touched down
+                [by_run_a[i].time_to_land_s for i in runs], [by_run_b[i].time_to_land_s for i in runs], seed=8
+            )
             paired.append(
                 {
                     "condition": condition,
@@ -191,6 +194,7 @@ def build_report(
                     "success_only_b": test.only_b,
                     "mcnemar_p": test.p_value,
                     "nearest_person_mean_difference_m": asdict(diff),
+                    "time_to_land_difference_s": asdict(landing),
                 }
             )
     against_paper = paper_comparison(cells)
@@ -360,14 +364,17 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
         "",
         "## Paired comparisons (same scenes and start poses)",
         "",
-        "| condition | a vs b | pairs | only a succeeded | only b succeeded | McNemar p | nearest person a - b (m) |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| condition | a vs b | pairs | only a succeeded | only b succeeded | McNemar p | nearest person a - b (m) "
+        "| time to land a - b (s), both landed |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for pair in summary["paired"]:
         diff = _est(pair["nearest_person_mean_difference_m"]).format(2)
+        landing = pair.get("time_to_land_difference_s")  # absent in summaries written before it
+        landing_text = "" if landing is None else _est(landing).format(1)
         lines.append(
             f"| {pair['condition']} | {pair['a']} vs {pair['b']} | {pair['pairs']} | {pair['success_only_a']} "
-            f"| {pair['success_only_b']} | {pair['mcnemar_p']:.3g} | {diff} |"
+            f"| {pair['success_only_b']} | {pair['mcnemar_p']:.3g} | {diff} | {landing_text} |"
         )
     lines += _flown_markdown(summary["flown"])
     lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({p})" for p in plots] + [""]

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from companion.vehicle.sim_control import Command, Event, RequestError, flag, frames_wanted, lockstep_ack, number
+from sitl.autopilot.actuators import ActuatorOutputs
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MAX_SENDERS_REPORTED, MavlinkServer
@@ -42,6 +43,8 @@ class ControlledVehicle(Protocol):
     """The simulated camera, or None without one."""
     camera_failed: bool
     handler_errors: int
+    actuators: ActuatorOutputs
+    """The autopilot's actuator outputs and the warning device on one."""
 
     def fail_camera(self, failed: bool) -> None:
         """The camera delivers nothing from now on (or again)."""
@@ -147,6 +150,11 @@ class ControlRequests:
                 "clients": v.camera.server.stats.clients,
                 "refused": v.camera.server.stats.refused,
                 "not_wanted": v.camera.server.stats.not_wanted,
+            },
+            "warning": {  # the vehicle's warning device, and the people who reacted to it (scenario.reaction)
+                "on": v.actuators.warning_on,
+                "times_on": v.actuators.warnings,
+                "reactions": None if v.camera is None else v.camera.crowd.reaction.reactions,
             },
             "handler_errors": v.handler_errors,
             "control_malformed": v.control.malformed if v.control is not None else 0,
