@@ -8,7 +8,9 @@ import math
 
 import pytest
 
+from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
+from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause
 from companion.perception.projection import HeadPlaneOccupancy
@@ -120,3 +122,47 @@ def test_without_sites_the_end_of_the_budget_is_the_decision_it_always_was() -> 
     d = g.time_used_up(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0))
     assert d is not None
     assert (d.reason, d.event, d.cause) == ("no landing within 60 s of the start: hold", DecisionEvent.TIME_LIMIT, None)
+
+
+# -- "next fallback site" from the ground station (companion.guidance.operator) ------------------------------------
+def test_the_ground_stations_next_site_ends_the_search_for_the_nearest_site_then_the_one_after() -> None:
+    g, state = searching()
+    d = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(5.0, 0.0, 0.0, -20.0, 0.0), False, False)
+    assert isinstance(d, Decision)
+    assert (d.phase, d.event, d.cause) == (LandingPhase.APPROACH, DecisionEvent.FALLBACK_SITE, RefusalCause.OPERATOR)
+    assert d.reason == "next fallback site, from the ground station: fallback site lawn, 10 m away"
+    assert d.target is not None
+    assert (d.target.north_m, d.target.east_m) == (10.0, 0.0)
+    # Asked again on the way: the lawn is given up for the yard.
+    d = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(8.0, 4.0, 0.0, -20.0, 0.0), False, False)
+    assert isinstance(d, Decision)
+    assert d.target is not None
+    assert (d.target.north_m, d.target.east_m) == (-9.0, 12.0)
+    # None left: denied, nothing changes (the yard is still flown to and checked).
+    denied = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(9.0, 0.0, 4.0, -20.0, 0.0), False, False)
+    assert denied == "no fallback site left to try in reach"
+    assert g.target is not None
+    assert g.target.north_m == -9.0
+    made, state, _ = frames(g, VehicleState(9.0, 0.0, 4.0, -20.0, 0.0), 9.0, _map(), {CommandKind.LAND})
+    assert LandingPhase.DESCENT in [m.phase for m in made]  # checked on the way down
+    assert math.hypot(state.north_m + 9.0, state.east_m - 12.0) <= g.config.capture_radius_m
+
+
+def test_next_site_is_denied_without_sites_or_outside_a_search() -> None:
+    g, state = searching(fallback={"sites": []})
+    assert operator_decision(g, OperatorCommand.NEXT_FALLBACK, state, False, False) == (
+        "no fallback sites in this mission (guidance.fallback)"
+    )
+    g = _guidance(fallback={"sites": SITES})
+    idle = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(0.0, 0.0, 0.0, -20.0, 0.0), False, False)
+    assert idle == "no search, approach or descent to act on (phase idle)"
+
+
+def test_a_site_the_ground_station_chose_that_the_map_refuses_ends_in_the_last_resort() -> None:
+    g, state = searching(fallback={"sites": SITES[:1], "site_time_s": 90.0})
+    d = operator_decision(g, OperatorCommand.NEXT_FALLBACK, state, False, False)
+    assert isinstance(d, Decision)
+    made, _, _ = frames(g, state, 0.0, _map(person_at=(10.2, 0.3)), {LandingPhase.FAILSAFE})
+    last = made[-1]
+    assert last.kind is CommandKind.HOLD
+    assert last.reason.endswith("site lawn refused; no fallback site left in reach: hold")

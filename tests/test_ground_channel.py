@@ -178,11 +178,11 @@ def test_without_a_key_commands_are_taken_unsigned_and_a_land_now_with_param1_1_
     async def script(channel: CommandChannel) -> None:
         gcs.command(31011, param1=1.0)
         gcs.command(31010)
-        gcs.command(31012)  # the next fallback site: not in this version
+        gcs.command(31012)  # the next fallback site
         gcs.command(400)  # arm/disarm: not the companion's
         channel.counts.malformed = 0
         gcs.sock.sendto(b"\xfd garbage", gcs.address)
-        await wait_until_async(lambda: channel.counts.taken == 2 and channel.counts.malformed == 1, 10, "two taken")
+        await wait_until_async(lambda: channel.counts.taken == 3 and channel.counts.malformed == 1, 10, "three taken")
         await wait_until_async(lambda: len(gcs.acks()) == 4, 10, "four answers")
         taken.extend(channel.pending())
 
@@ -190,11 +190,12 @@ def test_without_a_key_commands_are_taken_unsigned_and_a_land_now_with_param1_1_
     assert [(c.command, c.force, c.signed) for c in taken] == [
         (OperatorCommand.LAND_NOW, True, False),
         (OperatorCommand.REJECT_ZONE, False, False),
+        (OperatorCommand.NEXT_FALLBACK, False, False),
     ]
     assert sorted(gcs.acks()) == sorted(
-        [(31011, AckResult.IN_PROGRESS), (31010, AckResult.IN_PROGRESS), (31012, 3), (400, 3)]
+        [(31011, AckResult.IN_PROGRESS), (31010, AckResult.IN_PROGRESS), (31012, AckResult.IN_PROGRESS), (400, 3)]
     )
-    assert channel.counts.unsupported == 2
+    assert channel.counts.unsupported == 1
     gcs.close()
 
 

@@ -1,6 +1,8 @@
 """Ground-station commands to a companion flying the SITL: a pymavlink ground station sends signed and unsigned
 COMMAND_LONGs to the companion's own component over real UDP, and the vehicle's behaviour is checked in its flight log
-and the SITL's ground truth. The logic of each command on hand-made maps: tests/test_operator_commands.py."""
+and the SITL's ground truth: go-around, reject, land-now (denied away from the target, and over a person the SITL puts
+under the descent unless forced), the next fallback site. The logic of each command on hand-made maps:
+tests/test_operator_commands.py and tests/test_fallback.py."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from companion.app.recorder import read_log
 from companion.app.replay import replay
 from companion.ground import mavlink_frames as frames
 from companion.ground.command_channel import AckResult
+from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
 from sitl.testing.helpers import free_udp_port, sitl_mission_yaml, slz_fly_argv, start_camera_sitl, wait_until
 from tests.mavproxy_client import MavProxy
 from tests.test_ground_channel import Gcs
@@ -25,7 +28,7 @@ pytestmark = pytest.mark.sitl
 REPO_ROOT = Path(__file__).resolve().parent.parent
 KEY = frames.key_from_passphrase("secret")  # docs/ground_station.md's passphrase
 DOC = REPO_ROOT / "docs" / "ground_station.md"
-GO_AROUND, REJECT, LAND_NOW = 191, 31010, 31011
+GO_AROUND, REJECT, LAND_NOW, NEXT_SITE = 191, 31010, 31011, 31012
 
 
 def decisions(log: Path) -> list[dict[str, Any]]:
@@ -136,5 +139,137 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
     assert max(-p["down_m"] for p in poses) > go_alt_m + 1.5
     assert flown[-1]["phase"] == "done"
     # The flight replays identically, the ground station's decisions included.
+    report = replay(tmp_path / "flight")
+    assert report.identical, report.differences
+
+
+def test_next_fallback_site_from_the_ground_station_flies_to_the_site_checks_it_and_lands_there(
+    tmp_path: Path, instance: int
+) -> None:
+    site_ne_m = (21.0, -4.0)  # north of the crowd's ROI, inside the fence; the park keeps objects off it
+    clear = {"clear_ne_m": [[*site_ne_m, 3.0]]}
+    sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=clear)
+    port = free_udp_port()
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
+    site = f"{{name: lawn, north_m: {site_ne_m[0]}, east_m: {site_ne_m[1]}, radius_m: 3.0}}"
+    assert "\nguidance:\n" in text
+    text = text.replace("\nguidance:\n", f"\nguidance:\n  fallback: {{sites: [{site}]}}\n")
+    text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n"
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(text)
+    log = tmp_path / "flight" / "flight.jsonl"
+    pilot = Gcs(port)
+    fly = subprocess.Popen(
+        slz_fly_argv(mission, tmp_path / "flight"),
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_until(lambda: any(d["phase"] == "approach" for d in decisions(log)), 180, "the first approach")
+        pilot.command(NEXT_SITE)
+        assert answered(pilot, NEXT_SITE) == AckResult.ACCEPTED, pilot.texts()
+        pilot.command(NEXT_SITE)  # the only site is flown to: none left
+        second = wait_until(
+            lambda: [r for c, r in pilot.acks() if c == NEXT_SITE and r != AckResult.IN_PROGRESS][1:],
+            30,
+            "the answer to the second command",
+        )
+        assert second == [AckResult.DENIED]
+        _, err = fly.communicate(timeout=300)
+        truth = sitl.state()
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        sitl.stop()
+        pilot.poll()
+        pilot.close()
+    assert fly.returncode == 0, err[-3000:]
+    assert [t for t in pilot.texts() if t.startswith("next_fallback denied: no fallback site left")]  # 50 characters
+    commands = [r for r in read_log(log) if r["kind"] == "ground_command"]
+    assert [(r["command"], r["result"]) for r in commands] == [
+        ("next_fallback", "accepted"),
+        ("next_fallback", "denied"),
+    ]
+    assert commands[1]["reason"] == "next_fallback denied: no fallback site left to try in reach"
+    by_operator = [d for d in decisions(log) if d["source"] == "operator"]
+    assert [(d["event"], d["cause"]) for d in by_operator] == [("fallback_site", "operator")]
+    assert by_operator[0]["target"]["north_m"] == site_ne_m[0]
+    outcome = landing_outcome_of_run(tmp_path / "flight")
+    assert outcome.kind is LandingKind.FALLBACK_SITE
+    north_m, east_m, _ = truth["position_ned_m"]
+    assert math.hypot(north_m - site_ne_m[0], east_m - site_ne_m[1]) <= 1.5  # down at the site's centre
+    report = replay(tmp_path / "flight")
+    assert report.identical, report.differences
+
+
+def test_land_now_over_a_person_at_the_walker_gate_is_denied_unless_forced_and_the_force_is_logged(
+    tmp_path: Path, instance: int
+) -> None:
+    # People who may step away from a warning may be moved (none is sounded here): one is put under the descent.
+    scenario = {"reaction": {"enabled": True}}
+    sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=scenario)
+    port = free_udp_port()
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
+    assert "\nguidance:\n" in text
+    # The person is seen from 12 m down to the gate: no abort on the way (the gate waits, as for a walker).
+    text = text.replace("\nguidance:\n", "\nguidance:\n  unsafe_frames_to_abort: 100\n")
+    text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n"
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(text)
+    log = tmp_path / "flight" / "flight.jsonl"
+    pilot = Gcs(port)
+    fly = subprocess.Popen(
+        slz_fly_argv(mission, tmp_path / "flight"),
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_until(
+            lambda: any(d["phase"] == "descent" for d in decisions(log)) and -sitl.state()["position_ned_m"][2] < 12.0,
+            180,
+            "a descent below 12 m",
+        )
+        target = next(d["target"] for d in reversed(decisions(log)) if d["phase"] == "descent")
+        placed = sitl.request({"cmd": "place_person", "north_m": target["north_m"], "east_m": target["east_m"]})
+        assert "index" in placed, placed
+        wait_until(
+            lambda: any(d["event"] == "wait_at_gate" and d["cause"] == "person_in_footprint" for d in decisions(log)),
+            120,
+            "the descent waiting at the gate for the person in the footprint",
+        )
+        pilot.command(LAND_NOW)
+        assert answered(pilot, LAND_NOW) == AckResult.DENIED
+        pilot.command(LAND_NOW, param1=1.0)  # forced
+        final = wait_until(
+            lambda: [r for c, r in pilot.acks() if c == LAND_NOW and r != AckResult.IN_PROGRESS][1:],
+            30,
+            "the answer to the forced land-now",
+        )
+        assert final == [AckResult.ACCEPTED]
+        _, err = fly.communicate(timeout=300)
+        truth = sitl.state()
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        sitl.stop()
+        pilot.poll()
+        pilot.close()
+    assert fly.returncode == 0, err[-3000:]
+    assert [t for t in pilot.texts() if t.startswith("land_now denied: a person in the footprint")]
+    commands = [r for r in read_log(log) if r["kind"] == "ground_command"]
+    assert [(r["result"], r["force"], r["person_seen"]) for r in commands] == [
+        ("denied", False, True),
+        ("accepted", True, True),
+    ]
+    by_operator = [d for d in decisions(log) if d["source"] == "operator"]
+    assert [(d["event"], d["kind"]) for d in by_operator] == [("operator_land", "land")]
+    assert "(forced: a person in the footprint on the newest map)" in by_operator[0]["reason"]
+    assert decisions(log)[-1]["phase"] == "done"
+    north_m, east_m, _ = truth["position_ned_m"]  # landed where the operator forced it
+    assert math.hypot(north_m - target["north_m"], east_m - target["east_m"]) <= 1.5
     report = replay(tmp_path / "flight")
     assert report.identical, report.differences

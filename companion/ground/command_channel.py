@@ -10,7 +10,7 @@ command                     number   what the companion does (:mod:`companion.gu
 ``MAV_CMD_DO_GO_AROUND``    191      climb back and search again (approach or descent)
 ``MAV_CMD_USER_1``          31010    reject the zone it flies to; choose another
 ``MAV_CMD_USER_2``          31011    land on the current target now (param1 = 1: even over a person seen)
-``MAV_CMD_USER_3``          31012    the next fallback site (not in this version: UNSUPPORTED)
+``MAV_CMD_USER_3``          31012    the next fallback site not tried yet (guidance.fallback)
 ==========================  =======  ===================================================================
 
 Each is answered with ``COMMAND_ACK``: ``IN_PROGRESS`` when taken (it is decided at the vehicle's next tick), then
@@ -206,7 +206,7 @@ class CommandChannel:
             self._reply(frame, address, mav_cmd, AckResult.DENIED, f"refused: {refusal}")
             return
         command = COMMAND_OF_MAV_CMD.get(mav_cmd)
-        if command is None or command is OperatorCommand.NEXT_FALLBACK:
+        if command is None:
             self.counts.unsupported += 1
             self._reply(frame, address, mav_cmd, AckResult.UNSUPPORTED, f"command {mav_cmd} is not supported")
             return

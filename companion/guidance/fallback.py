@@ -68,15 +68,19 @@ class FallbackPlan:
         self._tried: set[int] = set()
         self._since_s = 0.0
 
-    def next(self, state: VehicleState) -> FallbackSite | None:
-        """Choose the nearest untried site in reach of ``state`` (it becomes :attr:`current`), or None."""
-        self.current = None
+    def untried(self, state: VehicleState) -> list[tuple[float, int, FallbackSite]]:
+        """The sites not tried yet in reach of ``state``: (distance m, index, site) each."""
         in_reach = [
             (math.hypot(s.north_m - state.north_m, s.east_m - state.east_m), s.index, s)
             for s in self.sites
             if s.index not in self._tried
         ]
-        in_reach = [entry for entry in in_reach if self.reach_m is None or entry[0] <= self.reach_m]
+        return [entry for entry in in_reach if self.reach_m is None or entry[0] <= self.reach_m]
+
+    def next(self, state: VehicleState) -> FallbackSite | None:
+        """Choose the nearest untried site in reach of ``state`` (it becomes :attr:`current`), or None."""
+        self.current = None
+        in_reach = self.untried(state)
         if not in_reach:
             return None
         _, _, site = min(in_reach)

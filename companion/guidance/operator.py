@@ -1,12 +1,14 @@
 """The ground station's landing commands, decided by the landing logic (:mod:`companion.ground.command_channel` takes
-them, :mod:`companion.app.operator_desk` hands them over at a tick): go around, reject the zone, land now."""
+them, :mod:`companion.app.operator_desk` hands them over at a tick): go around, reject the zone, land now, the next
+fallback site."""
 
 from __future__ import annotations
 
 import math
 
 from companion.ground.operator_commands import OperatorCommand
-from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
+from companion.guidance.fallback import BudgetEnd
+from companion.guidance.landing import ACTIVE_PHASES, CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause
 
@@ -27,7 +29,11 @@ def operator_decision(
 
     A go-around, and a rejection in the descent, abort the descent as a refused point does (climb back, a
     re-selection spent, the point refused); a rejection in the approach refuses the zone and chooses again from where
-    the vehicle is; land-now commands the landing over the target, the vehicle within ``capture_radius_m`` of it."""
+    the vehicle is; land-now commands the landing over the target, the vehicle within ``capture_radius_m`` of it; the
+    next fallback site ends the search (or gives up the site flown to) for the nearest fallback site not tried yet, as
+    the end of the search's budget does (:func:`next_fallback`)."""
+    if command is OperatorCommand.NEXT_FALLBACK:
+        return next_fallback(g, state)
     target = g.target
     if g.phase not in (LandingPhase.APPROACH, LandingPhase.DESCENT) or target is None:
         return f"no approach or descent to act on (phase {g.phase.value})"
@@ -49,3 +55,21 @@ def operator_decision(
     said += " (forced: a person in the footprint on the newest map)" if person_seen else ""
     g.enter(LandingPhase.LAND, state.t_s)
     return Decision(state.t_s, LandingPhase.LAND, CommandKind.LAND, None, target, said, event)
+
+
+def next_fallback(g: LandingGuidance, state: VehicleState) -> Decision | str:
+    """The ground station's "next fallback site" to ``g`` at ``state``: while searching, approaching or descending,
+    the nearest fallback site not tried yet in reach (the climb to the search altitude first, then the site's checks,
+    as when the search's budget ends; a site flown to now is given up); denied (in words) without sites or with none
+    left to try. The search counts as ended by the ground station: once no site is left, ``guidance.last_resort``."""
+    plan = g.fallback
+    if g.phase not in ACTIVE_PHASES:
+        return f"no search, approach or descent to act on (phase {g.phase.value})"
+    if not plan.sites:
+        return "no fallback sites in this mission (guidance.fallback)"
+    if not plan.untried(state):
+        return "no fallback site left to try in reach"
+    said = "next fallback site, from the ground station"
+    if plan.ended_by is None:
+        plan.ended_by = BudgetEnd(said, DecisionEvent.FALLBACK_SITE, g.config.last_resort)
+    return g.next_site(state, said, RefusalCause.OPERATOR)

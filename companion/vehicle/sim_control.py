@@ -43,6 +43,7 @@ class Command(str, enum.Enum):
     CAMERA_FAIL = "camera_fail"
     LINK_LOSS = "link_loss"
     PEOPLE = "people"
+    PLACE_PERSON = "place_person"
     SHUTDOWN = "shutdown"
 
 

@@ -243,6 +243,7 @@ CONTROL_COMMANDS = (
     "camera_fail",
     "link_loss",
     "people",
+    "place_person",
 )
 BAD_VALUES: tuple[Any, ...] = (
     "false",
@@ -304,6 +305,7 @@ class ControlFuzzer:
                 "lockstep_ack": {"seq": self._bad(), "expect": self._bad(), "mavlink_sent": self._bad()},
                 "camera_fail": {"failed": self._bad()},
                 "link_loss": {"lost": self._bad()},
+                "place_person": {"north_m": self._bad()},  # east_m missing: never a valid request
             }.get(cmd, {"extra": self._bad()})
             return "wrong_fields", json.dumps({"cmd": cmd, **fields}).encode()
         if how == 6:  # out of range, right types

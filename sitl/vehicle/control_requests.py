@@ -23,9 +23,14 @@ from sitl.dynamics.base import Dynamics
 from sitl.vehicle.clock import SimClock
 from sitl.vehicle.control_channel import ControlChannel
 from sitl.vehicle.lockstep_gate import LockstepGate
+from sitl.world.crowd import CrowdError
 
 if TYPE_CHECKING:  # the camera module needs the renderer, which a SITL without a camera never loads
     from sitl.vehicle.sim_camera import SimCamera
+
+
+MAX_PLACE_M = 1000.0
+"""How far from the origin ``place_person`` may put someone (m, per axis)."""
 
 
 class ControlledVehicle(Protocol):
@@ -108,6 +113,15 @@ class ControlRequests:
                 if v.camera is None:
                     raise ValueError("this SITL has no world (camera disabled)")
                 reply = {"event": Event.PEOPLE.value, **v.camera.people()}
+            elif cmd == Command.PLACE_PERSON:
+                if v.camera is None:
+                    raise ValueError("this SITL has no world (camera disabled)")
+                north, east = (number(request, k, -MAX_PLACE_M, MAX_PLACE_M) for k in ("north_m", "east_m"))
+                v.camera.crowd.advance_to(v.clock.now_s)
+                try:
+                    reply["index"] = v.camera.crowd.place(north, east)
+                except CrowdError as exc:
+                    raise ValueError(str(exc)) from None
             elif cmd == Command.SHUTDOWN:
                 v.request_stop()
             else:

@@ -123,6 +123,20 @@ class Crowd:
         """Who may move during the scene (N,): the walkers and those who would step away from a warning."""
         return np.asarray(self.moving | self.reaction.reactive)
 
+    def place(self, north_m: float, east_m: float) -> int:
+        """Move the person nearest to (``north_m``, ``east_m``) among those who may move (:attr:`mobile`) there, now;
+        their index (:class:`CrowdError` when nobody may move: the renderer draws the others in one still mesh).
+
+        A test's injection, as the control channel's ``place_person`` (a person stepping under the vehicle); a walker
+        walks on from there."""
+        mobile = np.nonzero(self.mobile)[0]
+        if not len(mobile):
+            raise CrowdError("nobody in this scene may move (scenario.moving_fraction or scenario.reaction)")
+        d = np.hypot(self.positions_ne_m[mobile, 0] - north_m, self.positions_ne_m[mobile, 1] - east_m)
+        index = int(mobile[int(np.argmin(d))])
+        self.positions_ne_m[index] = (north_m, east_m)
+        return index
+
     def warn(self, t_s: float, north_m: float, east_m: float, on: bool) -> None:
         """The vehicle's warning starts (``on``; the vehicle over (``north_m``, ``east_m``), NED) or stops at
         simulated ``t_s``: the crowd walks up to then first (:class:`~sitl.world.reaction.Reaction`)."""
