@@ -188,3 +188,22 @@ done
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/people_heldout" "${PEOPLE[@]}"
 "$PY" -m models.eval.tradeoff --out models/eval/results/tradeoff_people --model slz-lite=models/density/slz_lite.onnx \
     "${PEOPLE[@]}"
+
+# 7. Issue 52 (model card, "More context does not close it either"): round cg with YOLOX-nano's stride-16 stage too.
+run=yoloxctx_cg
+"$PY" -m models.density.train --arch yolox-context --loss mse --no-distractors --data "$MH" --steps 2000 --batch 8 \
+    --crop 192 --workers 0 --validate-every 500 --real-ground sitl/world/ground/caliterra \
+    --real-ground sitl/world/ground/garfield --real-negatives 0.3 --composites 0.4 --backbone-lr-scale 0.1 \
+    --out "$RUNS/$run"
+"$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" \
+    --name "$run-raw" --version 0 --check-frames "$MH/train"
+"$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
+    --reference slz-lite=models/density/slz_lite.onnx@0.01 --synthetic "$VAL_MH/train" \
+    --real-ground sitl/world/ground/caliterra --out "$RUNS/$run/threshold"
+chosen=$("$PY" -c "import json, sys; print(json.load(open(sys.argv[1]))['chosen_threshold'])" "$RUNS/$run/threshold.json")
+"$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/$run.onnx" --name "$run" \
+    --version 0 --check-frames "$MH/train" --operating-threshold "$chosen" --calibrate "$MH/train"
+CTX=(--model "yolox-ctx-cg=$RUNS/$run/$run.onnx" --model "yolox-cg=$RUNS/yolox_cg/yolox_cg.onnx")
+"$PY" -m models.eval.real --out "$RUNS/${run}_real" "${CTX[@]}"
+"$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/${run}_heldout" "${CTX[@]}"
+"$PY" -m models.eval.tradeoff --out "$RUNS/${run}_tradeoff" "${CTX[@]}"

@@ -212,14 +212,23 @@ needs_pretrained = pytest.mark.skipif(
 )
 
 
+NODES_TO_DARK4 = 130
+
+
 @needs_pretrained
 @pytest.mark.unit
-def test_the_pretrained_stages_compute_what_onnxruntime_computes_on_the_original_graph() -> None:
+@pytest.mark.parametrize(("context", "nodes"), [(False, 84), (True, NODES_TO_DARK4)])
+def test_the_pretrained_stages_compute_what_onnxruntime_computes_on_the_original_graph(
+    context: bool, nodes: int
+) -> None:
     import onnx
     import onnxruntime as ort
 
     from models.density.preprocess import MEAN, STD, to_input
-    from models.density.pretrained import YOLOX_NANO, OnnxStages, PretrainedStages
+    from models.density.pretrained import YOLOX_NANO as STRIDE8
+    from models.density.pretrained import YOLOX_NANO_CONTEXT, OnnxStages, PretrainedStages
+
+    YOLOX_NANO = YOLOX_NANO_CONTEXT if context else STRIDE8  # the spec under test
 
     graph = onnx.load(str(PRETRAINED / YOLOX_NANO.file))
     for name in YOLOX_NANO.outputs:  # the stage outputs, exposed
@@ -229,7 +238,7 @@ def test_the_pretrained_stages_compute_what_onnxruntime_computes_on_the_original
     pixels = image_bgr.transpose(2, 0, 1)[None].astype(np.float32)  # YOLOX: BGR, 0-255
     expected = session.run(list(YOLOX_NANO.outputs), {"images": pixels})
     stages = OnnxStages(PRETRAINED / YOLOX_NANO.file, YOLOX_NANO.outputs)
-    assert len(stages.nodes) == 84  # of the graph's 369: the stem, dark2 and dark3
+    assert len(stages.nodes) == nodes  # of the graph's 369: the stem, dark2 and dark3 (and dark4)
     with torch.no_grad():
         got = stages(torch.from_numpy(pixels))
         # The same from the density network's own input (normalised RGB): the wrapper undoes the normalisation.

@@ -29,6 +29,9 @@ class Architecture(str, enum.Enum):
     YOLOX_LITE = "yolox-lite"
     """YOLOX-nano's stride-4 and stride-8 stages (COCO-trained, ``models/density/pretrained.py``), then ``lite``'s
     separable blocks on both at stride 4 (issue 52: features learned on real photographs)."""
+    YOLOX_CONTEXT = "yolox-context"
+    """``yolox-lite`` with YOLOX-nano's stride-16 stage as well (its receptive field several times wider): the
+    surroundings that tell a person from a person-sized patch of roof or crown (issue 52)."""
 
 
 def _conv_bn_relu(
@@ -147,18 +150,20 @@ class YoloxLite(nn.Module):
     2) are concatenated (96 channels), reduced by a 1x1 conv to 48, then depthwise-separable blocks at stride 4 with
     dilations 1, 2, 3, 1 (48, 48, 48, 32 channels) and a 1x1 head made non-negative (see ``_density_head``). The
     pretrained part is ``self.backbone`` (train it with a lower learning rate, or freeze it: ``train.py
-    --backbone-lr-scale``). H and W must be multiples of 8.
+    --backbone-lr-scale``). H and W must be multiples of 8. With ``context`` (``yolox-context``) the stride-16 stage
+    (``dark4``, 128 channels, upsampled by 4) joins the concatenation (224 channels); H and W multiples of 16.
     """
 
     BLOCKS = ((48, 48, 1), (48, 48, 2), (48, 48, 3), (48, 32, 1))
 
-    def __init__(self) -> None:
+    def __init__(self, context: bool = False) -> None:
         super().__init__()
         from models.density.preprocess import MEAN, STD
-        from models.density.pretrained import YOLOX_NANO, PretrainedStages
+        from models.density.pretrained import YOLOX_NANO, YOLOX_NANO_CONTEXT, PretrainedStages
 
-        self.backbone = PretrainedStages(YOLOX_NANO, MEAN, STD)
-        self.reduce = _conv_bn_relu(sum(YOLOX_NANO.channels), 48, 1)
+        spec = YOLOX_NANO_CONTEXT if context else YOLOX_NANO
+        self.backbone = PretrainedStages(spec, MEAN, STD)
+        self.reduce = _conv_bn_relu(sum(spec.channels), 48, 1)
         self.head = nn.Sequential(
             *(_SeparableBlock(c_in, c_out, dilation) for c_in, c_out, dilation in self.BLOCKS),
             _density_head(32),
@@ -166,17 +171,17 @@ class YoloxLite(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, 3, H, W) -> (N, 1, H/4, W/4)."""
-        stride4, stride8 = self.backbone(x)
-        up = nn.functional.interpolate(stride8, size=stride4.shape[-2:], mode="nearest")
-        return self.head(self.reduce(torch.cat([stride4, up], dim=1)))
+        stride4, *coarser = self.backbone(x)
+        up = [nn.functional.interpolate(c, size=stride4.shape[-2:], mode="nearest") for c in coarser]
+        return self.head(self.reduce(torch.cat([stride4, *up], dim=1)))
 
 
 def build(architecture: Architecture) -> nn.Module:
     """A freshly initialised network (the pretrained part of ``yolox-lite`` from its graph)."""
     if architecture is Architecture.CCNN:
         return Ccnn()
-    if architecture is Architecture.YOLOX_LITE:
-        return YoloxLite()
+    if architecture in (Architecture.YOLOX_LITE, Architecture.YOLOX_CONTEXT):
+        return YoloxLite(context=architecture is Architecture.YOLOX_CONTEXT)
     return LiteWide() if architecture is Architecture.LITE_WIDE else Lite()
 
 

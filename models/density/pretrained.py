@@ -55,6 +55,18 @@ YOLOX_NANO = BackboneSpec(
 )
 
 
+YOLOX_NANO_CONTEXT = BackboneSpec(
+    file="yolox_nano_coco_416.onnx",
+    outputs=("721", "781", "841"),  # dark2, dark3 and dark4 (stride 16, 128 ch): 130 of the graph's 369 nodes
+    channels=(32, 64, 128),
+    strides=(4, 8, 16),
+    input_bgr=True,
+    input_scale=1.0,
+    licence="Apache-2.0 (Megvii-BaseDetection/YOLOX; COCO train2017 weights)",
+)
+"""YOLOX-nano up to its stride-16 stage: the context around a person (a path, a lawn, a roof) that stride 8 lacks."""
+
+
 def _attributes(node: onnx.NodeProto) -> dict[str, object]:
     return {a.name: onnx.helper.get_attribute_value(a) for a in node.attribute}
 
