@@ -48,14 +48,26 @@ def documented_mavproxy(port: int) -> tuple[list[str], list[str]]:
     return args, console.group(1).splitlines()
 
 
-def answered(gcs: Gcs, mav_cmd: int, timeout_s: float = 30.0) -> int:
-    """The final answer (not IN_PROGRESS) to ``mav_cmd``."""
+def answered(gcs: Gcs, mav_cmd: int, timeout_s: float = 30.0, nth: int = 1) -> int:
+    """The final answer (not IN_PROGRESS) to the ``nth`` ``mav_cmd`` sent (the first by default)."""
     final = wait_until(
-        lambda: [r for c, r in gcs.acks() if c == mav_cmd and r != AckResult.IN_PROGRESS],
+        lambda: [r for c, r in gcs.acks() if c == mav_cmd and r != AckResult.IN_PROGRESS][nth - 1 :],
         timeout_s,
-        f"the answer to command {mav_cmd}",
+        f"the answer to command {mav_cmd} (number {nth})",
     )
-    return int(final[-1])
+    return int(final[0])
+
+
+def fly_with_commands(tmp_path: Path, instance: int, port: int, guidance: str) -> tuple[subprocess.Popen[str], Path]:
+    """``slz fly`` started on instance ``instance`` with ``guidance`` lines and the command channel on ``port``
+    (unsigned), every frame saved for a replay; the process and its flight log's path."""
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True, guidance=guidance)
+    text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n"
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(text)
+    argv = slz_fly_argv(mission, tmp_path / "flight")
+    fly = subprocess.Popen(argv, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return fly, tmp_path / "flight" / "flight.jsonl"
 
 
 def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_and_the_flight_replays(
@@ -150,33 +162,15 @@ def test_next_fallback_site_from_the_ground_station_flies_to_the_site_checks_it_
     clear = {"clear_ne_m": [[*site_ne_m, 3.0]]}
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=clear)
     port = free_udp_port()
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
     site = f"{{name: lawn, north_m: {site_ne_m[0]}, east_m: {site_ne_m[1]}, radius_m: 3.0}}"
-    assert "\nguidance:\n" in text
-    text = text.replace("\nguidance:\n", f"\nguidance:\n  fallback: {{sites: [{site}]}}\n")
-    text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n"
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(text)
-    log = tmp_path / "flight" / "flight.jsonl"
+    fly, log = fly_with_commands(tmp_path, instance, port, f"  fallback: {{sites: [{site}]}}")
     pilot = Gcs(port)
-    fly = subprocess.Popen(
-        slz_fly_argv(mission, tmp_path / "flight"),
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
     try:
         wait_until(lambda: any(d["phase"] == "approach" for d in decisions(log)), 180, "the first approach")
         pilot.command(NEXT_SITE)
         assert answered(pilot, NEXT_SITE) == AckResult.ACCEPTED, pilot.texts()
         pilot.command(NEXT_SITE)  # the only site is flown to: none left
-        second = wait_until(
-            lambda: [r for c, r in pilot.acks() if c == NEXT_SITE and r != AckResult.IN_PROGRESS][1:],
-            30,
-            "the answer to the second command",
-        )
-        assert second == [AckResult.DENIED]
+        assert answered(pilot, NEXT_SITE, nth=2) == AckResult.DENIED
         _, err = fly.communicate(timeout=300)
         truth = sitl.state()
     finally:
@@ -211,22 +205,9 @@ def test_land_now_over_a_person_at_the_walker_gate_is_denied_unless_forced_and_t
     scenario = {"reaction": {"enabled": True}}
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=scenario)
     port = free_udp_port()
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
-    assert "\nguidance:\n" in text
     # The person is seen from 12 m down to the gate: no abort on the way (the gate waits, as for a walker).
-    text = text.replace("\nguidance:\n", "\nguidance:\n  unsafe_frames_to_abort: 100\n")
-    text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n"
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(text)
-    log = tmp_path / "flight" / "flight.jsonl"
+    fly, log = fly_with_commands(tmp_path, instance, port, "  unsafe_frames_to_abort: 100")
     pilot = Gcs(port)
-    fly = subprocess.Popen(
-        slz_fly_argv(mission, tmp_path / "flight"),
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
     try:
         wait_until(
             lambda: any(d["phase"] == "descent" for d in decisions(log)) and -sitl.state()["position_ned_m"][2] < 12.0,
@@ -244,12 +225,7 @@ def test_land_now_over_a_person_at_the_walker_gate_is_denied_unless_forced_and_t
         pilot.command(LAND_NOW)
         assert answered(pilot, LAND_NOW) == AckResult.DENIED
         pilot.command(LAND_NOW, param1=1.0)  # forced
-        final = wait_until(
-            lambda: [r for c, r in pilot.acks() if c == LAND_NOW and r != AckResult.IN_PROGRESS][1:],
-            30,
-            "the answer to the forced land-now",
-        )
-        assert final == [AckResult.ACCEPTED]
+        assert answered(pilot, LAND_NOW, nth=2) == AckResult.ACCEPTED
         _, err = fly.communicate(timeout=300)
         truth = sitl.state()
     finally:

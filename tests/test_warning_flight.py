@@ -26,9 +26,8 @@ def test_the_warning_sounds_from_the_descents_start_to_the_touchdown_and_people_
 ) -> None:
     scenario = {"moving_fraction": 0.2, "reaction": {"enabled": True, "warning_actuator": 2}}
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=scenario)
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
-    assert "\nguidance:\n" in text
-    text = text.replace("\nguidance:\n", "\nguidance:\n  warning: {enabled: true, actuator: 2}\n")
+    warning = "  warning: {enabled: true, actuator: 2}"
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True, guidance=warning)
     mission = tmp_path / "mission.yaml"
     mission.write_text(text)
     try:

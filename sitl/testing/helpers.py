@@ -24,11 +24,17 @@ T = TypeVar("T")
 SITL_MISSION_CONFIG = Path(__file__).resolve().parents[2] / "mission_configs" / "sitl.yaml"
 
 
-def sitl_mission_yaml(instance: int, flights_dir: Path | None = None, replayable: bool = False) -> str:
+def sitl_mission_yaml(
+    instance: int, flights_dir: Path | None = None, replayable: bool = False, guidance: str = ""
+) -> str:
     """mission_configs/sitl.yaml on SITL instance ``instance``'s ports (MAVSDK, camera, control channel). A SITL
     started without ``--lockstep`` answers the control channel with "running free": the companion runs free too.
-    ``replayable``: every frame saved, losslessly (PNG), so that ``slz replay`` can re-run the flight."""
+    ``replayable``: every frame saved, losslessly (PNG), so that ``slz replay`` can re-run the flight. ``guidance``:
+    YAML lines (indented by two) put first in its ``guidance`` section."""
     text = SITL_MISSION_CONFIG.read_text()
+    if guidance:
+        assert "\nguidance:\n" in text
+        text = text.replace("\nguidance:\n", f"\nguidance:\n{guidance.rstrip()}\n")
     if replayable:
         assert "frame_every: 10" in text
         assert "frame_format: jpeg" in text
