@@ -331,6 +331,79 @@ def test_the_context_a_cell_reads_is_followed_through_the_graph(tmp_path: Path) 
         )
 
 
+def focus_model(path: Path, upsample: str = "scales", coordinates: str = "asymmetric") -> Path:
+    """A graph shaped like YOLOX's early stages under our head: the channels flipped (RGB -> BGR), a space-to-depth
+    stem (every other row and column, from rows 0 and 1), a 3x3 at stride 2, a 3x3 stride-2 stage upsampled back
+    by 2 (``upsample``: by constant ``scales``, or to fixed ``sizes``) and concatenated, a 1x1 head."""
+    rng = np.random.default_rng(7)
+    ints = {
+        "ch_start": [-1], "ch_end": [-(2**63) + 1], "ch_axis": [1], "ch_step": [-1],
+        "even": [0], "odd": [1], "end": [2**63 - 1], "rows": [2], "cols": [3], "two": [2],
+    }  # fmt: skip
+    inits = [onnx.numpy_helper.from_array(np.array(v, np.int64), k) for k, v in ints.items()]
+    inits += [
+        onnx.numpy_helper.from_array(rng.normal(size=(4, 6, 3, 3)).astype(np.float32), "w1"),
+        onnx.numpy_helper.from_array(rng.normal(size=(4, 4, 3, 3)).astype(np.float32), "w2"),
+        onnx.numpy_helper.from_array(rng.normal(size=(1, 8, 1, 1)).astype(np.float32), "w3"),
+        onnx.numpy_helper.from_array(np.array([1, 1, 2, 2], np.float32), "scales"),
+        onnx.numpy_helper.from_array(np.array([1, 4, 24, 32], np.int64), "sizes"),
+    ]
+    resize_inputs = ["s4", "", "scales"] if upsample == "scales" else ["s4", "", "", "sizes"]
+    nodes = [
+        helper.make_node("Slice", ["frame", "ch_start", "ch_end", "ch_axis", "ch_step"], ["bgr"]),
+        helper.make_node("Slice", ["bgr", "even", "end", "rows", "two"], ["r0"]),
+        helper.make_node("Slice", ["r0", "even", "end", "cols", "two"], ["r0c0"]),
+        helper.make_node("Slice", ["bgr", "odd", "end", "rows", "two"], ["r1"]),
+        helper.make_node("Slice", ["r1", "even", "end", "cols", "two"], ["r1c0"]),
+        helper.make_node("Concat", ["r0c0", "r1c0"], ["focus"], axis=1),
+        helper.make_node("Conv", ["focus", "w1"], ["s2"], kernel_shape=[3, 3], pads=[1] * 4),
+        helper.make_node("Conv", ["s2", "w2"], ["s4"], kernel_shape=[3, 3], strides=[2, 2], pads=[1] * 4),
+        helper.make_node(
+            "Resize", resize_inputs, ["up"], mode="nearest", coordinate_transformation_mode=coordinates,
+            nearest_mode="floor",
+        ),
+        helper.make_node("Concat", ["s2", "up"], ["both"], axis=1),
+        helper.make_node("Conv", ["both", "w3"], ["c3"]),
+        helper.make_node("Abs", ["c3"], ["density"]),
+    ]  # fmt: skip
+    graph = helper.make_graph(
+        nodes,
+        "focus",
+        [helper.make_tensor_value_info("frame", TensorProto.FLOAT, [1, 3, 48, 64])],
+        [helper.make_tensor_value_info("density", TensorProto.FLOAT, [1, 1, 24, 32])],
+        initializer=inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    contract = {"input_width_px": 64, "input_height_px": 48, "output_stride": 2}
+    helper.set_model_props(model, {CONTRACT_METADATA_KEY: json.dumps(contract)})
+    onnx.save(model, str(path))
+    return path
+
+
+def test_a_space_to_depth_stem_and_an_upsampled_stage_are_followed(tmp_path: Path) -> None:
+    # Rows: the stem's odd rows start one pixel down (stride 2, extent 1); the 3x3 adds 1 cell of 2 px (3); the
+    # stride-2 3x3 over that another 2 px (5, stride 4); nearest upsampling by 2 (floor, asymmetric) reads the same
+    # pixels at stride 2. Columns reach 4. So (2, 5): 4 px past the last kept cell, a context of 16.
+    path = focus_model(tmp_path / "focus.onnx")
+    assert input_extent_px(onnx.load(str(path)).graph) == (2, 5)
+    model = OnnxDensityModel(path)
+    assert model.context_px == 16
+    padded = OnnxDensityModel(path, crop_shrunk_frames=False)
+    frame = np.random.default_rng(4).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    for scale in (0.3, 0.5, 0.75):
+        np.testing.assert_array_equal(
+            predict_downscaled(model, frame, scale).values, predict_downscaled(padded, frame, scale).values
+        )
+    # Another rounding of the upsampling may read one coarse cell further: a cell of 4 px more.
+    rounded = focus_model(tmp_path / "half_pixel.onnx", coordinates="half_pixel")
+    assert input_extent_px(onnx.load(str(rounded)).graph) == (2, 9)
+    # Upsampled to fixed sizes, the graph runs at the contract's size only.
+    fixed = focus_model(tmp_path / "sizes.onnx", upsample="sizes")
+    assert input_extent_px(onnx.load(str(fixed)).graph) is None
+    assert OnnxDensityModel(fixed).context_px is None
+
+
 def test_graphs_whose_context_is_unbounded_here_run_on_the_contract_size(
     tmp_path: Path, blob_model: OnnxDensityModel
 ) -> None:

@@ -10,12 +10,13 @@ import json
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
 
-from companion.perception.density import OnnxDensityModel  # noqa: E402
+from companion.perception.density import OnnxDensityModel, predict_downscaled  # noqa: E402
 from models.data.generate import Split, generate  # noqa: E402
 from models.data.real_ground import composite  # noqa: E402
 from models.density import dataset as dataset_module  # noqa: E402
@@ -288,7 +289,17 @@ def test_a_pretrained_network_trains_on_two_sites_exports_and_names_them(tiny_se
     export(model, log, onnx_path, "slz-yolox-test", "0")
     frames = [f.image_bgr for f in load_frames(tiny_set / "train")[:2]]
     assert parity(model, onnx_path, frames) <= 1e-4
-    assert OnnxDensityModel(onnx_path).predict(frames[0]).values.shape == (120, 160)
+    exported = OnnxDensityModel(onnx_path)
+    assert exported.predict(frames[0]).values.shape == (120, 160)
+    # The coarse stage is upsampled by a factor, not to a size: the graph runs at any size and a shrunk frame is
+    # run cropped, to the same map as the whole padded frame.
+    assert exported.context_px is not None
+    whole = OnnxDensityModel(onnx_path, crop_shrunk_frames=False)
+    frame = np.ascontiguousarray(cv2.resize(frames[0], (640, 480)), dtype=np.uint8)
+    for scale in (0.4, 0.7):
+        np.testing.assert_array_equal(
+            predict_downscaled(exported, frame, scale).values, predict_downscaled(whole, frame, scale).values
+        )
     from models.eval.real import training_sites
 
     assert training_sites(onnx_path) == {"caliterra", "garfield"}

@@ -217,6 +217,8 @@ class PretrainedStages(nn.Module):
         super().__init__()
         self.spec = spec
         self.stages = OnnxStages(root / spec.file, spec.outputs)
+        self.mean: torch.Tensor
+        self.std: torch.Tensor
         self.register_buffer("mean", torch.tensor(mean, dtype=torch.float32).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor(std, dtype=torch.float32).view(1, 3, 1, 1))
 

@@ -193,12 +193,14 @@ def train(
         for parameter in pretrained:
             parameter.requires_grad_(False)
     held = {id(p) for p in pretrained}
+    rates = [lr]
     groups = [{"params": [p for p in model.parameters() if id(p) not in held], "lr": lr}]
     if pretrained and backbone_lr_scale > 0.0:
-        groups.append({"params": pretrained, "lr": lr * backbone_lr_scale})
+        rates.append(lr * backbone_lr_scale)
+        groups.append({"params": pretrained, "lr": rates[-1]})
     optimiser = torch.optim.AdamW(groups, lr=lr, weight_decay=1e-4)
     schedule = torch.optim.lr_scheduler.OneCycleLR(
-        optimiser, max_lr=[g["lr"] for g in groups], total_steps=steps, pct_start=max(0.05, 3 / steps)
+        optimiser, max_lr=rates, total_steps=steps, pct_start=max(0.05, 3 / steps)
     )
     log: dict[str, Any] = {
         "architecture": arch.value,
