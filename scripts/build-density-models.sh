@@ -134,23 +134,26 @@ for first in 0 400 800 1200; do
 done
 "$PY" -m models.data.generate --split train --frames 200 --first 1600 --out "$VAL_MH" --altitude-m 2 40 \
     --people makehuman --sensor
+thresholded_export() {  # thresholded_export RUN SITE DATA: the raw export, models/eval/threshold.py's rule on the
+    # synthetic validation frames and SITE's validation ground, and the export at the chosen threshold (RUN.onnx)
+    local run=$1 chosen
+    "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" \
+        --name "$run-raw" --version 0 --check-frames "$3/train"
+    "$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
+        --reference slz-lite=models/density/slz_lite.onnx@0.01 --synthetic "$VAL_MH/train" \
+        --real-ground "sitl/world/ground/$2" --out "$RUNS/$run/threshold"
+    chosen=$("$PY" -c "import json, sys; print(json.load(open(sys.argv[1]))['chosen_threshold'])" \
+        "$RUNS/$run/threshold.json")
+    "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/$run.onnx" --name "$run" \
+        --version 0 --check-frames "$3/train" --operating-threshold "$chosen" --calibrate "$3/train"
+}
 round() {  # round TAG SITE1 SITE2
     local common=(--loss mse --no-distractors --data "$MH" --steps 2000 --batch 8 --crop 192 --workers 0
         --validate-every 500 --real-ground "sitl/world/ground/$2" --real-ground "sitl/world/ground/$3"
         --real-negatives 0.3 --composites 0.4)
     "$PY" -m models.density.train --arch yolox-lite "${common[@]}" --backbone-lr-scale 0.1 --out "$RUNS/yolox_$1"
     "$PY" -m models.density.train --arch lite-wide "${common[@]}" --out "$RUNS/wide_$1"
-    for run in "yolox_$1" "wide_$1"; do
-        "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" \
-            --name "$run-raw" --version 0 --check-frames "$MH/train"
-        "$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
-            --reference slz-lite=models/density/slz_lite.onnx@0.01 --synthetic "$VAL_MH/train" \
-            --real-ground "sitl/world/ground/$2" --out "$RUNS/$run/threshold"
-        chosen=$("$PY" -c "import json, sys; print(json.load(open(sys.argv[1]))['chosen_threshold'])" \
-            "$RUNS/$run/threshold.json")
-        "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/$run.onnx" --name "$run" \
-            --version 0 --check-frames "$MH/train" --operating-threshold "$chosen" --calibrate "$MH/train"
-    done
+    for run in "yolox_$1" "wide_$1"; do thresholded_export "$run" "$2" "$MH"; done
 }
 round cg caliterra garfield  # Boruszyn held out
 round cb caliterra boruszyn  # Garfield held out
@@ -172,15 +175,7 @@ for seed in 0 1; do
             --batch 8 --crop 192 --workers 0 --validate-every 500 --real-ground sitl/world/ground/caliterra \
             --real-ground sitl/world/ground/garfield --real-negatives 0.3 --composites 0.4 --backbone-lr-scale 0.1 \
             --seed "$seed" --out "$RUNS/$run"
-        "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" \
-            --name "$run-raw" --version 0 --check-frames "$data/train"
-        "$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
-            --reference slz-lite=models/density/slz_lite.onnx@0.01 --synthetic "$VAL_MH/train" \
-            --real-ground sitl/world/ground/caliterra --out "$RUNS/$run/threshold"
-        chosen=$("$PY" -c "import json, sys; print(json.load(open(sys.argv[1]))['chosen_threshold'])" \
-            "$RUNS/$run/threshold.json")
-        "$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/$run.onnx" --name "$run" \
-            --version 0 --check-frames "$data/train" --operating-threshold "$chosen" --calibrate "$data/train"
+        thresholded_export "$run" caliterra "$data"
         PEOPLE+=(--model "$run=$RUNS/$run/$run.onnx")
     done
 done
@@ -195,14 +190,7 @@ run=yoloxctx_cg
     --crop 192 --workers 0 --validate-every 500 --real-ground sitl/world/ground/caliterra \
     --real-ground sitl/world/ground/garfield --real-negatives 0.3 --composites 0.4 --backbone-lr-scale 0.1 \
     --out "$RUNS/$run"
-"$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" \
-    --name "$run-raw" --version 0 --check-frames "$MH/train"
-"$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
-    --reference slz-lite=models/density/slz_lite.onnx@0.01 --synthetic "$VAL_MH/train" \
-    --real-ground sitl/world/ground/caliterra --out "$RUNS/$run/threshold"
-chosen=$("$PY" -c "import json, sys; print(json.load(open(sys.argv[1]))['chosen_threshold'])" "$RUNS/$run/threshold.json")
-"$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/$run.onnx" --name "$run" \
-    --version 0 --check-frames "$MH/train" --operating-threshold "$chosen" --calibrate "$MH/train"
+thresholded_export "$run" caliterra "$MH"
 CTX=(--model "yolox-ctx-cg=$RUNS/$run/$run.onnx" --model "yolox-cg=$RUNS/yolox_cg/yolox_cg.onnx")
 "$PY" -m models.eval.real --out "$RUNS/${run}_real" "${CTX[@]}"
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/${run}_heldout" "${CTX[@]}"
@@ -215,14 +203,7 @@ run=yolox_cgb
     --crop 192 --workers 0 --validate-every 500 --real-ground sitl/world/ground/caliterra \
     --real-ground sitl/world/ground/garfield --real-ground sitl/world/ground/boruszyn --real-negatives 0.3 \
     --composites 0.4 --backbone-lr-scale 0.1 --out "$RUNS/$run"
-"$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/raw.onnx" \
-    --name "$run-raw" --version 0 --check-frames "$MH/train"
-"$PY" -m models.eval.threshold --model "$run=$RUNS/$run/raw.onnx" \
-    --reference slz-lite=models/density/slz_lite.onnx@0.01 --synthetic "$VAL_MH/train" \
-    --real-ground sitl/world/ground/caliterra --out "$RUNS/$run/threshold"
-chosen=$("$PY" -c "import json, sys; print(json.load(open(sys.argv[1]))['chosen_threshold'])" "$RUNS/$run/threshold.json")
-"$PY" -m models.density.export --checkpoint "$RUNS/$run/model.pt" --out "$RUNS/$run/$run.onnx" --name "$run" \
-    --version 0 --check-frames "$MH/train" --operating-threshold "$chosen" --calibrate "$MH/train"
+thresholded_export "$run" caliterra "$MH"
 "$PY" -m models.eval.real --model "$run=$RUNS/$run/$run.onnx" --out "$RUNS/${run}_real"
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/${run}_heldout" --model "$run=$RUNS/$run/$run.onnx"
 "$PY" -m models.eval.tradeoff --model "$run=$RUNS/$run/$run.onnx" --out "$RUNS/${run}_tradeoff"

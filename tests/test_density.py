@@ -280,6 +280,32 @@ def test_a_scale_outside_0_1_is_refused(blob_model: OnnxDensityModel, scale: flo
         predict_downscaled(blob_model, np.zeros((480, 640, 3), np.uint8), scale)
 
 
+def save_stride2_graph(path: Path, name: str, nodes: list[onnx.NodeProto], inits: list[onnx.TensorProto]) -> Path:
+    """Save a graph from a 64x48 ``frame`` to a 32x24 ``density`` (stride 2) with its contract."""
+    graph = helper.make_graph(
+        nodes,
+        name,
+        [helper.make_tensor_value_info("frame", TensorProto.FLOAT, [1, 3, 48, 64])],
+        [helper.make_tensor_value_info("density", TensorProto.FLOAT, [1, 1, 24, 32])],
+        initializer=inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    contract = {"input_width_px": 64, "input_height_px": 48, "output_stride": 2}
+    helper.set_model_props(model, {CONTRACT_METADATA_KEY: json.dumps(contract)})
+    onnx.save(model, str(path))
+    return path
+
+
+def assert_cropped_as_padded(model: OnnxDensityModel, frame: np.ndarray) -> None:
+    """Shrunk frames run cropped (``model``) give the maps of the whole padded frame, to the bit."""
+    padded = OnnxDensityModel(model.path, crop_shrunk_frames=False)
+    for scale in (0.3, 0.5, 0.75):
+        np.testing.assert_array_equal(
+            predict_downscaled(model, frame, scale).values, predict_downscaled(padded, frame, scale).values
+        )
+
+
 def conv_model(path: Path, spatial_addend: bool = False) -> Path:
     """A small fully convolutional graph: 3x3 stride 2, ReLU, 3x3 dilated 2, 1x1 (stride 2 overall); with
     ``spatial_addend`` an addend of the contract's spatial size after the first convolution (which only that size
@@ -300,19 +326,7 @@ def conv_model(path: Path, spatial_addend: bool = False) -> Path:
         helper.make_node("Conv", ["c2", "w3"], ["c3"]),
         helper.make_node("Abs", ["c3"], ["density"]),
     ]
-    graph = helper.make_graph(
-        nodes,
-        "conv",
-        [helper.make_tensor_value_info("frame", TensorProto.FLOAT, [1, 3, 48, 64])],
-        [helper.make_tensor_value_info("density", TensorProto.FLOAT, [1, 1, 24, 32])],
-        initializer=inits,
-    )
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
-    model.ir_version = 8
-    contract = {"input_width_px": 64, "input_height_px": 48, "output_stride": 2}
-    helper.set_model_props(model, {CONTRACT_METADATA_KEY: json.dumps(contract)})
-    onnx.save(model, str(path))
-    return path
+    return save_stride2_graph(path, "conv", nodes, inits)
 
 
 def test_the_context_a_cell_reads_is_followed_through_the_graph(tmp_path: Path) -> None:
@@ -322,13 +336,9 @@ def test_the_context_a_cell_reads_is_followed_through_the_graph(tmp_path: Path) 
     assert input_extent_px(onnx.load(str(path)).graph) == (2, 5)
     model = OnnxDensityModel(path)
     assert model.context_px == 16
-    padded = OnnxDensityModel(path, crop_shrunk_frames=False)
     frame = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
     assert model.predict_any_size(frame[:32, :48]).shape == (16, 24)  # any multiple of the stride, as it is
-    for scale in (0.3, 0.5, 0.75):
-        np.testing.assert_array_equal(
-            predict_downscaled(model, frame, scale).values, predict_downscaled(padded, frame, scale).values
-        )
+    assert_cropped_as_padded(model, frame)
 
 
 def focus_model(path: Path, upsample: str = "scales", coordinates: str = "asymmetric") -> Path:
@@ -366,19 +376,7 @@ def focus_model(path: Path, upsample: str = "scales", coordinates: str = "asymme
         helper.make_node("Conv", ["both", "w3"], ["c3"]),
         helper.make_node("Abs", ["c3"], ["density"]),
     ]  # fmt: skip
-    graph = helper.make_graph(
-        nodes,
-        "focus",
-        [helper.make_tensor_value_info("frame", TensorProto.FLOAT, [1, 3, 48, 64])],
-        [helper.make_tensor_value_info("density", TensorProto.FLOAT, [1, 1, 24, 32])],
-        initializer=inits,
-    )
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
-    model.ir_version = 8
-    contract = {"input_width_px": 64, "input_height_px": 48, "output_stride": 2}
-    helper.set_model_props(model, {CONTRACT_METADATA_KEY: json.dumps(contract)})
-    onnx.save(model, str(path))
-    return path
+    return save_stride2_graph(path, "focus", nodes, inits)
 
 
 def test_a_space_to_depth_stem_and_an_upsampled_stage_are_followed(tmp_path: Path) -> None:
@@ -389,12 +387,7 @@ def test_a_space_to_depth_stem_and_an_upsampled_stage_are_followed(tmp_path: Pat
     assert input_extent_px(onnx.load(str(path)).graph) == (2, 5)
     model = OnnxDensityModel(path)
     assert model.context_px == 16
-    padded = OnnxDensityModel(path, crop_shrunk_frames=False)
-    frame = np.random.default_rng(4).integers(0, 256, (48, 64, 3), dtype=np.uint8)
-    for scale in (0.3, 0.5, 0.75):
-        np.testing.assert_array_equal(
-            predict_downscaled(model, frame, scale).values, predict_downscaled(padded, frame, scale).values
-        )
+    assert_cropped_as_padded(model, np.random.default_rng(4).integers(0, 256, (48, 64, 3), dtype=np.uint8))
     # Another rounding of the upsampling may read one coarse cell further: a cell of 4 px more.
     rounded = focus_model(tmp_path / "half_pixel.onnx", coordinates="half_pixel")
     assert input_extent_px(onnx.load(str(rounded)).graph) == (2, 9)

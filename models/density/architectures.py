@@ -163,7 +163,6 @@ class YoloxLite(nn.Module):
 
         spec = YOLOX_NANO_CONTEXT if context else YOLOX_NANO
         self.backbone = PretrainedStages(spec, MEAN, STD)
-        self.strides = spec.strides
         self.reduce = _conv_bn_relu(sum(spec.channels), 48, 1)
         self.head = nn.Sequential(
             *(_SeparableBlock(c_in, c_out, dilation) for c_in, c_out, dilation in self.BLOCKS),
@@ -173,14 +172,15 @@ class YoloxLite(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, 3, H, W) -> (N, 1, H/4, W/4)."""
         stride4, *coarser = self.backbone(x)
+        strides = self.backbone.spec.strides
         up = []
-        for c, stride in zip(coarser, self.strides[1:], strict=True):
-            factor = stride // self.strides[0]
+        for c, stride in zip(coarser, strides[1:], strict=True):
+            factor = stride // strides[0]
             if tuple(stride4.shape[-2:]) == (factor * c.shape[-2], factor * c.shape[-1]):
                 # By a constant factor where the sides divide (always at export): the ONNX Resize then runs at any
                 # input size, so a shrunk frame runs cropped (companion.perception.density.input_extent_px).
                 up.append(nn.functional.interpolate(c, scale_factor=float(factor), mode="nearest"))
-            else:  # sides that do not divide (a whole validation frame): to stride4's size, the same map
+            else:  # sides that do not divide (a whole validation frame): to stride4's size, as before
                 up.append(nn.functional.interpolate(c, size=stride4.shape[-2:], mode="nearest"))
         return self.head(self.reduce(torch.cat([stride4, *up], dim=1)))
 
