@@ -199,6 +199,29 @@ def test_without_a_key_commands_are_taken_unsigned_and_a_land_now_with_param1_1_
     gcs.close()
 
 
+def test_a_denial_longer_than_one_statustext_arrives_whole_in_chunks_sharing_an_id(port: int) -> None:
+    gcs = Gcs(port)
+    reason = "land_now denied: a person seen inside the footprint at 12.4 m, 0.8 m from the target (zone 3)"
+
+    async def script(channel: CommandChannel) -> None:
+        gcs.command(31011)
+        gcs.command(31011)
+        await wait_until_async(lambda: channel.counts.taken == 2, 10, "both taken")
+        for command in channel.pending():
+            channel.answer(command, AckResult.DENIED, reason)
+        await wait_until_async(lambda: len(gcs.texts()) == 4, 10, "two denials of two chunks each")
+
+    run_channel(port, None, script)
+    chunks = [m for m in gcs.poll() if m.get_type() == "STATUSTEXT"]
+    gcs.close()
+    assert len(reason) > 50
+    assert [(m.chunk_seq, m.severity) for m in chunks] == [(0, 4), (1, 4)] * 2
+    assert chunks[0].id == chunks[1].id != 0
+    assert chunks[2].id == chunks[3].id != chunks[0].id
+    assert chunks[0].text + chunks[1].text == reason  # the last chunk is shorter than 50: the text ends there
+    assert len(chunks[0].text) == 50
+
+
 def test_a_channel_on_a_port_in_use_names_its_url() -> None:
     from companion.ground.command_channel import CommandChannelError
 

@@ -14,8 +14,9 @@ command                     number   what the companion does (:mod:`companion.gu
 ==========================  =======  ===================================================================
 
 Each is answered with ``COMMAND_ACK``: ``IN_PROGRESS`` when taken (it is decided at the vehicle's next tick), then
-``ACCEPTED`` or ``DENIED``, a denial with its reason as ``STATUSTEXT``. With a signing key every command must carry a
-valid MAVLink 2 signature whose timestamp is newer than the last one of its stream (system, component, link id);
+``ACCEPTED`` or ``DENIED``, a denial with its reason as ``STATUSTEXT`` (MAVLink 2 chunks sharing an ``id`` when it is
+longer than 50 characters, as QGroundControl and MAVSDK put them together). With a signing key every command must
+carry a valid MAVLink 2 signature whose timestamp is newer than the last one of its stream (system, component, link id);
 unsigned, badly signed or replayed commands are refused (``DENIED`` and the reason, signed) and counted. A datagram
 that is not a frame the channel reads is dropped and counted, never a crash.
 """
@@ -49,6 +50,7 @@ from companion.ground.operator_commands import (
     MAV_COMP_ID_ONBOARD_COMPUTER,
     OperatorCommand,
 )
+from companion.vehicle.statustext import statustext_chunks
 
 logger = logging.getLogger(__name__)
 
@@ -58,7 +60,6 @@ MAV_AUTOPILOT_INVALID = 8
 MAV_STATE_ACTIVE = 4
 HEARTBEAT_PERIOD_S = 1.0
 MAX_PEERS = 8
-STATUSTEXT_BYTES = 50
 
 
 class AckResult(enum.IntEnum):
@@ -149,6 +150,7 @@ class CommandChannel:
         self._taken: list[GroundCommand] = []
         self._transport: asyncio.DatagramTransport | None = None
         self._seq = 0
+        self._text_id = 0
         self._last_stamp: dict[tuple[int, int, int], int] = {}  # per signed stream: its newest timestamp
         self._own_stamp = 0
         self.peers: list[tuple[str, int]] = []
@@ -256,9 +258,10 @@ class CommandChannel:
         ack.update(target_system=sender[0], target_component=sender[1])
         self._send(address, pack(COMMAND_ACK, ack, **self._header()))
         if text:
-            words = text.encode("ascii", "replace")[:STATUSTEXT_BYTES]
-            status: dict[str, int | float | bytes] = {"severity": MAV_SEVERITY_WARNING, "text": words}
-            self._send(address, pack(STATUSTEXT, status, **self._header()))
+            self._text_id = self._text_id % 0xFFFF + 1
+            for chunk in statustext_chunks(text, MAV_SEVERITY_WARNING, self._text_id):
+                status: dict[str, int | float | bytes] = {**chunk, "text": chunk["text"].encode("ascii")}
+                self._send(address, pack(STATUSTEXT, status, **self._header()))
 
     async def _beat(self) -> None:
         """A ``HEARTBEAT`` once a second to every peer heard from, as every MAVLink component sends (a ground station
