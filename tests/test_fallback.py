@@ -116,6 +116,37 @@ def test_with_the_energy_budget_only_sites_no_farther_than_home_are_in_reach() -
     assert in_reach.target.north_m == 10.0
 
 
+def test_the_energy_budget_ending_at_a_site_chosen_before_gives_it_up_when_it_lies_farther_than_home() -> None:
+    g, _ = searching(energy={"enabled": True, "capacity_mah": 5000})
+    chosen = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(5.0, 0.0, 0.0, -20.0, 0.0), False, False)
+    assert isinstance(chosen, Decision)
+    assert g.fallback.current is not None
+    assert g.fallback.current.name == "lawn"
+    # Home is 8 m away, the lawn 10 m and the yard 15 m: neither may be flown to any more.
+    d = g.time_used_up(VehicleState(6.0, 0.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=8.0)
+    assert d is not None
+    assert (d.phase, d.kind, d.event) == (LandingPhase.FAILSAFE, CommandKind.RETURN, DecisionEvent.ENERGY_LOW)
+    assert d.reason == "energy budget used up: site lawn out of reach; no fallback site left in reach: return"
+
+
+def test_the_energy_budget_ending_at_a_site_in_reach_flies_on_and_ends_in_its_own_action() -> None:
+    g, _ = searching(energy={"enabled": True, "capacity_mah": 5000})
+    assert g.time_used_up(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0)) is not None  # the time limit: the lawn
+    at = VehicleState(61.0, 5.0, 0.0, -20.0, 0.0)  # 5 m from the lawn, home 6 m away
+    d = g.time_used_up(at, "energy budget used up", reach_m=6.0)
+    assert d is not None
+    assert (d.phase, d.kind, d.event) == (LandingPhase.APPROACH, CommandKind.NONE, DecisionEvent.ENERGY_LOW)
+    assert d.reason == "energy budget used up: site lawn in reach, flown on"
+    assert d.target is not None
+    assert d.target.north_m == 10.0
+    assert g.time_used_up(VehicleState(61.1, 5.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=6.0) is None
+    # The lawn is refused: the yard (22 m away) is out of reach, and the energy budget's action ends it.
+    made, _, _ = frames(g, at, 61.0, _map(person_at=(10.2, 0.3)), {LandingPhase.FAILSAFE})
+    last = made[-1]
+    assert (last.kind, last.event) == (CommandKind.RETURN, DecisionEvent.ENERGY_LOW)
+    assert last.reason.endswith("site lawn refused; no fallback site left in reach: return")
+
+
 def test_without_sites_the_end_of_the_budget_is_the_decision_it_always_was() -> None:
     g = _guidance(mission_time_limit_s=60.0)
     g.start(VehicleState(0.0, 0.0, 0.0, -20.0, 0.0))

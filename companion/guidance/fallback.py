@@ -6,7 +6,9 @@ can still reach (with the energy budget on: no farther than home, whose return t
 checks it with its own map as it checks a zone: the descent over the site's centre is refused for a person in the
 footprint, a walker at the gate or no free map, exactly as over a zone. A refused site, or one not landed on within
 ``site_time_s``, is given up for the next site in reach; with none left, the last resort the budget's end named
-(``guidance.last_resort``, or the energy budget's action). Every choice is a decision with its reason.
+(``guidance.last_resort``, or the energy budget's action). When the energy budget ends during the stay of a site chosen
+before it (by the time limit or the ground station), the site is flown on to only if in reach, and the energy budget
+names the last resort from then on. Every choice is a decision with its reason.
 
 No I/O; times are the vehicle's clock.
 """
@@ -87,6 +89,19 @@ class FallbackPlan:
         self._tried.add(site.index)
         self.current, self._since_s = site, state.t_s
         return site
+
+    def end_stay_by(self, energy_low: str, action: FailsafeAction, reach_m: float | None) -> bool:
+        """The energy budget used up (``energy_low``: why, in words; ``action``: its last resort; ``reach_m``: home's
+        distance) during the stay of a site chosen before it, by the time limit or the ground station: from now on it
+        has ended the search, for this site and the next. False when it already had (or no site is flown to)."""
+        if self.current is None or self.ended_by is None or self.ended_by.event is DecisionEvent.ENERGY_LOW:
+            return False
+        self.ended_by, self.reach_m = BudgetEnd(energy_low, DecisionEvent.ENERGY_LOW, action), reach_m
+        return True
+
+    def in_reach(self, state: VehicleState) -> bool:
+        """The current site lies within :attr:`reach_m` of ``state``."""
+        return self.reach_m is None or self.distance_m(state) <= self.reach_m
 
     def overdue(self, t_s: float) -> bool:
         """The current site's time is used up."""

@@ -221,18 +221,8 @@ class LandingGuidance:
             # return), and the pilot decides.
             used = f"{reason}; {self.reselections - 1} re-selections used up"
             return self.failsafe(state, used, DecisionEvent.RESELECTIONS_USED_UP, self.config.last_resort, cause)
-        climb_to = self.climb.after_abort(state)
-        return self.steer(
-            state,
-            LandingPhase.SEARCH,
-            None,
-            f"{reason}: climb back and re-select",
-            state.north_m,
-            state.east_m,
-            climb_to,
-            event,
-            cause,
-        )
+        climb_to, said = self.climb.after_abort(state), f"{reason}: climb back and re-select"
+        return self.steer(state, LandingPhase.SEARCH, None, said, state.north_m, state.east_m, climb_to, event, cause)
 
     def failsafe(
         self,
@@ -258,16 +248,8 @@ class LandingGuidance:
         self._heading_deg = state.yaw_deg
         altitude = max(state.altitude_m, self.config.search_altitude_m)
         self.climb.start(altitude)
-        return self.steer(
-            state,
-            LandingPhase.SEARCH,
-            None,
-            "mission start",
-            state.north_m,
-            state.east_m,
-            altitude,
-            DecisionEvent.MISSION_START,
-        )
+        n, e, event = state.north_m, state.east_m, DecisionEvent.MISSION_START
+        return self.steer(state, LandingPhase.SEARCH, None, "mission start", n, e, altitude, event)
 
     def on_frame(self, result: FrameResult, state: VehicleState) -> Decision:
         """Decide after one processed frame (``state`` at the frame's decision time)."""
@@ -388,11 +370,18 @@ class LandingGuidance:
     ) -> Decision | None:
         """The search's budget: once ``mission_time_limit_s`` has passed since :meth:`start` without a landing, or the
         energy budget says ``energy_low`` (why, in words: :mod:`companion.guidance.energy`), the nearest fallback site
-        within ``reach_m`` (None: any), else the last resort (or the energy budget's action); at a site, its time."""
+        within ``reach_m`` (None: any), else the last resort (or the energy budget's action); at a site, its time, and
+        the energy budget when it ends during the stay of a site chosen before (by the time limit or the ground
+        station): the site is flown on to if in ``reach_m``, else given up for one that is."""
         if self._started_s is None or self.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
             return None
         site = self.fallback.current
         if site is not None:
+            if energy_low is not None and self.fallback.end_stay_by(energy_low, self.config.energy.action, reach_m):
+                if self.fallback.in_reach(state):
+                    said, event = f"{energy_low}: site {site.name} in reach, flown on", DecisionEvent.ENERGY_LOW
+                    return Decision(state.t_s, self.phase, CommandKind.NONE, None, site.target, said, event)
+                return self.next_site(state, f"{energy_low}: site {site.name} out of reach", None)
             if not self.fallback.overdue(state.t_s):
                 return None
             late = f"not landed at site {site.name} within {self.fallback.config.site_time_s:g} s"
