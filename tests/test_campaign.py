@@ -91,6 +91,9 @@ def test_the_report_is_written_and_every_metric_is_in_its_range(one_worker: Path
         assert r["touched_obstacle"] <= r["landed"]
         assert (r["obstacle_distance_m"] is None) == (not r["landed"])
         assert r["obstacle_distance_m"] is None or r["obstacle_distance_m"] >= 0.0
+        assert r["sites_flown_to"] == 0  # no fallback sites in this campaign
+        endings = ("zone", "failsafe_land") if r["landed"] else ("hold", "return", "failsafe_land", "other")
+        assert r["ending"] in endings
     # Paired scenes: both strategies of a condition flew the same seed.
     seeds = {(r["condition"], r["strategy"]): r["seed"] for r in results}
     assert seeds["static", "oldest"] == seeds["static", "biggest"] != seeds["moving_20", "oldest"]

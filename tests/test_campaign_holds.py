@@ -81,6 +81,19 @@ def test_each_hold_is_explained_by_its_events_whatever_the_words() -> None:
         assert hold_cause([typed(1.0, "failsafe", DecisionEvent.RESELECTIONS_USED_UP, cause)]) == kind
     assert hold_cause([typed(1.0, "failsafe", DecisionEvent.PERCEPTION_FAILSAFE)]) == "perception silent"
     assert hold_cause([typed(1.0, "failsafe", DecisionEvent.LIMIT)]) == "other"
+    # After fallback sites (metrics version 7): the last resort's cause says how the last site ended.
+    to_site = [*searching, typed(300.0, "approach", DecisionEvent.FALLBACK_SITE)]
+    refused = typed(340.0, "failsafe", DecisionEvent.TIME_LIMIT, RefusalCause.PERSON_IN_FOOTPRINT)
+    assert hold_cause([*to_site, refused]) == "fallback sites refused"
+    late = typed(390.0, "failsafe", DecisionEvent.TIME_LIMIT, RefusalCause.SITE_TIMED_OUT)
+    assert hold_cause([*to_site, late]) == "fallback site timed out"
+    asked = [*searching[:10], typed(10.0, "approach", DecisionEvent.FALLBACK_SITE, RefusalCause.OPERATOR)]
+    assert hold_cause([*asked, typed(40.0, "failsafe", DecisionEvent.FALLBACK_SITE, RefusalCause.OPERATOR)]) == (
+        "fallback sites refused"  # given up from the ground station, none left
+    )
+    out_of_reach = typed(320.0, "failsafe", DecisionEvent.ENERGY_LOW)  # the energy budget gave the site up
+    assert hold_cause([*to_site, out_of_reach]) == "energy budget"
+    assert hold_cause([*searching, refused]) == "nothing free"  # no site flown to: the time limit's kinds
 
 
 def test_choices_are_counted_from_the_reasons_not_from_the_trackers_ids() -> None:
@@ -124,6 +137,7 @@ def _results(spec: CampaignSpec, over_a_person: set[str], held: dict[str, str | 
                 time_to_land_s=40.0, path_length_m=30.0, reselections=0, aborts=0, failsafes=0,
                 touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0, obstacle_kind="bench",
                 touched_obstacle=False, people_cells=[], hold_cause=held.get(plan.mission_id), zones_chosen=1,
+                ending="hold" if hold else "zone", sites_flown_to=0,
             ).to_json()
         )  # fmt: skip
     return rows
@@ -140,7 +154,8 @@ def test_the_report_counts_holds_by_cause_and_compares_with_an_earlier_flight(tm
     now = _results(spec, set(), {oldest[0]: "nothing free", oldest[1]: "person in the footprint"})
     earlier = next(r for r in now if r["mission_id"] == oldest[2])
     earlier.update(landed=False, success=False, reason=TIME_LIMIT)
-    del earlier["hold_cause"]  # a result of metrics version 4
+    for key in ("hold_cause", "ending", "sites_flown_to"):  # a result of metrics version 4
+        del earlier[key]
     earlier["metrics_version"] = 4
     assert hold_kind(_flown([earlier])[0]) == "(before version 5) no landing within 300 s of the start"
 
@@ -163,4 +178,15 @@ def test_the_report_counts_holds_by_cause_and_compares_with_an_earlier_flight(tm
     held_row = "| static/oldest | 8 | 3 | (before version 5) no landing within 300 s of the start: 1, nothing free: 1"
     assert held_row in text
     assert "## Against the old table (same scenes and start poses, mission by mission)" in text
+    # How the missions ended (metrics version 7), beside the one result that predates it.
+    assert summary["cells"]["static/oldest"]["endings"] == {"before version 7": 1, "hold": 2, "zone": 5}
+    assert "## How the missions ended" in text
+    assert "| condition / strategy | missions | a zone the map chose | hold | before version 7 |" in text
+    assert "| static/oldest | 8 | 5 | 2 | 1 |" in text
+    assert "| static/nearest | 8 | 8 | 0 | 0 |" in text
+    v6 = [{k: v for k, v in r.items() if k not in ("ending", "sites_flown_to")} for r in now]
+    v6 = [r | {"metrics_version": min(r["metrics_version"], 6)} for r in v6]
+    old = build_report(spec, v6, tmp_path / "old")
+    assert set(old["cells"]["static/oldest"]["endings"]) == {"before version 7"}
+    assert "## How the missions ended" not in (tmp_path / "old" / "report.md").read_text()
     assert "| static/oldest | 8 | 2 | 5 | 0 | 3 | 0.25 |" in text

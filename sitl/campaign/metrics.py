@@ -28,12 +28,13 @@ import numpy as np
 from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
 from companion.guidance.vocabulary import DecisionEvent, RefusalCause
+from sitl.campaign.landing_kinds import landing_outcome
 from sitl.campaign.metric_fields import Summary, result_field
 from sitl.config import SitlConfig
 from sitl.vehicle.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
-METRICS_VERSION = 6
+METRICS_VERSION = 7
 """Incremented when a definition changes what stored results hold; :func:`stale` says which of them it changes.
 
 1. The first campaigns.
@@ -56,6 +57,10 @@ METRICS_VERSION = 6
    part of the final descent, so a success stays a success: only results that landed and are not a success are stale
    (flown again on resume), but not the random policy's (the blind baseline never waits at the gate); an earlier
    success has ``overflown_above_gate`` False.
+7. Adds how a mission ended (``ending``: a zone the map chose, a fallback site, or the last resort;
+   :mod:`sitl.campaign.landing_kinds`) and how many fallback sites it flew to (``sites_flown_to``), and the hold
+   causes of missions whose fallback sites were all refused or timed out (they had read as the time limit's kinds).
+   Nothing else changes; earlier results are not stale (they lack the two fields, and keep their hold causes).
 """
 
 
@@ -125,6 +130,11 @@ class MissionMetrics:
     """How many times the companion chose a landing zone: its first commitment, each commitment after a release, and
     each switch to a rival (``reselections`` counts changes of the target's track id, which a zone that the tracker
     lost and found again also makes)."""
+    ending: str | None = result_field(since=7)
+    """How the mission ended (:class:`~sitl.campaign.landing_kinds.LandingKind`'s value: ``zone``, ``fallback_site``,
+    ``hold``, ``return``, ``failsafe_land``, ``other``); None in a result before version 7."""
+    sites_flown_to: int = result_field(since=7)
+    """How many fallback sites the mission flew to (the one landed at included); 0 before version 7."""
     overflown_above_gate: bool = result_field(since=6, default=False)
     """A landing (False without a touchdown) where a person's body came within the vehicle's footprint under it
     during the final descent but before the walker gate let it go: the vehicle hovering at the gate, 3 m above the
@@ -187,11 +197,18 @@ HOLD_CAUSES = {
     "perception silent": "no processed frame for the failsafe's time",
     "pilot took over": "the flight mode left offboard without the companion",
     "energy budget": "the battery no longer covered the way home and down with its reserve (guidance.energy)",
+    "fallback sites refused": "the search's budget ended and every fallback site flown to was refused by the map (or "
+    "given up from the ground station), none left in reach",
+    "fallback site timed out": "the search's budget ended and the last fallback site flown to was not landed on "
+    "within its time (guidance.fallback.site_time_s), none left in reach",
     "other": "anything else (the log's reason is in the result)",
 }
 """The kinds of :func:`hold_cause`, each with what it means."""
 
 NOTHING_FREE_WINDOW_S = 30.0
+SITE_ENDS = (DecisionEvent.TIME_LIMIT, DecisionEvent.ENERGY_LOW, DecisionEvent.FALLBACK_SITE)
+"""The events of a last resort after fallback sites: the search's end (time limit, energy budget, ground station).
+A last resort with a cause ended a site (refused, timed out); without one, the energy budget gave the site up."""
 
 
 USED_UP_CAUSES = {
@@ -213,6 +230,9 @@ def hold_cause(decisions: list[DecisionRecord]) -> str:
     """
     final = decisions[-1] if decisions else None
     event = None if final is None else final.event
+    after_sites = any(d.event is DecisionEvent.FALLBACK_SITE for d in decisions[:-1])
+    if final is not None and final.phase == "failsafe" and event in SITE_ENDS and after_sites and final.cause:
+        return "fallback site timed out" if final.cause is RefusalCause.SITE_TIMED_OUT else "fallback sites refused"
     if event is DecisionEvent.RESELECTIONS_USED_UP:
         assert final is not None
         return USED_UP_CAUSES.get(final.cause, "other") if final.cause is not None else "other"
@@ -255,6 +275,7 @@ def mission_metrics(
     sitl = load_yaml_config(SitlConfig, run_dir / "sitl.yaml", section="sitl")
     end = flight.outcome
     decisions = flight.decisions()
+    ending = landing_outcome(decisions)
     started = next((d.t_s for d in decisions if d.source == "start"), math.nan)
     down = touchdown(truth)
     # Without a touchdown the mission ends where the companion's log does (a hold, a yield, its time limit): an instant
@@ -337,6 +358,8 @@ def mission_metrics(
         people_cells=_people_cells(header, down if down is not None else (truth[-1] if truth else None)),
         hold_cause=None if down is not None else hold_cause(decisions),
         zones_chosen=zones_chosen(decisions),
+        ending=ending.kind.value,
+        sites_flown_to=ending.sites_flown_to,
         overflown_above_gate=down is not None and bool(under[~landing].any()),
     )
 

@@ -76,9 +76,23 @@ def cell_summary(rows: list[FlownMission], errors: int, seed: int) -> dict[str, 
     for k, key in enumerate(MEANS):
         out[key] = asdict(bootstrap_mean(_values(rows, key), seed + k))
     out["holds"] = dict(sorted(collections.Counter(hold_kind(r) for r in rows if not r.landed).items()))
+    out["endings"] = dict(sorted(collections.Counter(r.ending or BEFORE_ENDINGS for r in rows).items()))
     out["landed_unsafe"] = sum(1 for r in rows if r.landed and not r.success)
     out["overflown_above_gate"] = sum(1 for r in rows if r.overflown_above_gate)
     return out
+
+
+BEFORE_ENDINGS = "before version 7"
+"""A result's ending when it was computed before metrics version 7 recorded endings."""
+ENDING_WORDS = {
+    "zone": "a zone the map chose",
+    "fallback_site": "a fallback site",
+    "hold": "hold",
+    "return": "return",
+    "failsafe_land": "landing in place (failsafe)",
+    "other": "other",
+}
+"""The report's words for each ending (:class:`sitl.campaign.landing_kinds.LandingKind`)."""
 
 
 def hold_kind(result: FlownMission) -> str:
@@ -358,6 +372,7 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
             f"| {_fmt(cell['nearest_person_mean_m']['value'])} | {p(paper[5])} | {_fmt(cell['zone_iou']['value'], 3)} |"
         )
     lines += _holds_markdown(summary["cells"])
+    lines += _endings_markdown(summary["cells"])
     lines += _paper_test_markdown(summary["paper"])
     lines += _previous_markdown(summary["previous"])
     lines += [
@@ -408,6 +423,26 @@ def _holds_markdown(cells: dict[str, Any]) -> list[str]:
         "above the gate*: a landing where a body passed under the vehicle earlier in its final descent, while it "
         "hovered at the walker gate (3 m above the heads) or higher, before the gate let it go (metrics version 6; "
         "earlier versions counted these as not a success).",
+    ]
+    return lines
+
+
+def _endings_markdown(cells: dict[str, Any]) -> list[str]:
+    """How the missions of each cell ended (metrics version 7): nothing when no result records it."""
+    endings = [cell.get("endings", {}) for cell in cells.values()]
+    if not any(set(e) - {BEFORE_ENDINGS} for e in endings):
+        return []
+    kinds = [k for k in (*ENDING_WORDS, BEFORE_ENDINGS) if any(k in e for e in endings)]
+    lines = ["", "## How the missions ended", ""]
+    lines.append("| condition / strategy | missions | " + " | ".join(ENDING_WORDS.get(k, k) for k in kinds) + " |")
+    lines.append("| --- | --- |" + " --- |" * len(kinds))
+    for (name, cell), counts in zip(cells.items(), endings, strict=True):
+        lines.append(f"| {name} | {cell['missions']} | " + " | ".join(str(counts.get(k, 0)) for k in kinds) + " |")
+    lines += [
+        "",
+        "A landing on *a fallback site* followed a `fallback_site` decision (the search's budget ended, or the ground "
+        "station asked for the site); *hold*, *return* and *landing in place* are last resorts (metrics version 7, "
+        "from each flight log's decision events).",
     ]
     return lines
 
