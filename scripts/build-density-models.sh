@@ -207,3 +207,35 @@ thresholded_export "$run" caliterra "$MH"
 "$PY" -m models.eval.real --model "$run=$RUNS/$run/$run.onnx" --out "$RUNS/${run}_real"
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/${run}_heldout" --model "$run=$RUNS/$run/$run.onnx"
 "$PY" -m models.eval.tradeoff --model "$run=$RUNS/$run/$run.onnx" --out "$RUNS/${run}_tradeoff"
+
+# 9. Issue 52, how much of YOLOX-nano to fine-tune (model card, "Fine-tuning"): round cg's yolox-lite with its
+#    pretrained layers frozen and at the head's whole rate, beside the tenth the rounds use; then the frozen recipe in
+#    the other two rounds (each site held out once).
+for scale in 0 1; do
+    run=yolox_cg_lr$scale
+    "$PY" -m models.density.train --arch yolox-lite --loss mse --no-distractors --data "$MH" --steps 2000 --batch 8 \
+        --crop 192 --workers 0 --validate-every 500 --real-ground sitl/world/ground/caliterra \
+        --real-ground sitl/world/ground/garfield --real-negatives 0.3 --composites 0.4 --backbone-lr-scale "$scale" \
+        --out "$RUNS/$run"
+    thresholded_export "$run" caliterra "$MH"
+done
+FT=(--model "yolox-cg-frozen=$RUNS/yolox_cg_lr0/yolox_cg_lr0.onnx" --model "yolox-cg=$RUNS/yolox_cg/yolox_cg.onnx"
+    --model "yolox-cg-full=$RUNS/yolox_cg_lr1/yolox_cg_lr1.onnx")
+"$PY" -m models.eval.real --out "$RUNS/finetune_real" "${FT[@]}"
+"$PY" -m models.eval.tradeoff --out "$RUNS/finetune_tradeoff" "${FT[@]}"
+"$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/finetune_heldout" "${FT[@]}"
+frozen_round() {  # frozen_round TAG SITE1 SITE2
+    local run=yolox_$1_lr0
+    "$PY" -m models.density.train --arch yolox-lite --loss mse --no-distractors --data "$MH" --steps 2000 --batch 8 \
+        --crop 192 --workers 0 --validate-every 500 --real-ground "sitl/world/ground/$2" \
+        --real-ground "sitl/world/ground/$3" --real-negatives 0.3 --composites 0.4 --backbone-lr-scale 0 \
+        --out "$RUNS/$run"
+    thresholded_export "$run" "$2" "$MH"
+}
+frozen_round cb caliterra boruszyn  # Garfield held out
+frozen_round gb garfield boruszyn   # Caliterra held out
+FROZEN=()
+for tag in cg cb gb; do FROZEN+=(--model "yolox-$tag-frozen=$RUNS/yolox_${tag}_lr0/yolox_${tag}_lr0.onnx"); done
+"$PY" -m models.eval.real --out "$RUNS/frozen_real" "${FROZEN[@]}"
+"$PY" -m models.eval.tradeoff --out "$RUNS/frozen_tradeoff" "${FROZEN[@]}"
+"$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/frozen_heldout" "${FROZEN[@]}"
