@@ -209,8 +209,8 @@ thresholded_export "$run" caliterra "$MH"
 "$PY" -m models.eval.tradeoff --model "$run=$RUNS/$run/$run.onnx" --out "$RUNS/${run}_tradeoff"
 
 # 9. Issue 52, how much of YOLOX-nano to fine-tune (model card, "Fine-tuning"): round cg's yolox-lite with its
-#    pretrained layers frozen and at the head's whole rate, beside the tenth the rounds use; then the frozen recipe in
-#    the other two rounds (each site held out once).
+#    pretrained layers frozen, with only its first stages frozen, and at the head's whole rate, beside the tenth the
+#    rounds use; then the frozen recipe in the other two rounds (each site held out once).
 for scale in 0 1; do
     run=yolox_cg_lr$scale
     "$PY" -m models.density.train --arch yolox-lite --loss mse --no-distractors --data "$MH" --steps 2000 --batch 8 \
@@ -219,8 +219,14 @@ for scale in 0 1; do
         --out "$RUNS/$run"
     thresholded_export "$run" caliterra "$MH"
 done
+run=yolox_cg_fs1  # only the stem and the stride-4 stage frozen, the stride-8 stage at a tenth
+"$PY" -m models.density.train --arch yolox-lite --loss mse --no-distractors --data "$MH" --steps 2000 --batch 8 \
+    --crop 192 --workers 0 --validate-every 500 --real-ground sitl/world/ground/caliterra \
+    --real-ground sitl/world/ground/garfield --real-negatives 0.3 --composites 0.4 --backbone-lr-scale 0.1 \
+    --frozen-stages 1 --out "$RUNS/$run"
+thresholded_export "$run" caliterra "$MH"
 FT=(--model "yolox-cg-frozen=$RUNS/yolox_cg_lr0/yolox_cg_lr0.onnx" --model "yolox-cg=$RUNS/yolox_cg/yolox_cg.onnx"
-    --model "yolox-cg-full=$RUNS/yolox_cg_lr1/yolox_cg_lr1.onnx")
+    --model "yolox-cg-full=$RUNS/yolox_cg_lr1/yolox_cg_lr1.onnx" --model "yolox-cg-fs1=$RUNS/$run/$run.onnx")
 "$PY" -m models.eval.real --out "$RUNS/finetune_real" "${FT[@]}"
 "$PY" -m models.eval.tradeoff --out "$RUNS/finetune_tradeoff" "${FT[@]}"
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/finetune_heldout" "${FT[@]}"

@@ -303,3 +303,33 @@ def test_a_pretrained_network_trains_on_two_sites_exports_and_names_them(tiny_se
     from models.eval.real import training_sites
 
     assert training_sites(onnx_path) == {"caliterra", "garfield"}
+
+
+@needs_pretrained
+def test_frozen_stages_keep_the_first_pretrained_stages_and_train_the_rest(tiny_set: Path, tmp_path: Path) -> None:
+    log = train(
+        Architecture.YOLOX_LITE,
+        LossKind.MSE,
+        tiny_set,
+        tmp_path / "run",
+        steps=4,
+        batch=2,
+        crop_px=96,
+        workers=0,
+        val_frames=1,
+        validate_every=4,
+        device_name="cpu",
+        backbone_lr_scale=1.0,
+        frozen_stages=1,
+    )
+    assert (log["frozen_stages"], log["backbone_lr_scale"]) == (1, 1.0)
+    from models.density.architectures import YoloxLite
+
+    model, _ = load_checkpoint(tmp_path / "run" / "last.pt")
+    start = YoloxLite()
+    stage_of = start.backbone.stages.stage_of
+    assert set(stage_of.values()) == {0, 1}  # the stem and stride 4; stride 8
+    before, after = start.state_dict(), model.state_dict()
+    for name, stage in stage_of.items():
+        key = f"backbone.stages.weights.{name}"
+        assert torch.equal(before[key], after[key]) == (stage == 0), (name, stage)

@@ -117,27 +117,36 @@ class OnnxStages(nn.Module):
                 visit(source)
             needed.append(node)
 
+        first_needed: list[int] = []  # per output: where its nodes (those no earlier output needs) begin
         for name in outputs:
             if name not in producer:
                 raise OnnxGraphError(f"{path}: no tensor named {name!r}")
+            first_needed.append(len(needed))
             visit(name)
         self.inputs = [i.name for i in graph.input]
         self.outputs = outputs
         self.nodes: list[tuple[str, list[str], str, dict[str, object]]] = []
         self.weights = nn.ParameterDict()
         self.constants: dict[str, np.ndarray] = {}
-        for node in needed:
+        self.stage_of: dict[str, int] = {}
+        """Each weight's stage: the index of the first output whose nodes include its convolution."""
+        for k, node in enumerate(needed):
             if node.op_type not in self.SUPPORTED:
                 raise OnnxGraphError(f"{path}: node {node.name} is a {node.op_type}, which is not supported")
             attributes = _attributes(node)
             if node.op_type == "Conv":
                 for role, name in zip(("weight", "bias"), node.input[1:], strict=False):
                     self.weights[f"{node.name}_{role}"] = nn.Parameter(torch.from_numpy(constants[name].copy()))
+                    self.stage_of[f"{node.name}_{role}"] = sum(1 for start in first_needed if start <= k) - 1
             else:
                 for name in node.input:
                     if name in constants:
                         self.constants[name] = constants[name]
             self.nodes.append((node.op_type, list(node.input), node.output[0], attributes | {"name": node.name}))
+
+    def stage_parameters(self, stages: int) -> list[nn.Parameter]:
+        """The weights of the first ``stages`` stages (those that compute the first ``stages`` outputs)."""
+        return [w for key, w in self.weights.items() if self.stage_of[key] < stages]
 
     def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
         """The graph's input (N, C, H, W) -> the ``outputs`` tensors."""

@@ -36,6 +36,7 @@ from models.density.calibration import fit_floor_and_scale
 from models.density.dataset import WORKING_GSD_M_PER_PX, CrowdCrops, LabelledFrame, collate, load_frames
 from models.density.losses import OCCUPANCY_THRESHOLD, LossKind, density_loss
 from models.density.preprocess import OUTPUT_STRIDE, to_input
+from models.density.pretrained import PretrainedStages
 
 logger = logging.getLogger(__name__)
 
@@ -140,6 +141,7 @@ def train(
     real_gsd_m_per_px: tuple[float, float] = WORKING_GSD_M_PER_PX,
     real_detail_fraction: float = 0.0,
     backbone_lr_scale: float = 1.0,
+    frozen_stages: int = 0,
 ) -> dict[str, Any]:
     """Train and save; returns the training log (also written to ``out_dir/training.json``).
 
@@ -149,7 +151,8 @@ def train(
     composites' backgrounds; their held-out frames are never read here, and a site not named is never read at all
     (``models/eval/real.py`` scores a model on all frames of the sites it did not train on: the metadata names them).
     ``backbone_lr_scale``: the learning rate of a pretrained backbone (``yolox-lite``) relative to the rest; 0
-    freezes it.
+    freezes it. ``frozen_stages``: its first stages (those that compute its first outputs: YOLOX-nano's stem and
+    stride-4 stage for 1) frozen, the rest at ``backbone_lr_scale``.
     """
     start = time.monotonic()
     torch.manual_seed(seed)
@@ -189,10 +192,13 @@ def train(
     model = build(arch).to(device)
     backbone = getattr(model, "backbone", None)
     pretrained = list(backbone.parameters()) if isinstance(backbone, torch.nn.Module) else []
-    if backbone_lr_scale == 0.0:
-        for parameter in pretrained:
-            parameter.requires_grad_(False)
+    frozen = pretrained if backbone_lr_scale == 0.0 else []
+    if frozen_stages and isinstance(backbone, PretrainedStages):
+        frozen = frozen or backbone.stages.stage_parameters(frozen_stages)
+    for parameter in frozen:
+        parameter.requires_grad_(False)
     held = {id(p) for p in pretrained}
+    pretrained = [p for p in pretrained if p.requires_grad]
     rates = [lr]
     groups = [{"params": [p for p in model.parameters() if id(p) not in held], "lr": lr}]
     if pretrained and backbone_lr_scale > 0.0:
@@ -215,7 +221,8 @@ def train(
         "scale_range": list(scale_range),
         "real_ground": str(real_ground_dirs[0]) if len(real_ground_dirs) == 1 else None,
         "real_ground_sites": [d.name for d in real_ground_dirs],
-        "backbone_lr_scale": backbone_lr_scale if pretrained else None,
+        "backbone_lr_scale": backbone_lr_scale if held else None,
+        "frozen_stages": frozen_stages if held else None,
         "real_ground_frames": [g.name for g in ground],
         "real_ground_validation_frames": [g.name for g in real_val],
         "real_negative_fraction": real_negative_fraction,
@@ -323,6 +330,9 @@ def main() -> int:
     parser.add_argument(
         "--backbone-lr-scale", type=float, default=1.0, help="pretrained layers' relative learning rate (0: frozen)"
     )
+    parser.add_argument(
+        "--frozen-stages", type=int, default=0, help="pretrained stages frozen from the input (1: stem and stride 4)"
+    )
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
@@ -349,6 +359,7 @@ def main() -> int:
         real_gsd_m_per_px=tuple(args.real_gsd),
         real_detail_fraction=args.real_detail,
         backbone_lr_scale=args.backbone_lr_scale,
+        frozen_stages=args.frozen_stages,
     )
     sys.stdout.write(
         f"{args.arch}: {log['parameters']} parameters, {args.steps} steps in {log['wall_s']:.0f} s on {log['device']}, "
