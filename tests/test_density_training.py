@@ -150,20 +150,14 @@ def test_composites_finer_than_the_real_ground_are_made_at_its_gsd_and_enlarged_
         CrowdCrops(frames, 128, 4, seed=0, real_ground=ground, composite_fraction=1.0, real_gsd_m_per_px=(0.1, 0.05))
 
 
+def tiny_train(arch: Architecture, loss: LossKind, data: Path, out: Path, steps: int, **options: Any) -> dict[str, Any]:
+    """A few steps of :func:`train` on the tiny set (2-frame batches of 96 px crops, CPU, one validation frame)."""
+    small: dict[str, Any] = {"batch": 2, "crop_px": 96, "workers": 0, "val_frames": 1, "device_name": "cpu"}
+    return train(arch, loss, data, out, steps=steps, **(small | options))
+
+
 def test_train_export_and_onnxruntime_parity(tiny_set: Path, tmp_path: Path) -> None:
-    log = train(
-        Architecture.LITE,
-        LossKind.BAYESIAN,
-        tiny_set,
-        tmp_path / "run",
-        steps=6,
-        batch=2,
-        crop_px=96,
-        workers=0,
-        val_frames=1,
-        validate_every=3,
-        device_name="cpu",
-    )
+    log = tiny_train(Architecture.LITE, LossKind.BAYESIAN, tiny_set, tmp_path / "run", 6, validate_every=3)
     assert [h["step"] for h in log["history"]] == [3, 6]
     assert all(np.isfinite(h["loss"]) for h in log["history"])
     saved = json.loads((tmp_path / "run" / "training.json").read_text())
@@ -260,22 +254,16 @@ def test_a_pretrained_network_trains_on_two_sites_exports_and_names_them(tiny_se
     from sitl.world.ground import GROUND_ROOT
 
     sites = (GROUND_ROOT / "caliterra", GROUND_ROOT / "garfield")
-    log = train(
+    options: dict[str, Any] = {"real_ground_dirs": sites, "real_negative_fraction": 0.3, "composite_fraction": 0.3}
+    log = tiny_train(
         Architecture.YOLOX_LITE,
         LossKind.MSE,
         tiny_set,
         tmp_path / "run",
-        steps=4,
-        batch=2,
-        crop_px=96,
-        workers=0,
-        val_frames=1,
+        4,
         validate_every=4,
-        device_name="cpu",
-        real_ground_dirs=sites,
-        real_negative_fraction=0.3,
-        composite_fraction=0.3,
         backbone_lr_scale=0.0,
+        **options,
     )
     assert log["real_ground_sites"] == ["caliterra", "garfield"]
     assert log["real_ground"] is None  # several sites: named in real_ground_sites
@@ -307,20 +295,8 @@ def test_a_pretrained_network_trains_on_two_sites_exports_and_names_them(tiny_se
 
 @needs_pretrained
 def test_frozen_stages_keep_the_first_pretrained_stages_and_train_the_rest(tiny_set: Path, tmp_path: Path) -> None:
-    log = train(
-        Architecture.YOLOX_LITE,
-        LossKind.MSE,
-        tiny_set,
-        tmp_path / "run",
-        steps=4,
-        batch=2,
-        crop_px=96,
-        workers=0,
-        val_frames=1,
-        validate_every=4,
-        device_name="cpu",
-        backbone_lr_scale=1.0,
-        frozen_stages=1,
+    log = tiny_train(
+        Architecture.YOLOX_LITE, LossKind.MSE, tiny_set, tmp_path / "run", 4, validate_every=4, frozen_stages=1
     )
     assert (log["frozen_stages"], log["backbone_lr_scale"]) == (1, 1.0)
     from models.density.architectures import YoloxLite
