@@ -197,8 +197,8 @@ HOLD_CAUSES = {
     "perception silent": "no processed frame for the failsafe's time",
     "pilot took over": "the flight mode left offboard without the companion",
     "energy budget": "the battery no longer covered the way home and down with its reserve (guidance.energy)",
-    "fallback sites refused": "the search's budget ended and every fallback site flown to was refused by the map (or "
-    "given up from the ground station), none left in reach",
+    "fallback sites refused": "the search's budget ended and the last fallback site flown to was refused by the map "
+    "(or given up from the ground station), none left in reach",
     "fallback site timed out": "the search's budget ended and the last fallback site flown to was not landed on "
     "within its time (guidance.fallback.site_time_s), none left in reach",
     "other": "anything else (the log's reason is in the result)",
