@@ -15,12 +15,13 @@ No I/O; times are the vehicle's clock.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
 from companion.guidance.config import FailsafeAction, FallbackConfig
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import DecisionEvent
+from companion.guidance.vocabulary import DecisionEvent, RefusalCause
 from companion.perception.selection import Target
 
 
@@ -111,3 +112,75 @@ class FallbackPlan:
         """From the vehicle to the current site's centre (horizontal)."""
         assert self.current is not None
         return math.hypot(self.current.north_m - state.north_m, self.current.east_m - state.east_m)
+
+
+class BudgetStepKind(str, enum.Enum):
+    """What the search's budget asks of the landing logic at a tick."""
+
+    NEXT_SITE = "next_site"
+    """Fly to the nearest fallback site left in reach; with none left, the last resort the search's end named."""
+    FLY_ON = "fly_on"
+    """Keep flying to the site flown to: the energy budget ended during its stay, and it lies in reach."""
+
+
+@dataclass(frozen=True)
+class BudgetStep:
+    """A step of the search's budget: its kind, its words, and the cause that ended a site (None: none did)."""
+
+    kind: BudgetStepKind
+    reason: str
+    cause: RefusalCause | None = None
+
+
+class SearchBudget:
+    """When the search ends without a landing, and what becomes of the fallback site flown to then (pure; vehicle
+    time).
+
+    Parameters
+    ----------
+    time_limit_s : float
+        The mission's time limit from :meth:`start` (``guidance.mission_time_limit_s``).
+    last_resort : FailsafeAction
+        The time limit's last resort (``guidance.last_resort``).
+    energy_action : FailsafeAction
+        The energy budget's last resort (``guidance.energy.action``).
+    plan : FallbackPlan
+        The flight's sites; the budget's end is recorded in it (:attr:`FallbackPlan.ended_by`, ``reach_m``).
+    """
+
+    def __init__(
+        self, time_limit_s: float, last_resort: FailsafeAction, energy_action: FailsafeAction, plan: FallbackPlan
+    ) -> None:
+        self.time_limit_s, self.plan = time_limit_s, plan
+        self.last_resort, self.energy_action = last_resort, energy_action
+        self.started_s: float | None = None
+        """When the mission started (None: not yet)."""
+
+    def elapsed_s(self, t_s: float) -> float:
+        """Vehicle time since the start (0 before it)."""
+        return t_s - (self.started_s if self.started_s is not None else t_s)
+
+    def step(self, state: VehicleState, energy_low: str | None, reach_m: float | None) -> BudgetStep | None:
+        """At ``state``, with the energy budget's word ``energy_low`` (None: not used up) and its reach: once the time
+        limit has passed or the energy budget is used up, the next site in ``reach_m``; at a site, its time, and the
+        energy budget ending during the stay of a site chosen before it (by the time limit or the ground station): the
+        site is flown on to if in reach, else given up. None: nothing to do. Call after :attr:`started_s` is set."""
+        site = self.plan.current
+        if site is not None:
+            if energy_low is not None and self.plan.end_stay_by(energy_low, self.energy_action, reach_m):
+                if self.plan.in_reach(state):
+                    return BudgetStep(BudgetStepKind.FLY_ON, f"{energy_low}: site {site.name} in reach, flown on")
+                return BudgetStep(BudgetStepKind.NEXT_SITE, f"{energy_low}: site {site.name} out of reach")
+            if not self.plan.overdue(state.t_s):
+                return None
+            late = f"not landed at site {site.name} within {self.plan.config.site_time_s:g} s"
+            return BudgetStep(BudgetStepKind.NEXT_SITE, late, RefusalCause.SITE_TIMED_OUT)
+        if energy_low is not None:
+            end = BudgetEnd(energy_low, DecisionEvent.ENERGY_LOW, self.energy_action)
+        elif self.elapsed_s(state.t_s) >= self.time_limit_s:
+            said = f"no landing within {self.time_limit_s:g} s of the start"
+            end = BudgetEnd(said, DecisionEvent.TIME_LIMIT, self.last_resort)
+        else:
+            return None
+        self.plan.ended_by, self.plan.reach_m = end, reach_m
+        return BudgetStep(BudgetStepKind.NEXT_SITE, end.reason)

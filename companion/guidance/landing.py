@@ -52,7 +52,7 @@ from companion.guidance.climb_back import ClimbBack
 from companion.guidance.commitment import TargetCommitment
 from companion.guidance.config import FailsafeAction, GuidanceConfig
 from companion.guidance.descent import Descent, StepKind
-from companion.guidance.fallback import BudgetEnd, FallbackPlan
+from companion.guidance.fallback import BudgetStepKind, FallbackPlan, SearchBudget
 from companion.guidance.geofence import Geofence
 from companion.guidance.safety_filter import filtered_setpoint
 from companion.guidance.search_pattern import ExpandingSquare
@@ -161,9 +161,9 @@ class LandingGuidance:
         self.search = ExpandingSquare(config.search_leg_m, config.search_timeout_s, geofence)
         self.climb = ClimbBack(config)
         self.fallback = FallbackPlan(config.fallback)
+        self.budget = SearchBudget(config.mission_time_limit_s, config.last_resort, config.energy.action, self.fallback)
         self._resume_phase = LandingPhase.SEARCH
         self._heading_deg: float | None = None
-        self._started_s: float | None = None
         self.target: Target | None = None
         """The target of the newest setpoint (None: none)."""
 
@@ -244,7 +244,7 @@ class LandingGuidance:
         if self.phase is not LandingPhase.IDLE:
             raise RuntimeError(f"start() in phase {self.phase.value}")
         self._last_target_s = state.t_s
-        self._started_s = state.t_s
+        self.budget.started_s = state.t_s
         self._heading_deg = state.yaw_deg
         altitude = max(state.altitude_m, self.config.search_altitude_m)
         self.climb.start(altitude)
@@ -339,7 +339,7 @@ class LandingGuidance:
         if proposed is not None and proposed.track_id is None:  # the blind baseline's point: drawn once, kept
             inside = self.geofence.contains_ne(proposed.north_m, proposed.east_m)
             return (proposed, None, ()) if inside else (None, "the point lies outside the geofence", ())
-        elapsed_s = state.t_s - (self._started_s if self._started_s is not None else state.t_s)
+        elapsed_s = self.budget.elapsed_s(state.t_s)
         choice = self.commitment.choose(
             result.tracks,
             result.head_plane,
@@ -368,35 +368,17 @@ class LandingGuidance:
     def time_used_up(
         self, state: VehicleState, energy_low: str | None = None, reach_m: float | None = None
     ) -> Decision | None:
-        """The search's budget: once ``mission_time_limit_s`` has passed since :meth:`start` without a landing, or the
-        energy budget says ``energy_low`` (why, in words: :mod:`companion.guidance.energy`), the nearest fallback site
-        within ``reach_m`` (None: any), else the last resort (or the energy budget's action); at a site, its time, and
-        the energy budget when it ends during the stay of a site chosen before (by the time limit or the ground
-        station): the site is flown on to if in ``reach_m``, else given up for one that is."""
-        if self._started_s is None or self.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
+        """The search's budget (:class:`~companion.guidance.fallback.SearchBudget`, with the energy budget's word
+        ``energy_low`` and reach ``reach_m``: :mod:`companion.guidance.energy`) as a decision: the nearest fallback site
+        in reach, else the last resort; or flying on to the site flown to, said."""
+        if self.budget.started_s is None or self.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
             return None
-        site = self.fallback.current
-        if site is not None:
-            if energy_low is not None and self.fallback.end_stay_by(energy_low, self.config.energy.action, reach_m):
-                if self.fallback.in_reach(state):
-                    said, event = f"{energy_low}: site {site.name} in reach, flown on", DecisionEvent.ENERGY_LOW
-                    return Decision(state.t_s, self.phase, CommandKind.NONE, None, site.target, said, event)
-                return self.next_site(state, f"{energy_low}: site {site.name} out of reach", None)
-            if not self.fallback.overdue(state.t_s):
-                return None
-            late = f"not landed at site {site.name} within {self.fallback.config.site_time_s:g} s"
-            return self.next_site(state, late, RefusalCause.SITE_TIMED_OUT)
-        limit_s = self.config.mission_time_limit_s
-        if energy_low is not None:
-            end = BudgetEnd(energy_low, DecisionEvent.ENERGY_LOW, self.config.energy.action)
-        elif state.t_s - self._started_s >= limit_s:
-            end = BudgetEnd(
-                f"no landing within {limit_s:g} s of the start", DecisionEvent.TIME_LIMIT, self.config.last_resort
-            )
-        else:
-            return None
-        self.fallback.ended_by, self.fallback.reach_m = end, reach_m
-        return self.next_site(state, end.reason, None)
+        step = self.budget.step(state, energy_low, reach_m)
+        if step is None or step.kind is BudgetStepKind.NEXT_SITE:
+            return None if step is None else self.next_site(state, step.reason, step.cause)
+        site, event = self.fallback.current, DecisionEvent.ENERGY_LOW
+        assert site is not None  # flown on to
+        return Decision(state.t_s, self.phase, CommandKind.NONE, None, site.target, step.reason, event)
 
     def next_site(self, state: VehicleState, reason: str, cause: RefusalCause | None) -> Decision:
         """Fly to the nearest fallback site left in reach (:mod:`companion.guidance.fallback`), climbing first to the
