@@ -297,6 +297,11 @@ def save_stride2_graph(path: Path, name: str, nodes: list[onnx.NodeProto], inits
     return path
 
 
+def extent_of(path: Path) -> tuple[int, int] | None:
+    """:func:`input_extent_px` of the graph saved at ``path``."""
+    return input_extent_px(onnx.load(str(path)).graph)
+
+
 def assert_cropped_as_padded(model: OnnxDensityModel, frame: np.ndarray) -> None:
     """Shrunk frames run cropped (``model``) give the maps of the whole padded frame, to the bit."""
     padded = OnnxDensityModel(model.path, crop_shrunk_frames=False)
@@ -333,7 +338,7 @@ def test_the_context_a_cell_reads_is_followed_through_the_graph(tmp_path: Path) 
     # Output cell i reads inputs 2i - 1 ... 2i + 1 through the first convolution, then its 3x3 dilated-2 window over
     # that (stride 2) adds 2 * 2 on each side: 2i + 5 at the right. 5 - 2 + 1 = 4 px past the last kept cell: 16.
     path = conv_model(tmp_path / "conv.onnx")
-    assert input_extent_px(onnx.load(str(path)).graph) == (2, 5)
+    assert extent_of(path) == (2, 5)
     model = OnnxDensityModel(path)
     assert model.context_px == 16
     frame = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
@@ -384,16 +389,16 @@ def test_a_space_to_depth_stem_and_an_upsampled_stage_are_followed(tmp_path: Pat
     # stride-2 3x3 over that another 2 px (5, stride 4); nearest upsampling by 2 (floor, asymmetric) reads the same
     # pixels at stride 2. Columns reach 4. So (2, 5): 4 px past the last kept cell, a context of 16.
     path = focus_model(tmp_path / "focus.onnx")
-    assert input_extent_px(onnx.load(str(path)).graph) == (2, 5)
+    assert extent_of(path) == (2, 5)
     model = OnnxDensityModel(path)
     assert model.context_px == 16
     assert_cropped_as_padded(model, np.random.default_rng(4).integers(0, 256, (48, 64, 3), dtype=np.uint8))
     # Another rounding of the upsampling may read one coarse cell further: a cell of 4 px more.
     rounded = focus_model(tmp_path / "half_pixel.onnx", coordinates="half_pixel")
-    assert input_extent_px(onnx.load(str(rounded)).graph) == (2, 9)
+    assert extent_of(rounded) == (2, 9)
     # Upsampled to fixed sizes, the graph runs at the contract's size only.
     fixed = focus_model(tmp_path / "sizes.onnx", upsample="sizes")
-    assert input_extent_px(onnx.load(str(fixed)).graph) is None
+    assert extent_of(fixed) is None
     assert OnnxDensityModel(fixed).context_px is None
 
 
