@@ -22,7 +22,7 @@ from models.data.real_ground import (
     load_ground,
     split_of,
 )
-from models.data.real_sites import CROP_PX, GARFIELD, SITES, derive_frame, prepare
+from models.data.real_sites import CROP_PX, GARFIELD, NEON, SITES, derive_frame, derive_tiles, prepare, tile_numbers
 from sitl.world.ground import GROUND_ROOT, painted_frames
 from sitl.world.park import Park
 from sitl.world.scenario import GroundKind, RealSite, ScenarioConfig
@@ -171,6 +171,56 @@ def test_a_source_frame_is_brought_to_the_stored_gsd_and_its_centre_kept() -> No
     centre = bright.mean(axis=0)
     assert np.allclose(centre, (CROP_PX[1] / 2, CROP_PX[0] / 2), atol=2)
     assert GARFIELD.frame_name(Path("IMG_161122_164150_0091_RGB.JPG")) == "garfield_0091"
+
+
+def test_neon_is_derived_as_the_others_small_sources_whole_and_large_ones_as_tiles() -> None:
+    root = GROUND_ROOT / "neon"
+    index = json.loads((root / "index.json").read_text())
+    assert (index["site"], index["licence"], index["credit"]) == ("neon", NEON.licence, NEON.credit)
+    assert index["gsd_m_per_px"] == STORED_GSD_M_PER_PX
+    frames = {f["name"]: f for f in index["frames"]}
+    assert len(frames) == 16
+    for name, frame in frames.items():
+        assert frame["split"] == split_of(name)
+        assert (root / f"{name}.jpg").is_file()
+    places = [name.split("_")[2] for name in frames]
+    assert {p: places.count(p) for p in set(places)} == {
+        "osbs": 1,
+        "sjer": 1,
+        "soapa": 1,
+        "soapb": 1,
+        "yellb": 8,
+        "yella": 4,
+    }
+    # The four 400 px frames at 0.10 m/px are 889 px at 0.045 m/px, whole, and all trained on
+    small = [f for f in frames.values() if f["name"].split("_")[2] in ("osbs", "sjer", "soapa", "soapb")]
+    assert all((f["width_px"], f["height_px"]) == (889, 889) and f["split"] == TRAIN for f in small)
+    held_out = [name for name, f in frames.items() if f["split"] == HELDOUT]
+    assert held_out
+    assert all("yell" in name for name in held_out)
+    assert "NEON" in (root / "SOURCES.md").read_text()
+
+
+def test_tiles_of_a_large_frame_keep_its_scale_and_at_most_the_sites_tile_count() -> None:
+    image = np.zeros((1000, 1400, 3), np.uint8)  # 0.10 m/px: 3111 x 2222 px at 0.045 m/px, a grid of 2 x 2 tiles
+    image[500 - 20 : 500 + 20, 700 - 20 : 700 + 20] = 255  # 4 m at the centre: the tiles' shared corner
+    tiles = derive_tiles(NEON, image)
+    assert len(tiles) == 4
+    assert all(t.shape == (CROP_PX[1], CROP_PX[0], 3) for t in tiles)
+    corner = [t[-1, -1, 0] for t in tiles[:1]] + [t[-1, 0, 0] for t in tiles[1:2]]
+    assert all(v > 127 for v in corner)  # the square's quarters meet at the grid's centre
+    assert len(derive_tiles(NEON, np.zeros((3000, 3000, 3), np.uint8))) == NEON.max_tiles  # 5 x 6 = 30, evenly kept
+    assert derive_tiles(NEON, np.zeros((400, 400, 3), np.uint8))[0].shape == (889, 889, 3)
+
+
+def test_tile_numbers_train_every_small_source_and_hold_out_tiles_of_the_large_ones() -> None:
+    numbers = tile_numbers([1, 1, 1, 1, 8, 4])
+    assert sorted(n for group in numbers for n in group) == list(range(1, 17))
+    for group in numbers[:4]:
+        assert split_of(str(group[0])) == TRAIN
+        assert group[0] % 10 != 2
+    with pytest.raises(ValueError, match="single-tile"):
+        tile_numbers([1] * 5)  # 1, 3 and 5 are plain training numbers; 2 and 4 are not
 
 
 DATASETS = Path(__file__).resolve().parents[2] / "shared" / "datasets"

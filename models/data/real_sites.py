@@ -1,4 +1,5 @@
-"""Two more real sites beside Caliterra: a park (Garfield, CC0) and a village seen from a kite (Boruszyn, CC BY 3.0).
+"""Three more real sites beside Caliterra: a park (Garfield, CC0), a village seen from a kite (Boruszyn, CC BY 3.0)
+and NEON's forest and savanna orthophotos (CC0).
 
 Issue 52: a model's real-ground figure counts only on a site it never trained on, so the project needs several
 sites. Each is derived here into ``sitl/world/ground/<site>/`` in Caliterra's layout (``index.json`` with source,
@@ -17,6 +18,14 @@ licence, GSD and each frame's split; frames at :data:`~sitl.world.ground.STORED_
   is read from objects of known size in them (wrapped silage bales of 1.2 m span 21-25 px; the yard's 3 x 1.5 m
   road slabs about 55 x 27 px). A kite sways: the scale varies by perhaps 20 % between frames. Frames that look
   across the land (a horizon, or a scale that changes across the frame) are left out (:data:`BORUSZYN_EXCLUDED`).
+
+- **neon** (``../shared/datasets/neon_trees/images``, NEON AOP camera imagery via weecology/DeepForest 1.5.2, CC0):
+  six person-free nadir orthophotos at 0.10 m/px of pine and conifer forest, oak savanna and a Yellowstone meadow
+  and road: tree crowns, their shadows, pale dead crowns, fallen logs and boulders, where the density networks put
+  most of their false occupancy on unseen ground (issue 63). Upsampled by 2.22 to 0.045 m/px (much softer than a
+  camera there); the four 400 px frames are kept whole (889 px), the two Yellowstone mosaics as at most
+  :attr:`SiteSource.max_tiles` tiles of :data:`CROP_PX` each (:func:`derive_tiles`), numbered so that every small
+  source is trained on and the site's held-out and validation frames are Yellowstone tiles (:func:`tile_numbers`).
 
 Each frame is resampled to 0.045 m/px (Boruszyn's by 1.22: upsampled, softer than a camera at that GSD) and its centre
 :data:`CROP_PX` kept (60 x 45 m, the size of a stored Caliterra frame), which keeps the repository small; Garfield's
@@ -47,7 +56,7 @@ import numpy as np
 import numpy.typing as npt
 
 from models.data.images import read_bgr
-from sitl.world.ground import GROUND_ROOT, STORED_GSD_M_PER_PX, split_of
+from sitl.world.ground import GROUND_ROOT, STORED_GSD_M_PER_PX, TRAIN, split_of
 
 U8Image = npt.NDArray[np.uint8]
 
@@ -74,9 +83,13 @@ class SiteSource:
     gsd_method: str
     pattern: str  # glob of the source frames
     excluded: dict[str, str] = field(default_factory=dict)
+    tiled: bool = False  # a source larger than CROP_PX gives whole tiles of a grid, not only its centre
+    max_tiles: int = 8  # of a tiled source: at most this many tiles, evenly spaced in the grid (repository size)
 
     def frame_name(self, path: Path) -> str:
         """The stored name of a source frame: ``garfield_0091`` for ``IMG_161122_164150_0091_RGB.JPG``."""
+        if self.name == "neon":
+            return NEON_PLACES[path.stem]
         if self.name == "garfield":
             match = re.search(r"_(\d{4})_RGB$", path.stem)
             if match is None:
@@ -104,7 +117,43 @@ BORUSZYN = SiteSource(
     pattern="img_*.jpg",
     excluded=dict(BORUSZYN_EXCLUDED),
 )
-SITES = {site.name: site for site in (GARFIELD, BORUSZYN)}
+NEON = SiteSource(
+    name="neon",
+    source="NEON AOP camera imagery (DP1.30010.001) via weecology/DeepForest 1.5.2, deepforest/data/",
+    licence="CC0 1.0 Universal",
+    credit="NEON (National Ecological Observatory Network), AOP camera imagery, via weecology/DeepForest",
+    source_gsd_m_per_px=0.10,
+    gsd_method="NEON AOP orthophotos at 0.10 m/px (../shared/datasets/neon_trees/README.md)",
+    pattern="neon_*",
+    tiled=True,
+    max_tiles=8,
+)
+# The places of the NEON frames, letters only: a stored name's number (split_of) is the one NEON_NUMBERS gives it.
+NEON_PLACES = {
+    "neon_osbs_029": "osbs",
+    "neon_sjer_477": "sjer",
+    "neon_soap_031": "soapa",
+    "neon_soap_061": "soapb",
+    "neon_yell_528000_crop2": "yellb",
+    "neon_yell_541000_crop": "yella",
+}
+SITES = {site.name: site for site in (GARFIELD, BORUSZYN, NEON)}
+
+
+def tile_numbers(tiles_per_source: list[int]) -> list[list[int]]:
+    """Frame numbers for a tiled site's sources, in order: a source of one tile takes the next number of the
+    training split that is not a validation number (:func:`~models.data.real_ground.is_validation`: ending in 2);
+    a source of several tiles takes the numbers left, in order, so that the site's held-out frames (numbers ending
+    in 4 or 9) and its validation frames are tiles of its larger sources and every small source is trained on."""
+    total = sum(tiles_per_source)
+    numbers = list(range(1, total + 1))
+    plain = [n for n in numbers if split_of(str(n)) == TRAIN and n % 10 != 2]
+    singles = sum(1 for count in tiles_per_source if count == 1)
+    if singles > len(plain):
+        raise ValueError(f"{singles} single-tile sources but only {len(plain)} plain training numbers")
+    single_numbers = iter(plain[:singles])
+    rest = iter(n for n in numbers if n not in set(plain[:singles]))
+    return [[next(single_numbers)] if count == 1 else [next(rest) for _ in range(count)] for count in tiles_per_source]
 
 
 def centre_crop(image: U8Image, size_px: tuple[int, int]) -> U8Image:
@@ -127,6 +176,34 @@ def derive_frame(site: SiteSource, image: U8Image) -> U8Image:
     return centre_crop(resized, CROP_PX)
 
 
+def derive_tiles(site: SiteSource, image: U8Image) -> list[U8Image]:
+    """A source frame at the stored GSD as whole :data:`CROP_PX` tiles of a centred grid (row by row; at most
+    ``site.max_tiles`` of them, evenly spaced), or the whole frame where it is smaller than one tile (a portrait frame
+    is turned)."""
+    if image.shape[0] > image.shape[1]:
+        image = np.ascontiguousarray(np.rot90(image))
+    factor = site.source_gsd_m_per_px / STORED_GSD_M_PER_PX
+    h, w = image.shape[:2]
+    interpolation = cv2.INTER_AREA if factor < 1 else cv2.INTER_CUBIC
+    resized = np.asarray(
+        cv2.resize(image, (round(w * factor), round(h * factor)), interpolation=interpolation), np.uint8
+    )
+    h, w = resized.shape[:2]
+    cols, rows = w // CROP_PX[0], h // CROP_PX[1]
+    if cols == 0 or rows == 0:
+        return [centre_crop(resized, CROP_PX)]
+    y0, x0 = (h - rows * CROP_PX[1]) // 2, (w - cols * CROP_PX[0]) // 2
+    cells = [divmod(k, cols) for k in range(rows * cols)]
+    if len(cells) > site.max_tiles:
+        cells = [cells[round(k)] for k in np.linspace(0, len(cells) - 1, site.max_tiles)]
+    return [
+        np.ascontiguousarray(
+            resized[y0 + r * CROP_PX[1] : y0 + (r + 1) * CROP_PX[1], x0 + c * CROP_PX[0] : x0 + (c + 1) * CROP_PX[0]]
+        )
+        for r, c in cells
+    ]
+
+
 def prepare(
     site: SiteSource, source_dir: Path, out_dir: Path | None = None, people: dict[str, str] | None = None
 ) -> dict[str, object]:
@@ -138,12 +215,22 @@ def prepare(
         raise FileNotFoundError(f"no {site.pattern} in {source_dir} ({site.source})")
     excluded = dict(site.excluded) | {name: f"someone may be there: {where}" for name, where in (people or {}).items()}
     out_dir.mkdir(parents=True, exist_ok=True)
+    named: list[tuple[str, U8Image]] = []
+    if site.tiled:
+        kept = [p for p in sources if site.frame_name(p) not in excluded]
+        tiles = [derive_tiles(site, read_bgr(path)) for path in kept]
+        for path, source_tiles, numbers in zip(kept, tiles, tile_numbers([len(t) for t in tiles]), strict=True):
+            named += [
+                (f"{site.name}_{n:02d}_{site.frame_name(path)}", t) for n, t in zip(numbers, source_tiles, strict=True)
+            ]
+        named.sort(key=lambda item: item[0])
+    else:
+        for path in sources:
+            name = site.frame_name(path)
+            if name not in excluded:
+                named.append((name, derive_frame(site, read_bgr(path))))
     frames = []
-    for path in sources:
-        name = site.frame_name(path)
-        if name in excluded:
-            continue
-        derived = derive_frame(site, read_bgr(path))
+    for name, derived in named:
         cv2.imwrite(str(out_dir / f"{name}.jpg"), derived, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         h, w = derived.shape[:2]
         frames.append({"name": name, "split": split_of(name), "width_px": w, "height_px": h})

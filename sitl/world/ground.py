@@ -1,9 +1,10 @@
-"""Real ground for the SITL and for training: real drone frames of three sites, derived into this package.
+"""Real ground for the SITL and for training: real nadir frames of four sites, derived into this package.
 
 ``ground/caliterra/`` (CC0: a construction site in Texas, nobody in the frames; ``models/data/real_ground.py`` derives
-it and explains the GSD estimate), ``ground/garfield/`` (CC0: a park in Ohio) and ``ground/boruszyn/`` (CC BY 3.0: a
-village in Poland; ``models/data/real_sites.py`` derives both), each resampled to :data:`STORED_GSD_M_PER_PX` with
-``index.json`` (source, licence, GSD, split of each frame) and ``SOURCES.md``.
+it and explains the GSD estimate), ``ground/garfield/`` (CC0: a park in Ohio), ``ground/boruszyn/`` (CC BY 3.0: a
+village in Poland) and ``ground/neon/`` (CC0: NEON's forest and savanna orthophotos, for training only; the SITL paints
+no park from it; ``models/data/real_sites.py`` derives the last three), each resampled to
+:data:`STORED_GSD_M_PER_PX` with ``index.json`` (source, licence, GSD, split of each frame) and ``SOURCES.md``.
 
 **Split**: frames whose number ends in 4 or 9 (every fifth by name) are held out from training within a site. The
 SITL paints its real ground (:func:`real_ground_texture`) from frames no shipped model trained on
