@@ -24,8 +24,10 @@ FOOTPRINT_M = 1.0
 CHASE = Path(__file__).parent / "data" / "chase_tracks.json"
 
 
-def _track(track_id: int, n: float, e: float, r: float, created_s: float = 0.0, misses: int = 0) -> TrackedZone:
-    return TrackedZone(track_id, n, e, r, 0.0, 0.0, 0.0, created_s, created_s, 0.0, 5, misses)
+def _track(
+    track_id: int, n: float, e: float, r: float, created_s: float = 0.0, misses: int = 0, hits: int = 5
+) -> TrackedZone:
+    return TrackedZone(track_id, n, e, r, 0.0, 0.0, 0.0, created_s, created_s, 0.0, hits, misses)
 
 
 def _free_map(person_at: tuple[float, float] | None = None) -> HeadPlaneOccupancy:
@@ -39,6 +41,7 @@ def _free_map(person_at: tuple[float, float] | None = None) -> HeadPlaneOccupanc
 
 
 def _commitment(policy: object = None, **overrides: object) -> TargetCommitment:
+    overrides.setdefault("observe_s", 0.0)  # most tests here are about what follows the first choice
     return TargetCommitment(
         CommitmentConfig.model_validate(overrides),
         policy or BiggestPolicy(),  # type: ignore[arg-type]
@@ -251,3 +254,53 @@ def test_a_zone_just_above_the_footprint_is_not_chosen_but_a_chosen_one_is_kept_
     for k in range(1, 20):
         assert _choose(c, 0.1 * k, [_track(3, 5, 0, 1.05), _track(4, -5, 0, 1.29)]) == (3, None)
     assert _choose(c, 2.0, [_track(3, 5, 0, 1.05), _track(5, -5, 0, 1.4)])[0] == 5
+
+
+def _window_scene(t_s: float) -> list[TrackedZone]:
+    """Zones watched from t = 0: zone 1 (the biggest at first) is gone at 1 s, zone 3 (bigger still) appears at 1.5 s,
+    zone 2 stays throughout."""
+    tracks = [_track(2, -5, 0, 3.0, created_s=0.0)]
+    if t_s < 1.0:
+        tracks.append(_track(1, 5, 0, 4.0, created_s=0.0))
+    if t_s >= 1.5:
+        tracks.append(_track(3, 0, 8, 5.0, created_s=1.5))
+    return tracks
+
+
+@pytest.mark.parametrize(("policy", "chosen_after_window"), [(OldestPolicy(), 2), (BiggestPolicy(), 3)])
+def test_the_first_choice_waits_for_the_observation_window_and_then_oldest_means_tracked_longest(
+    policy: OldestPolicy | BiggestPolicy, chosen_after_window: int
+) -> None:
+    at_once = _commitment(policy, observe_s=0.0)
+    assert _choose(at_once, 0.0, _window_scene(0.0))[0] == 1  # at the first frame both policies take zone 1
+    c = _commitment(policy, observe_s=3.0)
+    for k in range(0, 15):  # 0 to 2.8 s at 5 Hz: watching, nothing chosen
+        t_s = 0.2 * k
+        chosen, text = _choose(c, t_s, _window_scene(t_s))
+        assert chosen is None, t_s
+        assert text is not None
+        assert f"watching zones {t_s:.1f} of 3 s" in text
+    chosen, text = _choose(c, 3.0, _window_scene(3.0))
+    assert chosen == chosen_after_window
+    assert text is not None
+    assert "committed" in text
+
+
+def test_the_observation_window_starts_at_the_first_zone_and_comes_once_a_mission() -> None:
+    c = _commitment(OldestPolicy(), observe_s=2.0)
+    for t_s in (0.0, 0.5, 1.0):  # nothing to watch yet: the window has not started
+        assert _choose(c, t_s, []) == (None, None)
+    assert _choose(c, 1.5, [_track(4, 0, 0, 3.0, created_s=1.5)])[0] is None
+    assert _choose(c, 3.4, [_track(4, 0, 0, 3.0, created_s=1.5)])[0] is None  # 1.9 s watched
+    assert _choose(c, 3.5, [_track(4, 0, 0, 3.0, created_s=1.5)])[0] == 4
+    c.refuse(0.0, 0.0, 4.0, "aborted descent")  # released: the next choice does not wait again
+    assert _choose(c, 4.1, [_track(5, 10, 10, 3.0, created_s=4.1)])[0] == 5
+    c.reset()  # a new mission watches again
+    assert _choose(c, 10.0, [_track(6, 0, 0, 3.0, created_s=10.0)])[0] is None
+
+
+def test_oldest_breaks_a_tie_of_ages_by_the_frames_a_zone_was_seen_in() -> None:
+    tracks = [_track(1, 5, 0, 4.0, created_s=0.0, hits=20), _track(2, -5, 0, 3.0, created_s=0.0, hits=30)]
+    chosen = OldestPolicy().select(tracks, SelectionContext(6.0, 0.0, 0.0))
+    assert chosen is not None
+    assert chosen.track_id == 2

@@ -18,6 +18,7 @@ from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
+from companion.guidance.vocabulary import DecisionEvent
 from companion.perception.density import DensityMap
 from companion.perception.occupancy import OccupancyImage
 from companion.perception.pipeline import FrameResult
@@ -62,6 +63,9 @@ def _frame(t_s: float, tracks: list[TrackedZone], target: Target | None, head_pl
 
 
 def _guidance(**overrides: object) -> LandingGuidance:
+    """Frame-by-frame landing logic; its first choice at once (``commitment.observe_s`` 0) unless a test sets it."""
+    commitment = overrides.get("commitment")
+    overrides["commitment"] = {"observe_s": 0.0, **(commitment if isinstance(commitment, dict) else {})}
     return LandingGuidance(
         GuidanceConfig.model_validate(overrides), FENCE, FOOTPRINT_M, min_zone_radius_m=1.0, policy=BiggestPolicy()
     )
@@ -69,6 +73,25 @@ def _guidance(**overrides: object) -> LandingGuidance:
 
 def _fly(state: VehicleState, setpoint_alt: float, n: float, e: float, t: float) -> VehicleState:
     return VehicleState(t, n, e, -setpoint_alt, 0.0)
+
+
+def test_the_first_choice_holds_position_for_the_observation_window_and_no_search_pattern_starts() -> None:
+    g = _guidance(commitment={"observe_s": 8.0}, search_timeout_s=2.0)  # a window longer than the search timeout
+    state = VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)
+    g.start(state)
+    zone = _track(7, 6.0, 8.0, 2.5)
+    t = 0.0
+    while t < 7.95:  # from the first frame with a zone at 0.1 s: watching, holding where it is
+        t += 0.1
+        d = g.on_frame(_frame(t, [zone], Target(6.0, 8.0, 2.5, 7), _map()), state)
+        assert d.phase is LandingPhase.SEARCH
+        assert d.event is DecisionEvent.HOLD_NO_TARGET, t
+        assert "watching zones" in d.reason
+        assert d.setpoint is not None
+        assert (d.setpoint.north_m, d.setpoint.east_m) == pytest.approx((0.0, 0.0))
+    d = g.on_frame(_frame(8.2, [zone], Target(6.0, 8.0, 2.5, 7), _map()), state)
+    assert d.phase is LandingPhase.APPROACH
+    assert g.commitment.committed_id == 7
 
 
 def test_a_clean_landing_goes_search_approach_descent_land() -> None:

@@ -9,6 +9,11 @@ the policy chooses once, and the choice stands:
   tracks of this frame: seen in it, larger than the minimum zone radius by ``choose_margin_m`` (0 by default;
   kept down to the minimum), the footprint around its centre inside the geofence, and not near a point refused
   earlier. So "biggest" and "oldest" mean what they mean at the moment of choice.
+- **Observation window.** The mission's first choice waits until zones have been watched for ``observe_s``
+  (from the first frame with a zone that may be chosen). Chosen at that first frame, every track is new: "oldest"
+  was a tie that the track ids broke in the order the zones were found, biggest first, so ``oldest`` and
+  ``biggest`` landed on the same point in most scenes (issue 63: 311 of 400 ROI scene pairs). After the window the
+  zones that persisted are older than the ones that came and went, as the paper's "oldest SLZ" means.
 - **Follow.** The committed zone is the same zone on the ground, not only the same track: far zones flicker in and
   out of the map and each return starts a new track, so a zone seen now that overlaps its last circle continues
   it (``reacquire_iou``).
@@ -102,6 +107,14 @@ class CommitmentConfig(StrictModel):
         le=60.0,
         description="Release the committed zone after this long without a zone seen where it was.",
     )
+    observe_s: float = Field(
+        default=5.0,
+        ge=0.0,
+        le=60.0,
+        description="The mission's first choice waits until zones have been watched this long (from the first frame "
+        "with a zone that may be chosen), so that tracks have ages: 'oldest' is then the zone tracked longest, not a "
+        "tie among new tracks. 0: choose at the first frame (before issue 63).",
+    )
     approach_speed_mps: float = Field(
         default=2.0,
         gt=0.0,
@@ -126,11 +139,12 @@ class Choice:
 
     target: Target | None
     events: tuple[CommitmentEvent, ...] = ()
+    watching: str | None = None  # in the observation window before the mission's first choice: in words
 
     @property
     def text(self) -> str | None:
-        """What changed, in words (None: nothing)."""
-        return "; ".join(e.text for e in self.events) or None
+        """What changed, and the observation window, in words (None: nothing)."""
+        return "; ".join([e.text for e in self.events] + ([self.watching] if self.watching else [])) or None
 
 
 class TargetCommitment:
@@ -171,12 +185,16 @@ class TargetCommitment:
         self._occupied_frames = 0
         self._rival_id: int | None = None
         self._rival_since_s = 0.0
+        self._watch_from_s: float | None = None  # the first frame with a zone that may be chosen
+        self._chosen_once = False
 
     def reset(self) -> None:
-        """A new mission: nothing committed, nothing refused."""
+        """A new mission: nothing committed, nothing refused, the observation window ahead."""
         self._release()
         self.switches = 0
         self.refused.clear()
+        self._watch_from_s = None
+        self._chosen_once = False
 
     # -- what the guidance tells it ---------------------------------------------------------------------------------
     def refuse(self, north_m: float, east_m: float, t_s: float, reason: str) -> None:
@@ -262,6 +280,10 @@ class TargetCommitment:
                 committed = None
         candidates = [t for t in tracks if t.track_id != self.committed_id and self.eligible(t, t_s)]
         if committed is None:
+            watching_s = self._watching(candidates, t_s)
+            if watching_s is not None:
+                words = f"watching zones {watching_s:.1f} of {self.config.observe_s:g} s before the first choice"
+                return Choice(None, tuple(events), words)
             best = next((t for t in candidates if t.track_id == self._best_id(candidates, context)), None)
             if best is None:
                 return Choice(None, tuple(events))
@@ -308,7 +330,18 @@ class TargetCommitment:
             return None
         return own if own is not None else last  # coasting: the track's prediction, else where it was last seen
 
+    def _watching(self, candidates: Sequence[TrackedZone], t_s: float) -> float | None:
+        """In the observation window before the mission's first choice: how long zones have been watched (s); None
+        once it is over (or before any zone may be chosen, when there is nothing to watch)."""
+        if self._chosen_once or not candidates:
+            return None
+        if self._watch_from_s is None:
+            self._watch_from_s = t_s
+        watched_s = t_s - self._watch_from_s
+        return watched_s if watched_s < self.config.observe_s else None
+
     def _commit(self, track: TrackedZone, t_s: float) -> None:
+        self._chosen_once = True
         self._zone, self._seen_s = track, t_s
         self.committed_id = track.track_id
         self._occupied_frames = 0

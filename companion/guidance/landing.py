@@ -349,6 +349,8 @@ class LandingGuidance:
             time_left_s=c.mission_time_limit_s - elapsed_s,
             descent_rate_mps=c.descent_rate_limit_mps,
         )
+        if choice.watching is not None:  # zones to watch: the search pattern waits for the observation window
+            self._last_target_s = state.t_s
         return choice.target, choice.text, choice.events
 
     def _descent(self, result: FrameResult, state: VehicleState) -> Decision:

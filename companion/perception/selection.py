@@ -101,10 +101,10 @@ class OldestPolicy:
     name = "oldest"
 
     def select(self, tracks: Sequence[TrackedZone], context: SelectionContext) -> Target | None:
-        """The track created first."""
+        """The track created first; of tracks born in the same frame, the one seen in most frames since."""
         if not tracks:
             return None
-        return target_of(min(tracks, key=lambda t: (t.created_s, t.track_id)))
+        return target_of(min(tracks, key=lambda t: (t.created_s, -t.hits, t.track_id)))
 
     def score(self, track: TrackedZone, context: SelectionContext) -> float:
         """The track's age at the frame, s."""
