@@ -34,7 +34,7 @@ from sitl.config import SitlConfig
 from sitl.vehicle.truth import TruthHeader, TruthRecord, body_edges_m, people_at, read_truth, touchdown
 from sitl.world.park import Park, ParkObject
 
-METRICS_VERSION = 7
+METRICS_VERSION = 8
 """Incremented when a definition changes what stored results hold; :func:`stale` says which of them it changes.
 
 1. The first campaigns.
@@ -61,6 +61,10 @@ METRICS_VERSION = 7
    :mod:`sitl.campaign.landing_kinds`) and how many fallback sites it flew to (``sites_flown_to``), and the hold
    causes of missions whose fallback sites were all refused or timed out (they had read as the time limit's kinds).
    Nothing else changes; earlier results are not stale (they lack the two fields, and keep their hold causes).
+8. Adds where the mission's first landing zone was (``first_zone_north_m``, ``first_zone_east_m``: the centre of the
+   zone of its first commitment), so that a report can say how often two policies chose the same zone in the same
+   scene (issue 63: ``oldest`` and ``biggest``). Nothing else changes; earlier results are not stale (they lack the
+   two fields).
 """
 
 
@@ -135,6 +139,11 @@ class MissionMetrics:
     ``hold``, ``return``, ``failsafe_land``, ``other``); None in a result before version 7."""
     sites_flown_to: int = result_field(since=7)
     """How many fallback sites the mission flew to (the one landed at included); 0 before version 7."""
+    first_zone_north_m: float = result_field(since=8)
+    """North of the centre of the first zone the mission committed to (world NED, m); NaN with none, or before
+    version 8."""
+    first_zone_east_m: float = result_field(since=8)
+    """East of that centre (world NED, m)."""
     overflown_above_gate: bool = result_field(since=6, default=False)
     """A landing (False without a touchdown) where a person's body came within the vehicle's footprint under it
     during the final descent but before the walker gate let it go: the vehicle hovering at the gate, 3 m above the
@@ -317,6 +326,11 @@ def mission_metrics(
     path = np.array([r.position_ned_m for r in truth if math.isfinite(started) and started <= r.t_s <= t_end + 1e-9])
     path_length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
     targets = [d.target["track_id"] for d in decisions if d.target is not None]
+    # The first zone committed to (a commitment within the capture radius goes straight to the descent, whose
+    # decision does not carry the change: then the first target of all).
+    first = next((d.target for d in decisions if d.chose_zones() and d.target is not None), None) or next(
+        (d.target for d in decisions if d.target is not None), None
+    )
     reselections = sum(1 for a, b in itertools.pairwise(targets) if a != b)
     aborts = sum(1 for d in decisions if d.event is DecisionEvent.ABORT)
     obstacle_m, obstacle_kind = (
@@ -360,6 +374,8 @@ def mission_metrics(
         zones_chosen=zones_chosen(decisions),
         ending=ending.kind.value,
         sites_flown_to=ending.sites_flown_to,
+        first_zone_north_m=float(first["north_m"]) if first is not None else nan,
+        first_zone_east_m=float(first["east_m"]) if first is not None else nan,
         overflown_above_gate=down is not None and bool(under[~landing].any()),
     )
 

@@ -132,6 +132,21 @@ def against_previous(
     return rows
 
 
+SAME_POINT_M = 1.0
+"""Two missions chose the same zone (landed on the same point) when its centres (their touchdowns) lie this close."""
+
+
+def same_point(a: FlownMission, b: FlownMission, kind: str) -> bool | None:
+    """Whether two missions of one scene chose the same first zone (``kind`` ``first_zone``) or touched down at the
+    same point (``touchdown``), within :data:`SAME_POINT_M`; None where either has no such point (no zone chosen,
+    no touchdown, a result before metrics version 8)."""
+    pa = (getattr(a, f"{kind}_north_m"), getattr(a, f"{kind}_east_m"))
+    pb = (getattr(b, f"{kind}_north_m"), getattr(b, f"{kind}_east_m"))
+    if not all(v is not None and math.isfinite(v) for v in (*pa, *pb)):
+        return None
+    return math.hypot(pa[0] - pb[0], pa[1] - pb[1]) <= SAME_POINT_M
+
+
 def _flown(spec: CampaignSpec, results: list[dict[str, Any]]) -> list[FlownMission]:
     """The flown missions of stored result lines, completed (:func:`completed`) and read as typed records."""
     return flown_missions(parse_results(completed(spec, results)))
@@ -198,12 +213,18 @@ def build_report(
             landing = paired_mean_difference(  # over the pairs where both touched down
                 [by_run_a[i].time_to_land_s for i in runs], [by_run_b[i].time_to_land_s for i in runs], seed=8
             )
+            same_zone = [same_point(by_run_a[i], by_run_b[i], "first_zone") for i in runs]
+            same_touchdown = [same_point(by_run_a[i], by_run_b[i], "touchdown") for i in runs]
             paired.append(
                 {
                     "condition": condition,
                     "a": a,
                     "b": b,
                     "pairs": test.n_pairs,
+                    "same_first_zone": sum(x is True for x in same_zone),
+                    "first_zone_pairs": sum(x is not None for x in same_zone),
+                    "same_touchdown": sum(x is True for x in same_touchdown),
+                    "touchdown_pairs": sum(x is not None for x in same_touchdown),
                     "success_only_a": test.only_a,
                     "success_only_b": test.only_b,
                     "mcnemar_p": test.p_value,
@@ -380,17 +401,27 @@ def _markdown(spec: CampaignSpec, summary: dict[str, Any], plots: list[str]) -> 
         "## Paired comparisons (same scenes and start poses)",
         "",
         "| condition | a vs b | pairs | only a succeeded | only b succeeded | McNemar p | nearest person a - b (m) "
-        "| time to land a - b (s), both landed |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| time to land a - b (s), both landed | same first zone | same touchdown |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for pair in summary["paired"]:
         diff = _est(pair["nearest_person_mean_difference_m"]).format(2)
         landing = pair.get("time_to_land_difference_s")  # absent in summaries written before it
         landing_text = "" if landing is None else _est(landing).format(1)
+        same = [
+            f"{pair[key]} of {pair[total]}" if total in pair else ""  # absent in summaries written before them
+            for key, total in (("same_first_zone", "first_zone_pairs"), ("same_touchdown", "touchdown_pairs"))
+        ]
         lines.append(
             f"| {pair['condition']} | {pair['a']} vs {pair['b']} | {pair['pairs']} | {pair['success_only_a']} "
-            f"| {pair['success_only_b']} | {pair['mcnemar_p']:.3g} | {diff} | {landing_text} |"
+            f"| {pair['success_only_b']} | {pair['mcnemar_p']:.3g} | {diff} | {landing_text} | {same[0]} | {same[1]} |"
         )
+    lines.append("")
+    lines.append(
+        f"*Same first zone*: the centres of the first zones the two missions committed to lie within "
+        f"{SAME_POINT_M:g} m (pairs where both chose one); *same touchdown*: the touchdowns lie within "
+        f"{SAME_POINT_M:g} m (pairs where both touched down)."
+    )
     lines += _flown_markdown(summary["flown"])
     lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({p})" for p in plots] + [""]
     return "\n".join(lines)
