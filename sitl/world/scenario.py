@@ -78,10 +78,12 @@ class PeopleModel(str, enum.Enum):
     """How people are drawn."""
 
     PROCEDURAL = "procedural"
-    """Cylinders, boxes and spheres per body type (the first SITL's people; its campaigns' records)."""
+    """Cylinders, boxes and spheres per body type (the first SITL's people; its campaigns' records before issue 63):
+    an option."""
     MAKEHUMAN = "makehuman"
     """MakeHuman's CC0 bodies: sex, age, ancestry and shape targets, fitted clothes, hair, skinned to a skeleton,
-    posed from MakeHuman's poses; walking people step through a walk cycle (``sitl/render/bodies``)."""
+    posed from MakeHuman's poses; walking people step through a walk cycle (``sitl/render/bodies``). The default
+    since issue 63: the paper's SITL drew people as UE4 characters."""
 
 
 class Range(StrictModel):
@@ -166,7 +168,11 @@ class ScenarioConfig(StrictModel):
     style: Style = Field(default=Style.ANY, description="Appearance family (datasets: a train/held-out style split).")
     ground: GroundKind = Field(default=GroundKind.PROCEDURAL, description="The park's ground texture.")
     ground_site: RealSite = Field(default=RealSite.CALITERRA, description="Real ground: the site it is painted from.")
-    people: PeopleModel = Field(default=PeopleModel.PROCEDURAL, description="How people are drawn.")
+    people: PeopleModel = Field(
+        default=PeopleModel.MAKEHUMAN,
+        description="How people are drawn: makehuman (bodies, clothes and poses; the default) or procedural (the "
+        "first SITL's shapes, cheaper to draw).",
+    )
     reaction: ReactionConfig = Field(
         default_factory=ReactionConfig, description="People stepping away from the vehicle's warning (off by default)."
     )
