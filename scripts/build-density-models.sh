@@ -245,3 +245,33 @@ for tag in cg cb gb; do FROZEN+=(--model "yolox-$tag-frozen=$RUNS/yolox_${tag}_l
 "$PY" -m models.eval.real --out "$RUNS/frozen_real" "${FROZEN[@]}"
 "$PY" -m models.eval.tradeoff --out "$RUNS/frozen_tradeoff" "${FROZEN[@]}"
 "$PY" -m models.eval.evaluate --data "$DATA/heldout" --out "$RUNS/frozen_heldout" "${FROZEN[@]}"
+
+# 10. Issue 63, the new default: the rounds' recipe (yolox-lite, pretrained layers at a tenth of the head's rate,
+#     section 5) on the real ground of all four sites, NEON's forest and savanna included (`neon`: person-free tree
+#     crowns, shadows, dead crowns, boulders); its transfer measured by leaving one site out in turn (four rounds).
+#     Thresholds by the same rule (section 5); the shipped default also as FP16 for the Jetson, checked against FP32.
+site_round() {  # site_round TAG SITE...: yolox-lite on the real ground of the SITEs, thresholded on the first's
+    local run=yolox63_$1 first=$2 grounds=()
+    shift
+    for site in "$@"; do grounds+=(--real-ground "sitl/world/ground/$site"); done
+    "$PY" -m models.density.train --arch yolox-lite --loss mse --no-distractors --data "$MH" --steps 2000 --batch 8 \
+        --crop 192 --workers 0 --validate-every 500 "${grounds[@]}" --real-negatives 0.3 --composites 0.4 \
+        --backbone-lr-scale 0.1 --out "$RUNS/$run"
+    thresholded_export "$run" "$first" "$MH"
+}
+site_round cgbn caliterra garfield boruszyn neon  # the new default: every real site
+site_round gbn garfield boruszyn neon              # Caliterra held out
+site_round cbn caliterra boruszyn neon             # Garfield held out
+site_round cgn caliterra garfield neon             # Boruszyn held out
+site_round cgb caliterra garfield boruszyn         # NEON held out
+R63=()
+for tag in cgbn gbn cbn cgn cgb; do R63+=(--model "yolox63-$tag=$RUNS/yolox63_$tag/yolox63_$tag.onnx"); done
+"$PY" -m models.eval.real --out models/eval/results/default63_by_site --model slz-lite=models/density/slz_lite.onnx \
+    "${R63[@]}"
+"$PY" -m models.eval.evaluate --data "$DATA/heldout" --out models/eval/results/default63_heldout \
+    --model slz-lite=models/density/slz_lite.onnx "${R63[@]}"
+"$PY" -m models.eval.tradeoff --out models/eval/results/default63_tradeoff --model slz-lite=models/density/slz_lite.onnx \
+    "${R63[@]}"
+cp "$RUNS/yolox63_cgbn/yolox63_cgbn.onnx" "$OUT/slz_yolox.onnx"
+"$PY" -m models.density.quantize --precision fp16 --model "$OUT/slz_yolox.onnx" --out "$OUT/slz_yolox_fp16.onnx"
+"$PY" -m bench.density

@@ -30,11 +30,16 @@ class SelectionPolicyName(str, enum.Enum):
     """Blind baseline: a seeded random point of the search area, ignoring perception (paper's "random")."""
 
 
+DEFAULT_MODEL_FILE = "slz_yolox.onnx"
+"""The default density model's file in models/density/ (issue 63: YOLOX-nano's early layers fine-tuned on rendered
+people and the real ground of four sites; models/density/MODEL_CARD.md)."""
+
+
 def _shipped_model() -> Path:
-    """models/density/slz_lite.onnx of this installation (the repository, or a copy of it such as the Jetson's
+    """models/density/slz_yolox.onnx of this installation (the repository, or a copy of it such as the Jetson's
     /opt/slz/src), absolute; relative to the working directory where the package is installed without it."""
-    beside = Path(os.path.normpath(Path(__file__).absolute().parents[2] / "models" / "density" / "slz_lite.onnx"))
-    return beside if beside.is_file() else Path("models/density/slz_lite.onnx")
+    beside = Path(os.path.normpath(Path(__file__).absolute().parents[2] / "models" / "density" / DEFAULT_MODEL_FILE))
+    return beside if beside.is_file() else Path("models/density") / DEFAULT_MODEL_FILE
 
 
 SHIPPED_MODEL = _shipped_model()
@@ -47,7 +52,8 @@ class ModelConfig(StrictModel):
     path: Path = Field(
         default_factory=lambda: SHIPPED_MODEL,
         description="ONNX file; in a config file, a relative path is taken from the file's folder. Default: the "
-        "shipped slz_lite.onnx (models/density/ of this installation).",
+        "shipped slz_yolox.onnx (models/density/ of this installation); slz_lite.onnx is the synthetic-only model of "
+        "the first tables.",
     )
     providers: list[str] = Field(
         default_factory=lambda: ["CPUExecutionProvider"],
