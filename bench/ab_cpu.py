@@ -8,6 +8,11 @@ mission at a time, so the two keep both cores busy and meet the same slowdowns. 
 warm CPU seconds of each side and their ratio, and saves ``bench/results/ab_cpu.json`` with the machine's context and
 both commits. Each checkout's own ``bench/results/mission_cpu.json`` is put back as it was.
 
+``--spec FILE`` (a path inside the checkouts) flies the missions of another sample spec on both sides instead of
+``paper_table1_roi_sample.yaml``, in checkouts of any age (the spec is set in the benchmark's module before it runs):
+e.g. ``mission_configs/campaigns/paper_table1_roi_sample_makehuman.yaml``, so that both sides fly the same people when
+the before's SITL drew procedural ones by default (issue 63).
+
 ``--sample`` flies the whole 63-mission sample instead (``bench/campaign_sample.py --workers 1`` in both checkouts at
 once, each one core's worth, into two new folders): missions per hour and CPU seconds per mission of each side, and
 whether each mission's metrics are the same on both sides (the sample's own references are still compared by each
@@ -34,6 +39,22 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 RECORD = Path("bench") / "results" / "mission_cpu.json"
+WITH_SPEC = (
+    "import sys; from pathlib import Path; import importlib; module = importlib.import_module(sys.argv[1]); "
+    "module.SPEC = Path(sys.argv[2]).resolve(); sys.argv = [sys.argv[1], *sys.argv[3:]]; "
+    "raise SystemExit(module.main())"
+)
+"""Runs a benchmark module (argv 1) with its sample spec set to argv 2: ``python -c WITH_SPEC MODULE SPEC ARGS...``."""
+
+
+def bench_command(module: str, spec: Path | None, *args: str) -> list[str]:
+    """The command line of ``module`` (``bench.mission_cpu``, ``bench.campaign_sample``) in a checkout, with its
+    sample spec replaced by ``spec`` (relative to the checkout) where given."""
+    if spec is None:
+        return [module.replace(".", "/") + ".py", *args]
+    return ["-c", WITH_SPEC, module, str(spec), *args]
+
+
 SAMPLE_RECORD = Path("bench") / "results" / "campaign_sample_warm.json"
 ROUND_TIMEOUT_S = 3600.0
 
@@ -78,13 +99,13 @@ def fly_together(
                 (checkout / record).write_bytes(original)
 
 
-def sample_together(checkouts: list[Path], out: Path) -> int:
+def sample_together(checkouts: list[Path], out: Path, spec: Path | None = None) -> int:
     """The 63-mission sample in both checkouts at once, one worker each; both sides' throughput and whether every
-    mission flew the same (``--sample``)."""
+    mission flew the same (``--sample``; ``spec``: another sample spec, relative to the checkouts)."""
     folders = [Path(tempfile.mkdtemp(prefix=f"ab-sample-{side}-")) for side in ("before", "after")]
-    commands = [["bench/campaign_sample.py", "--workers", "1", "--out", str(f)] for f in folders]
+    commands = [bench_command("bench.campaign_sample", spec, "--workers", "1", "--out", str(f)) for f in folders]
     before, after = fly_together(checkouts, commands, SAMPLE_RECORD)
-    policies = load_campaign_spec(SPEC).policies()
+    policies = load_campaign_spec(SPEC if spec is None else checkouts[1] / spec).policies()
     flown = [{r["mission_id"]: r for r in read_results(f / "results.jsonl")} for f in folders]
     differing = {
         mission_id: diff
@@ -100,6 +121,7 @@ def sample_together(checkouts: list[Path], out: Path) -> int:
         "after": {"checkout": str(checkouts[1]), "commit": commit_of(checkouts[1])}
         | {k: after[k] for k in side_keys}
         | {"out": str(folders[1])},
+        "spec": str(spec or SPEC.relative_to(REPO_ROOT)),
         "missions_per_hour_ratio": round(after["missions_per_hour"] / before["missions_per_hour"], 3),
         "cpu_s_per_mission_ratio": round(after["cpu_s_per_mission"] / before["cpu_s_per_mission"], 3),
         "same_in_both": len(flown[0]) - len(differing),
@@ -117,15 +139,16 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--sample", action="store_true", help="fly the 63-mission sample in both (one worker each)")
     parser.add_argument("--out", type=Path, help="report (default bench/results/ab_cpu.json, ab_sample.json)")
+    parser.add_argument("--spec", type=Path, help="another sample spec, a path inside both checkouts")
     args = parser.parse_args()
     checkouts = [args.before.resolve(), args.after.resolve()]
     results = REPO_ROOT / "bench" / "results"
     if args.sample:
-        return sample_together(checkouts, args.out or results / "ab_sample.json")
+        return sample_together(checkouts, args.out or results / "ab_sample.json", args.spec)
     args.out = args.out or results / "ab_cpu.json"
     rounds = []
     for number in range(1, args.rounds + 1):
-        before, after = fly_together(checkouts)
+        before, after = fly_together(checkouts, [bench_command("bench.mission_cpu", args.spec) for _ in checkouts])
         missions = {}
         for mission, b in before["missions"].items():
             a = after["missions"][mission]
@@ -157,6 +180,7 @@ def main() -> int:
         "machine": machine_context(),
         "before": {"checkout": str(checkouts[0]), "commit": commit_of(checkouts[0])},
         "after": {"checkout": str(checkouts[1]), "commit": commit_of(checkouts[1])},
+        "spec": str(args.spec or SPEC.relative_to(REPO_ROOT)),
         "rounds": rounds,
         "warm_cpu_s_per_mission": [
             round(sum(all_before) / len(all_before), 2),
