@@ -118,7 +118,12 @@ def test_packing_the_assets_again_gives_the_shipped_library(tmp_path: Path) -> N
     with np.load(out) as fresh, np.load(PACK_PATH) as shipped:
         assert sorted(fresh.files) == sorted(shipped.files)
         for name in fresh.files:
-            np.testing.assert_array_equal(fresh[name], shipped[name], err_msg=name)
+            # The same library, not the same bytes: floats computed from the assets may take other SIMD paths on
+            # another CPU (issue 65), so they agree to a few units in the last place; everything else exactly.
+            if np.issubdtype(fresh[name].dtype, np.floating):
+                np.testing.assert_allclose(fresh[name], shipped[name], rtol=1e-5, atol=1e-6, err_msg=name)
+            else:
+                np.testing.assert_array_equal(fresh[name], shipped[name], err_msg=name)
 
 
 # -- figures -------------------------------------------------------------------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from pydantic import ValidationError
@@ -236,4 +237,43 @@ def test_deriving_a_site_again_gives_the_shipped_files(tmp_path: Path) -> None:
     assert isinstance(frames, list)
     for frame in frames:
         name = f"{frame['name']}.jpg"
-        assert (tmp_path / name).read_bytes() == (shipped / name).read_bytes(), name
+        assert_same_picture(tmp_path / name, shipped / name)
+
+
+DERIVED_MAX_DN = 8
+"""Re-derived frames may differ from the shipped ones by this many grey levels per pixel at most: OpenCV's resize and
+JPEG codec take other SIMD paths on other CPUs (issue 65: up to 4 DN on an AMD EPYC host, mean 0.0001), so the same
+content is checked, not the same bytes."""
+DERIVED_MEAN_DN = 0.05
+
+
+def assert_same_picture(derived: Path, shipped: Path) -> None:
+    """The same picture within :data:`DERIVED_MAX_DN` per pixel and :data:`DERIVED_MEAN_DN` on average."""
+    a, b = cv2.imread(str(derived)), cv2.imread(str(shipped))
+    assert a is not None, derived
+    assert b is not None, shipped
+    assert a.shape == b.shape, derived.name
+    diff = np.abs(a.astype(np.int16) - b.astype(np.int16))
+    assert int(diff.max()) <= DERIVED_MAX_DN, f"{derived.name}: {int(diff.max())} DN"
+    assert float(diff.mean()) <= DERIVED_MEAN_DN, f"{derived.name}: mean {float(diff.mean()):.4f} DN"
+
+
+@pytest.mark.skipif(not (DATASETS / "neon_trees").is_dir(), reason="../shared/datasets/neon_trees is not here")
+def test_deriving_neon_again_gives_the_shipped_frames(tmp_path: Path) -> None:
+    index = prepare(SITES["neon"], DATASETS / "neon_trees" / "images", tmp_path)
+    shipped = GROUND_ROOT / "neon"
+    assert index == json.loads((shipped / "index.json").read_text())
+    frames = index["frames"]
+    assert isinstance(frames, list)
+    for frame in frames:
+        assert_same_picture(tmp_path / f"{frame['name']}.jpg", shipped / f"{frame['name']}.jpg")
+
+
+def test_a_picture_changed_by_more_than_the_tolerance_is_not_the_same(tmp_path: Path) -> None:
+    image = np.full((40, 60, 3), 120, np.uint8)
+    cv2.imwrite(str(tmp_path / "a.png"), image)
+    image[10, 10] = 120 + DERIVED_MAX_DN + 1
+    cv2.imwrite(str(tmp_path / "b.png"), image)
+    assert_same_picture(tmp_path / "a.png", tmp_path / "a.png")
+    with pytest.raises(AssertionError, match="DN"):
+        assert_same_picture(tmp_path / "a.png", tmp_path / "b.png")
