@@ -31,12 +31,13 @@ that runs at any size runs the shrunk frame cropped (``companion.perception.dens
 
 
 VARIANTS = {
-    "slz-lite (default)": "models/density/slz_lite.onnx",
-    "slz-lite int8": "models/density/slz_lite_int8.onnx",
-    "slz-ccnn (paper)": "models/density/slz_ccnn.onnx",
-    "slz-lite-wide-real": "models/density/slz_lite_wide_real.onnx",
-    "yolox-cb (issue 52 candidate)": "models/density/candidates/yolox_cb.onnx",
-    "wide-cb (issue 52 candidate)": "models/density/candidates/wide_cb.onnx",
+    "slz-yolox (default)": "models/density/slz_yolox.onnx",
+    "slz-yolox fp16": "models/density/slz_yolox_fp16.onnx",
+    "slz-lite (synthetic-only option)": "models/density/slz_lite.onnx",
+    "slz-lite int8 (history)": "models/density/slz_lite_int8.onnx",
+    "slz-ccnn (paper, history)": "models/density/slz_ccnn.onnx",
+    "slz-lite-wide-real (history)": "models/density/slz_lite_wide_real.onnx",
+    "yolox-cb (issue 52 candidate, history)": "models/density/candidates/yolox_cb.onnx",
     "blob placeholder": "models/blob_detector/blob_detector.onnx",
 }
 
