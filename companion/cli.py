@@ -73,7 +73,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     unvalidated = validation is None or not validation.real_imagery
     if unvalidated and config.mode is OperatingMode.FLY and config.simulator.lockstep_url is None:
         logger.warning(
-            "%s is NOT validated for real imagery: %s",
+            "%s is NOT validated for flight over real people: %s",
             config.perception.model.path.name,
             validation.summary if validation is not None else "no validation record for this model file",
         )

@@ -47,7 +47,7 @@ def test_the_default_config_flies_the_model_trained_on_every_real_site() -> None
     metadata = read_metadata(SHIPPED["slz_yolox"])
     training = json.loads(metadata[TRAINING_KEY])
     assert training["architecture"] == "yolox-lite"
-    assert set(training["real_ground_sites"]) == {"caliterra", "garfield", "boruszyn", "neon"}
+    assert set(training["real_ground_sites"]) == {"caliterra", "garfield", "boruszyn"}  # NEON held out
     assert json.loads(metadata[CONTRACT_KEY])["output_stride"] == 4
     assert json.loads(read_metadata(SHIPPED["slz_yolox_fp16"])[TRAINING_KEY]) == training  # the same model in FP16
 
@@ -56,9 +56,9 @@ def test_the_fp16_copy_gives_the_fp32_maps_within_a_small_part_of_the_threshold(
     fp32, fp16 = OnnxDensityModel(SHIPPED["slz_yolox"]), OnnxDensityModel(SHIPPED["slz_yolox_fp16"])
     threshold = OccupancyConfig().density_threshold
     for path in sorted(heldout_frames.glob("*[0-9].png")):
-        frame = cv2.imread(str(path))
+        frame = np.asarray(cv2.imread(str(path)), np.uint8)
         a, b = fp32.predict(frame).values, fp16.predict(frame).values
-        assert float(np.abs(a - b).max()) < 0.5 * threshold, path.name  # measured: 0.0028 people per cell at most
+        assert float(np.abs(a - b).max()) < 0.5 * threshold, path.name  # measured: 0.0009 people per cell at most
         assert float(((a >= threshold) != (b >= threshold)).mean()) < 0.002, path.name  # cells that change side
 
 

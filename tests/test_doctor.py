@@ -84,8 +84,10 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert ok.returncode == 0, ok.stdout + ok.stderr[-2000:]
     assert set(checks) == {"disk", "model", "validation", "link", "clock", "camera", "failsafe"}
     assert all(line.startswith("PASS") for name, line in checks.items() if name != "validation"), checks
-    assert checks["validation"].startswith("WARN validation: slz_lite.onnx is NOT validated for real imagery")
-    assert "do not fly it over real people" in checks["validation"]
+    assert checks["validation"].startswith(
+        "WARN validation: slz_yolox.onnx is NOT validated for flight over real people"
+    )
+    assert "fly a dry run first" in checks["validation"]
     assert "Retrying failed" not in ok.stdout + ok.stderr  # no parameter asked for by a name the autopilot lacks
     assert "CPUExecutionProvider" in checks["model"]
     assert "LOCAL_POSITION_NED" in checks["link"]
@@ -119,4 +121,6 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert verdict.startswith("NOT READY: validation, link"), verdict
     assert verdict.endswith("failsafe not checked"), verdict
     assert checks["model"].startswith("PASS")
-    assert checks["validation"].startswith("FAIL validation: slz_lite.onnx is NOT validated for real imagery")
+    assert checks["validation"].startswith(
+        "FAIL validation: slz_yolox.onnx is NOT validated for flight over real people"
+    )

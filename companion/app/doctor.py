@@ -6,7 +6,8 @@ The checks use the mission config the flight will use, and the same classes ``sl
 - **model**: the density model loads with the configured execution providers (the one chosen is named, a fallback
   is flagged) and runs at least at the camera's rate;
 - **validation**: what the model is validated on (``companion.perception.model_validation``): WARN for a model not
-  validated for real imagery (every shipped one), FAIL with ``perception.model.require_real_imagery_validation``;
+  validated for flight over real people (every shipped one), FAIL with
+  ``perception.model.require_real_imagery_validation``;
 - **link**: an autopilot answers on ``vehicle.url``, and position, attitude, flight mode (heartbeat), armed and
   in-air state all stream, position and attitude at a usable rate;
 - **clock**: the vehicle clock is synchronised from the telemetry stamps, and evenly (95 % of the stamps within
@@ -158,14 +159,14 @@ def check_model(config: MissionConfig, min_rate_hz: float, runs: int = 20) -> Ch
 
 
 def check_validation(config: MissionConfig) -> CheckResult:
-    """Whether the model is validated for real imagery: WARN when not (FAIL when the config requires it)."""
+    """Whether the model is validated for flight over real people: WARN when not (FAIL when the config requires it)."""
     m = config.perception.model
     record = validation_of(m.path)
     if record is not None and record.real_imagery:
         return CheckResult("validation", Status.PASS, f"{m.path.name}: {record.summary}")
     what = record.summary if record is not None else "no validation record for this model file (not a shipped model)"
     status = Status.FAIL if m.require_real_imagery_validation else Status.WARN
-    return CheckResult("validation", status, f"{m.path.name} is NOT validated for real imagery: {what}")
+    return CheckResult("validation", status, f"{m.path.name} is NOT validated for flight over real people: {what}")
 
 
 async def check_link(link: MavsdkVehicleLink, config: MissionConfig, limits: DoctorLimits) -> list[CheckResult]:

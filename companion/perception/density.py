@@ -258,13 +258,24 @@ _WINDOW_OPS = {
 
 
 def _constant_values(graph: Any) -> dict[str, npt.NDArray[Any]]:
-    """The graph's initializers and ``Constant`` outputs, by tensor name (shapes, slice bounds, resize scales)."""
-    from onnx import numpy_helper
+    """The graph's initializers and ``Constant`` outputs, by tensor name (shapes, slice bounds, resize scales), and
+    the ``Cast`` of any of them (a float16 export casts its float constants back to float32 where they feed an
+    operator it kept in float32, a resize's scales)."""
+    from onnx import helper, numpy_helper
 
     values = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
     for node in graph.node:
         if node.op_type == "Constant" and node.attribute and node.attribute[0].name == "value":
             values[node.output[0]] = numpy_helper.to_array(node.attribute[0].t)
+    casts = [n for n in graph.node if n.op_type == "Cast" and n.attribute]
+    changed = True
+    while changed:  # a cast of a cast of a constant, in any order in the file
+        changed = False
+        for node in casts:
+            if node.input[0] in values and node.output[0] not in values:
+                to = {a.name: a for a in node.attribute}["to"].i
+                values[node.output[0]] = values[node.input[0]].astype(helper.tensor_dtype_to_np_dtype(to))
+                changed = True
     return values
 
 
