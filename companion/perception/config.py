@@ -32,7 +32,7 @@ class SelectionPolicyName(str, enum.Enum):
 
 DEFAULT_MODEL_FILE = "slz_yolox.onnx"
 """The default density model's file in models/density/ (issue 63: YOLOX-nano's early layers fine-tuned on rendered
-people and the real ground of four sites; models/density/MODEL_CARD.md)."""
+people and the real ground of three sites; models/density/MODEL_CARD.md)."""
 
 
 def _shipped_model() -> Path:
@@ -81,8 +81,9 @@ class ModelConfig(StrictModel):
     )
     require_real_imagery_validation: bool = Field(
         default=False,
-        description="slz doctor fails (instead of warning) when the model is not validated for real imagery (no "
-        "shipped model is: companion/perception/model_validation.py). Set it on a vehicle that flies over people.",
+        description="slz doctor fails (instead of warning) when the model is not validated for flight over real "
+        "people (no shipped model is: companion/perception/model_validation.py). Set it on a vehicle that flies over "
+        "people.",
     )
     crop_shrunk_frames: bool = Field(
         default=True,
@@ -114,6 +115,118 @@ class OccupancyConfig(StrictModel):
         description="Safety margin grown around occupied cells, metres on the head plane, converted to pixels "
         "with the frame's finest ground sampling distance.",
     )
+
+
+class MotionHeightConfig(StrictModel):
+    """Height above the ground from the camera's own motion (issue 64; ``companion.perception.motion_height``): the
+    parallax of what stands on the ground between the newest frame and an earlier one taken from elsewhere."""
+
+    enabled: bool = Field(
+        default=False,
+        description="Measure the height map at every frame (its cost: bench/motion_height.py) and record it.",
+    )
+    fuse: bool = Field(
+        default=False,
+        description="Cells measured to stand above the ground (or to move against it) are occupied, whatever the "
+        "density says. Needs enabled.",
+    )
+    max_age_s: float = Field(
+        default=2.0, gt=0.0, le=30.0, description="The earlier frame is at most this old (vehicle clock)."
+    )
+    target_parallax_px_per_m: float = Field(
+        default=2.0,
+        gt=0.0,
+        le=100.0,
+        description="The earlier frame is the newest one whose baseline shifts a point 1 m above the ground by at "
+        "least this many pixels against the ground where the view shifts most (else the one that shifts it most).",
+    )
+    min_parallax_px_per_m: float = Field(
+        default=0.5,
+        gt=0.0,
+        le=100.0,
+        description="Below this (hovering, the walker gate) there is no usable baseline: the map is unknown, not "
+        "flat. Where a baseline shifts only part of the view (a descent: not its centre), the rest is unknown too.",
+    )
+    plane_scale: float = Field(
+        default=0.5,
+        gt=0.05,
+        le=1.0,
+        description="Frames are shrunk by this before they are aligned on the ground (the poses' errors).",
+    )
+    min_ground_share: float = Field(
+        default=0.3,
+        ge=0.0,
+        le=1.0,
+        description="At least this share of the frame must move with the shift that aligns the two frames on the "
+        "ground (within a pixel); less, they show no textured ground in common: the map is unknown.",
+    )
+    max_plane_correction_px: float = Field(
+        default=48.0,
+        gt=0.0,
+        le=1000.0,
+        description="The ground's homography fitted to the flow may move the image corners this far from the "
+        "poses' (attitude and position errors); farther, the fitted plane is not the ground: the map is unknown.",
+    )
+    sweep_scale: float = Field(
+        default=0.5, gt=0.05, le=1.0, description="Frames are shrunk by this before the plane sweep."
+    )
+    sweep_shifts_px: list[float] = Field(
+        default_factory=lambda: [1.0, 2.0, 3.0, 4.0, 6.0, 9.0, 14.0, 20.0, 28.0],
+        min_length=1,
+        description="The planes swept above the ground: those whose points shift against the ground by these many "
+        "full-frame pixels where the view shifts most (their heights follow from the baseline and the altitude).",
+    )
+    window_px: int = Field(default=3, ge=1, le=31, description="Side of the matching window, sweep pixels.")
+    raised_m: float = Field(
+        default=0.5,
+        gt=0.0,
+        le=20.0,
+        description="A pixel stands above the ground when a plane at least this high explains it better than the "
+        "ground (a cell, when enough of its pixels do); it is ground when the ground explains it better than every "
+        "plane this high.",
+    )
+    min_gain: float = Field(
+        default=2.0,
+        gt=0.0,
+        le=255.0,
+        description="A plane explains a pixel better than another when its matching cost (mean absolute grey "
+        "difference over the window) is lower by at least this, or k_noise times the frame's median best cost if "
+        "more.",
+    )
+    k_noise: float = Field(default=1.0, gt=0.0, le=20.0, description="See min_gain.")
+    registration_px: float = Field(
+        default=0.5,
+        ge=0.0,
+        le=10.0,
+        description="How far the ground may still be misaligned after the correction (full-frame pixels): a plane "
+        "must also beat another by what that misalignment makes of the pixel's gradient (edges, shadows).",
+    )
+    k_moving: float = Field(
+        default=4.0,
+        gt=0.0,
+        le=50.0,
+        description="A pixel no plane explains (its best cost and the ground's at least this many times the gain "
+        "threshold) moves against the ground: a walker.",
+    )
+    min_cell_share: float = Field(
+        default=0.125,
+        gt=0.0,
+        le=1.0,
+        description="A cell stands above the ground (or moves) when this share of its pixels do.",
+    )
+
+    @model_validator(mode="after")
+    def _parallax_order(self) -> MotionHeightConfig:
+        if self.min_parallax_px_per_m > self.target_parallax_px_per_m:
+            raise ValueError(
+                f"min_parallax_px_per_m ({self.min_parallax_px_per_m}) must be <= target_parallax_px_per_m "
+                f"({self.target_parallax_px_per_m})"
+            )
+        if self.fuse and not self.enabled:
+            raise ValueError("motion_height.fuse needs motion_height.enabled")
+        if sorted(self.sweep_shifts_px) != self.sweep_shifts_px or self.sweep_shifts_px[0] <= 0:
+            raise ValueError(f"sweep_shifts_px must be positive and increasing, got {self.sweep_shifts_px}")
+        return self
 
 
 class ProjectionConfig(StrictModel):
@@ -248,6 +361,7 @@ class PerceptionConfig(StrictModel):
     zones: ZoneConfig = Field(default_factory=ZoneConfig)
     tracking: TrackingConfig = Field(default_factory=TrackingConfig)
     selection: SelectionConfig = Field(default_factory=SelectionConfig)
+    motion_height: MotionHeightConfig = Field(default_factory=MotionHeightConfig)
 
     @model_validator(mode="after")
     def _tracks_vs_proposals(self) -> PerceptionConfig:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from companion.perception.config import OccupancyConfig
 from companion.perception.density import DensityMap
@@ -47,7 +48,9 @@ class OccupancyMapper:
         cell_m = gsd_m_per_px * min(density.stride_x, density.stride_y)
         return math.ceil(self.config.dilation_m / cell_m - 1e-9)
 
-    def compute(self, density: DensityMap, gsd_m_per_px: float) -> OccupancyImage:
+    def compute(
+        self, density: DensityMap, gsd_m_per_px: float, also_occupied: npt.NDArray[np.bool_] | None = None
+    ) -> OccupancyImage:
         """Occupancy map of one density map.
 
         Parameters
@@ -56,12 +59,21 @@ class OccupancyMapper:
             Output of the density model.
         gsd_m_per_px : float
             Finest ground sampling distance of the frame on the head plane, metres per frame pixel.
+        also_occupied : ndarray, shape of the density map, bool, optional
+            Cells occupied whatever the density says (what the camera's motion shows standing above the ground or
+            moving: ``companion.perception.motion_height``); dilated like the rest.
         """
         d = density.values
         finite = np.isfinite(d)
         peak = float(d[finite].max()) if finite.any() else 0.0
         threshold = max(self.config.density_threshold, self.config.relative_threshold * peak)
         occupied = ~(d < threshold)  # NaN compares False: occupied
+        if also_occupied is not None:
+            if also_occupied.shape != d.shape:
+                raise PerceptionError(
+                    "occupancy.compute", f"also_occupied is {also_occupied.shape}, the density map {d.shape}"
+                )
+            occupied = occupied | also_occupied
         values = np.where(occupied, np.uint8(OCCUPIED), np.uint8(FREE)).astype(np.uint8)
         radius = self.dilation_radius_px(density, gsd_m_per_px)
         if radius > 0 and occupied.any():

@@ -25,6 +25,7 @@ from companion.perception.density import (
 )
 from companion.perception.errors import PerceptionError
 from companion.perception.lens import LensDistortion
+from companion.perception.motion_height import HeightMap, MotionHeight
 from companion.perception.occupancy import OccupancyImage, OccupancyMapper
 from companion.perception.projection import HeadPlaneOccupancy, HeadPlaneProjector
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target, make_policy
@@ -34,6 +35,7 @@ from companion.perception.zones import Zone, ZoneFinder
 ResultT = TypeVar("ResultT")
 
 STAGES = ("density", "occupancy", "projection", "zones", "tracking", "selection")
+"""The stages every frame runs (with ``perception.motion_height.enabled``, also ``height``, after the density)."""
 
 
 def camera_from_config(config: CameraConfig) -> tuple[PinholeCamera, F64Array]:
@@ -76,7 +78,9 @@ class FrameResult:
     target : Target or None
         The selected landing target.
     timings_ms : dict
-        Wall time of each stage (``STAGES``), milliseconds.
+        Wall time of each stage (``STAGES``, and ``height`` when measured), milliseconds.
+    height : HeightMap or None
+        Height above the ground from the camera's motion (``perception.motion_height``), None when not measured.
     """
 
     t_s: float
@@ -88,6 +92,7 @@ class FrameResult:
     tracks: list[TrackedZone]
     target: Target | None
     timings_ms: dict[str, float] = field(default_factory=dict)
+    height: HeightMap | None = None
 
 
 class SlzPipeline:
@@ -103,6 +108,8 @@ class SlzPipeline:
         policy: SelectionPolicy,
         min_gsd_m_per_px: float = 0.0,
         lens: LensDistortion | None = None,
+        motion_height: MotionHeight | None = None,
+        fuse_height: bool = False,
     ) -> None:
         if not (math.isfinite(min_gsd_m_per_px) and min_gsd_m_per_px >= 0.0):
             raise PerceptionError("pipeline", f"min_gsd_m_per_px must be >= 0, got {min_gsd_m_per_px}")
@@ -115,6 +122,10 @@ class SlzPipeline:
         self.policy = policy
         self.lens = lens
         """The camera's lens: each frame is undistorted onto the pinhole image first (None: no lens)."""
+        self.motion_height = motion_height
+        """Height above the ground from the camera's motion, measured at every frame (None: not measured)."""
+        self.fuse_height = fuse_height and motion_height is not None
+        """Cells the height map finds standing above the ground or moving are occupied, whatever the density says."""
 
     @classmethod
     def from_config(
@@ -138,12 +149,18 @@ class SlzPipeline:
             policy=make_policy(config.selection, config.zones.landing_area_ne_m),
             min_gsd_m_per_px=config.model.min_gsd_m_per_px,
             lens=LensDistortion.from_coefficients(camera, config.camera.distortion),
+            motion_height=MotionHeight(camera, T_body_camera, config.motion_height)
+            if config.motion_height.enabled
+            else None,
+            fuse_height=config.motion_height.fuse,
         )
 
     def reset(self) -> None:
-        """Start a new mission: no tracks, fresh policy state."""
+        """Start a new mission: no tracks, fresh policy state, no earlier frames."""
         self.tracker.reset()
         self.policy.reset()
+        if self.motion_height is not None:
+            self.motion_height.reset()
 
     def process(
         self, frame_bgr: U8Image, pose: Pose, t_s: float, area_centre_ne_m: tuple[float, float] | None = None
@@ -176,7 +193,11 @@ class SlzPipeline:
         gsd = self.projector.finest_gsd_m_per_px(pose)
         scale = input_scale(gsd, self.min_gsd_m_per_px)
         density = _timed(timings, "density", lambda: predict_downscaled(self.density_model, frame_bgr, scale))
-        return self._after_density(density, pose, t_s, area_centre_ne_m, timings, gsd)
+        height = None
+        estimator = self.motion_height
+        if estimator is not None:
+            height = _timed(timings, "height", lambda: estimator.update(frame_bgr, pose, t_s))
+        return self._after_density(density, pose, t_s, area_centre_ne_m, timings, gsd, height)
 
     def sees_head_plane(self, pose: Pose) -> bool:
         """A frame taken from ``pose`` can be read: the camera sees the head plane (the vehicle is high enough
@@ -206,12 +227,14 @@ class SlzPipeline:
         area_centre_ne_m: tuple[float, float] | None,
         timings: dict[str, float],
         gsd_m_per_px: float | None = None,
+        height: HeightMap | None = None,
     ) -> FrameResult:
         projector = self.projector
 
         def occupancy_stage() -> OccupancyImage:
             gsd = projector.finest_gsd_m_per_px(pose) if gsd_m_per_px is None else gsd_m_per_px
-            return self.occupancy.compute(density, gsd)
+            standing = height.resampled(density.values.shape) if height is not None and self.fuse_height else None
+            return self.occupancy.compute(density, gsd, also_occupied=standing)
 
         occupancy = _timed(timings, "occupancy", occupancy_stage)
         density_camera = projector.camera.scaled(1.0 / density.stride_x, 1.0 / density.stride_y)
@@ -221,7 +244,7 @@ class SlzPipeline:
         position = pose.position_ned_m
         context = SelectionContext(t_s, float(position[0]), float(position[1]), area_centre_ne_m)
         target = _timed(timings, "selection", lambda: self.policy.select(tracks, context))
-        return FrameResult(t_s, pose, density, occupancy, head_plane, zones, tracks, target, timings)
+        return FrameResult(t_s, pose, density, occupancy, head_plane, zones, tracks, target, timings, height)
 
 
 def _timed(timings: dict[str, float], stage: str, fn: Callable[[], ResultT]) -> ResultT:
