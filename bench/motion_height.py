@@ -9,8 +9,10 @@ The renderer's depth gives the true height of every pixel. For the last frame of
 (the cells within a person's outline), whether geometry alone flagged them above the ground or moving (standing people
 taller than 1.5 m, walking, sitting), the share of open ground wrongly flagged (cells farther than 1 m from anything
 taller than 0.2 m), the median absolute height error of the people's and objects' cells the map measured, and the
-share of cells measured at all; and the median time of one update (one thread). Prints a table and saves JSON with the
-machine's context.
+share of cells measured at all; per pose, the share of people the occupancy the zones are built from misses (no cell
+of their outline occupied), from the shipped density model alone and fused with the height map, and the open ground
+each occupies; and the median time of one update (one thread). Prints a table and saves JSON with the machine's
+context.
 """
 
 from __future__ import annotations
@@ -28,8 +30,16 @@ import numpy.typing as npt
 
 from bench.machine import machine_context, save_report
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
-from companion.perception.config import MotionHeightConfig
+from companion.perception.config import (
+    ModelConfig,
+    MotionHeightConfig,
+    OccupancyConfig,
+    ProjectionConfig,
+)
+from companion.perception.density import OnnxDensityModel, input_scale, predict_downscaled
 from companion.perception.motion_height import CELL_PX, HeightMap, HeightState, MotionHeight
+from companion.perception.occupancy import OccupancyMapper
+from companion.perception.projection import HeadPlaneProjector
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import BodyType, Crowd
 from sitl.world.park import Park
@@ -58,6 +68,12 @@ class FlightScore:
     objects_flagged: int = 0
     update_ms: list[float] = field(default_factory=list)
     parallax_px_per_m: float = 0.0
+    # Found by the occupancy the zones are built from (a cell of the person's outline occupied): the density map
+    # alone, and fused with the height map. By pose.
+    density_found: dict[str, list[bool]] = field(default_factory=lambda: {"standing": [], "walking": [], "sitting": []})
+    fused_found: dict[str, list[bool]] = field(default_factory=lambda: {"standing": [], "walking": [], "sitting": []})
+    density_ground_occupied: int = 0
+    fused_ground_occupied: int = 0
 
 
 def true_heights(view_depth: npt.NDArray[np.float32], pose: Pose, camera: PinholeCamera, T_body_camera: Any) -> Any:
@@ -75,8 +91,32 @@ def _cells_max(values: Any, shape: tuple[int, int]) -> Any:
     return np.nanmax(values[: rows * CELL_PX, : cols * CELL_PX].reshape(rows, CELL_PX, cols, CELL_PX), axis=(1, 3))
 
 
+def occupancy_cells(
+    model: OnnxDensityModel, frame_bgr: Any, pose: Pose, camera: PinholeCamera, T_body_camera: Any, height: HeightMap
+) -> tuple[Any, Any]:
+    """The occupied cells (the height map's grid) of a frame as the companion makes them: density alone, and fused."""
+    projector = HeadPlaneProjector(camera, T_body_camera, ProjectionConfig())
+    gsd = projector.finest_gsd_m_per_px(pose)
+    density = predict_downscaled(model, frame_bgr, input_scale(gsd, ModelConfig().min_gsd_m_per_px))
+    mapper = OccupancyMapper(OccupancyConfig())
+    alone = mapper.compute(density, gsd).values == 0
+    fused = mapper.compute(density, gsd, also_occupied=height.resampled(density.values.shape)).values == 0
+    size = (height.state.shape[1], height.state.shape[0])
+
+    def on_grid(mask: Any) -> Any:
+        return cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+
+    return on_grid(alone), on_grid(fused)
+
+
 def score(
-    kind: str, renderer: WorldRenderer, camera: PinholeCamera, T_body_camera: Any, poses: list[Pose], config: Any
+    kind: str,
+    renderer: WorldRenderer,
+    camera: PinholeCamera,
+    T_body_camera: Any,
+    poses: list[Pose],
+    config: Any,
+    model: OnnxDensityModel | None = None,
 ) -> FlightScore:
     """Fly ``poses`` (one per frame at 10 Hz) and score the last frame's height map."""
     estimator = MotionHeight(camera, T_body_camera, config)
@@ -106,6 +146,12 @@ def score(
     result.ground_cells = int(open_ground.sum())
     result.ground_flagged = int((flagged & open_ground).sum())
     result.ground_measured = int((measured & open_ground).sum())
+    if model is not None:
+        alone, fused = occupancy_cells(model, view.image_bgr, poses[-1], camera, T_body_camera, last)
+        result.density_ground_occupied = int((alone & open_ground).sum())
+        result.fused_ground_occupied = int((fused & open_ground).sum())
+    else:
+        alone = fused = np.zeros(shape, bool)
     objects = (np.nan_to_num(tall, nan=0.0) > 0.5) & ~person_cells
     result.objects_cells = int(objects.sum())
     result.objects_flagged = int((flagged & objects).sum())
@@ -130,11 +176,17 @@ def score(
             continue  # hidden (under a crown)
         hit = bool(flagged[r0:r1, c0:c1][outline].any())
         if crowd.moving[i]:
-            result.walking.append(hit)
+            pose_name = "walking"
         elif crowd.appearances[i].body in SITTING:
-            result.sitting.append(hit)
+            pose_name = "sitting"
         elif renderer.head_height_m(i) >= 1.4:  # taller than about 1.5 m
-            result.standing.append(hit)
+            pose_name = "standing"
+        else:
+            continue
+        getattr(result, pose_name).append(hit)
+        if model is not None:
+            result.density_found[pose_name].append(bool(alone[r0:r1, c0:c1][outline].any()))
+            result.fused_found[pose_name].append(bool(fused[r0:r1, c0:c1][outline].any()))
     return result
 
 
@@ -169,6 +221,9 @@ def summarise(scores: list[FlightScore]) -> dict[str, Any]:
     def share(values: list[bool]) -> float | None:
         return round(sum(values) / len(values), 3) if values else None
 
+    def miss(values: list[bool]) -> float | None:
+        return round(1.0 - sum(values) / len(values), 3) if values else None
+
     out: dict[str, Any] = {}
     for kind in dict.fromkeys(s.kind for s in scores):
         group = [s for s in scores if s.kind == kind]
@@ -194,6 +249,13 @@ def summarise(scores: list[FlightScore]) -> dict[str, Any]:
             "median_abs_error_people_m": round(statistics.median(people_errors), 2) if people_errors else None,
             "median_abs_error_objects_m": round(statistics.median(object_errors), 2) if object_errors else None,
             "parallax_px_per_m": round(statistics.median(s.parallax_px_per_m for s in group), 2),
+            **{
+                f"{which}_miss_{pose}": miss([x for s in group for x in getattr(s, f"{which}_found")[pose]])
+                for which in ("density", "fused")
+                for pose in ("standing", "walking", "sitting")
+            },
+            "density_open_ground_occupied": round(sum(s.density_ground_occupied for s in group) / max(ground, 1), 4),
+            "fused_open_ground_occupied": round(sum(s.fused_ground_occupied for s in group) / max(ground, 1), 4),
             "update_ms_median": round(statistics.median(flat("update_ms")[1:]), 2),
         }
     return out
@@ -210,6 +272,7 @@ def main() -> int:
     camera = PinholeCamera.from_hfov(640, 480, 90.0)
     T_body_camera = T_body_camera_from_mount()
     config = MotionHeightConfig(enabled=True)
+    model = OnnxDensityModel(REPO_ROOT / "models" / "density" / "slz_yolox.onnx")
     scores = []
     for seed in args.seeds:
         scenario = ScenarioConfig(people_min=80, people_max=100, moving_fraction=0.2)
@@ -217,7 +280,7 @@ def main() -> int:
         for kind, poses in flights((15.0, 20.0, 30.0), args.speed_mps, args.seconds):
             renderer = WorldRenderer(Park(seed), Crowd(scenario, seed), camera, T_body_camera, light)
             try:
-                scores.append(score(kind, renderer, camera, T_body_camera, poses, config))
+                scores.append(score(kind, renderer, camera, T_body_camera, poses, config, model))
             finally:
                 renderer.close()
     summary = summarise(scores)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import signal
 import sys
 from collections.abc import Callable, Sequence
@@ -50,7 +51,6 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     import asyncio
     import datetime
     import hashlib
-    import math
 
     from companion.app.flight import FlightApp
     from companion.app.flight_log import SCHEMA_VERSION, RecordKind
@@ -204,6 +204,49 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0 if report.identical else 1
 
 
+def _positive(value: float | None, flag: str) -> str | None:
+    """Why ``value`` is not a finite positive number (None when it is, or not given)."""
+    if value is None or (math.isfinite(value) and value > 0):
+        return None
+    return f"{flag} must be a positive number, got {value:g}"
+
+
+def _cmd_height_map(args: argparse.Namespace) -> int:
+    from companion.app.height_pair import HeightPairError, run
+
+    for value, flag in (
+        (args.altitude_m, "--altitude-m"),
+        (args.baseline_m, "--baseline-m"),
+        (args.hfov_deg, "--hfov-deg"),
+    ):
+        why = _positive(value, flag)
+        if why is not None:
+            sys.stderr.write(f"slz height-map: {why}\n")
+            return 2
+    if args.hfov_deg is not None and args.hfov_deg >= 179.0:
+        sys.stderr.write(f"slz height-map: --hfov-deg must be below 179, got {args.hfov_deg:g}\n")
+        return 2
+    if not 160 <= args.width_px <= 8192:
+        sys.stderr.write(f"slz height-map: --width-px must lie in [160, 8192], got {args.width_px}\n")
+        return 2
+    try:
+        result = run(args.a, args.b, args.out, args.altitude_m, args.baseline_m, args.hfov_deg, args.width_px)
+    except (HeightPairError, OSError) as exc:
+        sys.stderr.write(f"slz height-map: {exc}\n")
+        return 1
+    g = result["geometry"]
+    sys.stdout.write(
+        f"{result['share_of_frame_above_ground']:.1%} of the frame above the ground, "
+        f"{result['share_of_frame_measured_flat']:.1%} measured flat, {result['share_of_frame_unknown']:.1%} unknown "
+        f"(altitude {g['altitude_m']:.1f} m {g['altitude_source']}, baseline {g['baseline_m']:.1f} m "
+        f"{g['baseline_source']}, focal {g['focal_px']:.0f} px {g['focal_source']})\n"
+    )
+    if result["unknown_because"]:
+        sys.stdout.write(f"unknown because: {result['unknown_because']}\n")
+    sys.stdout.write(f"wrote {args.out}/summary.json, height_m.npy, above_ground.png, overlay.png\n")
+    return 0
+
+
 def _cmd_serve(args: argparse.Namespace) -> int:
     from companion.app.serve import serve
 
@@ -281,6 +324,23 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--out", type=Path, help="output folder (default FLIGHT/report)")
     report.add_argument("--no-video", action="store_true", help="skip camera.mp4 (the contact sheet is kept)")
     report.set_defaults(func=_cmd_report)
+
+    height = sub.add_parser(
+        "height-map",
+        help="what stands above the ground in two overlapping photographs of a site (motion parallax), before a flight",
+    )
+    height.add_argument("a", type=Path, help="the photograph the map is drawn over")
+    height.add_argument("b", type=Path, help="a second photograph of the same ground from elsewhere")
+    height.add_argument(
+        "--out", type=Path, required=True, help="folder for the map, the mask, the overlay, the summary"
+    )
+    height.add_argument(
+        "--altitude-m", type=float, help="height of the camera above the ground, m (EXIF's is above sea)"
+    )
+    height.add_argument("--baseline-m", type=float, help="distance between the two shots, m (default: their EXIF GPS)")
+    height.add_argument("--hfov-deg", type=float, help="horizontal field of view (default: from EXIF's focal length)")
+    height.add_argument("--width-px", type=int, default=1280, help="working width the photographs are resized to")
+    height.set_defaults(func=_cmd_height_map)
 
     serve = sub.add_parser(
         "serve", help="run slz commands named on standard input, one after another, in this one warm process"
