@@ -103,10 +103,12 @@ def _cmd_fly(args: argparse.Namespace) -> int:
                     loop.remove_signal_handler(stop_signal)
         finally:
             await link.close()
-        sys.stdout.write(f"{config.mode.value}: ended in {outcome.phase} ({outcome.reason}); log {recorder.path}\n")
+        ended.append(f"ended in {outcome.phase} ({outcome.reason})")
         if outcome.phase in ("done", "yielded") or config.mode is OperatingMode.DRY_RUN:
             return 0
         return EXIT_FAILSAFE if outcome.phase == "failsafe" else 1
+
+    ended: list[str] = []  # the flight's own words, for the last line
 
     try:
         model_path = config.perception.model.path
@@ -129,9 +131,15 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     finally:
         recorder.close()
         if recorder.path.is_file():
-            from companion.app.landing_report import write_landing_report
+            from companion.app.landing_report import ENDING_WORDS, FlightEnding, write_landing_report
 
-            write_landing_report(recorder.directory)  # beside the log: what the operator files
+            report = write_landing_report(recorder.directory)  # beside the log: what the operator files
+            says = "no landing report (the log could not be read)"
+            if report is not None:
+                outcome = json.loads(report.read_text(encoding="utf-8"))["outcome"]
+                says = ENDING_WORDS[FlightEnding(outcome)]
+            words = "; ".join([says, *ended])
+            sys.stdout.write(f"{config.mode.value}: {words}; log {recorder.directory} (slz report takes it)\n")
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:

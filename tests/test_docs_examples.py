@@ -223,7 +223,7 @@ def test_a_two_terminal_example_runs_as_written(block: Block, tmp_path: Path, in
     doctor, flown = outputs
     assert doctor.rstrip().endswith("ready to fly")
     assert "PASS camera:" in doctor
-    assert "fly: ended in done (landed)" in flown
+    assert "fly: landed; ended in done (landed)" in flown
 
 
 def test_every_slz_command_shown_has_its_command_and_options() -> None:

@@ -11,6 +11,7 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from companion.app.drivers import FreeRunningDriver
@@ -569,3 +570,59 @@ def test_every_fallback_site_chosen_is_said_to_the_ground_station_even_without_a
     assert app.guidance.phase is LandingPhase.APPROACH
     texts = [fields["text"] for name, fields in link.mavlink if name == "STATUSTEXT"]
     assert "fallback site north_lawn" in "".join(texts), texts  # (chunked at 50 characters)
+
+
+def test_a_stop_while_watching_after_a_failsafe_ends_at_once_and_says_so(
+    tmp_path: Path, config: PerceptionConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Issue 65: a stop while watching after a failsafe logged "no vehicle tick within 3 s" with ticks all along.
+    monkeypatch.setattr("companion.app.run_end.STOP_UNHEARD_S", 0.2)
+    link, clock = FakeLink(), Clock()
+    app = limited_flight(tmp_path, config, link, clock)
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        await tick(app, link, 1.1)
+        clock.now_s = 300.0  # the wall limit: hold, then watch
+        await tick(app, link, 1.2)
+        assert app.supervision.watching is not None
+        sent = len(link.commands)
+        app.request_stop("SIGTERM received")
+        await tick(app, link, 1.3)
+        assert app.done.is_set()
+        assert len(link.commands) == sent  # the vehicle is the autopilot's: nothing sent
+        await asyncio.sleep(0.4)  # past the unheard stop's bound: it must not speak now
+
+    asyncio.run(flight())
+    assert "SIGTERM received while watching after the failsafe" in app.outcome.reason
+    assert "no vehicle tick" not in app.outcome.reason
+    events = supervision(tmp_path)
+    assert [e for e, _ in events] == ["watching", "stopped"]
+
+
+def test_a_frame_perceived_while_a_tick_ended_the_mission_is_not_decided_on(app_and_link: Any) -> None:
+    # Issue 65: after Ctrl-C mid-descent a frame in flight was decided on in the failsafe phase: a second failsafe
+    # record ("frame ignored in failsafe") and the outcome's reason overwritten.
+    app, link = app_and_link
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        perceive = app.intake.perceive
+
+        async def slow_perceive(*args: Any, **kwargs: Any) -> Any:
+            result = await perceive(*args, **kwargs)
+            app.request_stop("SIGINT received")
+            await tick(app, link, 1.15)  # the stop's last resort goes out while the frame is being perceived
+            return result
+
+        app.intake.perceive = slow_perceive  # type: ignore[method-assign]
+        link.at(1.1)
+        await app.on_frame(Frame(1, 1.1, np.full((480, 640, 3), 90, np.uint8)))
+
+    asyncio.run(flight())
+    records = read_log(app.recorder.path)
+    failsafes = [r for r in records if r["kind"] == "failsafe"]
+    assert len(failsafes) == 1
+    assert failsafes[0]["reason"].startswith("SIGINT received: stopping")
+    assert app.outcome.reason.startswith("SIGINT received: stopping")
+    assert app.outcome.failsafes == [app.outcome.reason]

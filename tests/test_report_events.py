@@ -105,7 +105,7 @@ def test_the_landing_report_names_the_fallback_site_landed_at_and_the_ground_sta
     recorder.close()
     write_landing_report(tmp_path)
     report = json.loads((tmp_path / REPORT_NAME).read_text())
-    assert report["version"] == 2
+    assert report["version"] == 3
     assert report["fallback_site"] == "rally_1"
     assert report["ground_commands"] == [
         {
@@ -131,3 +131,110 @@ def test_the_nearest_occupied_cell_is_measured_from_the_point() -> None:
     assert nearest_occupied_m(HeadPlaneOccupancy(grid, free, known), 2.25, 5.25) == pytest.approx(3.0)
     known[4, 16] = False  # unseen is not occupied
     assert nearest_occupied_m(HeadPlaneOccupancy(grid, free, known), 2.25, 5.25) is None
+
+
+def _ended(tmp_path: Path, decisions: list[tuple[LandingPhase, CommandKind, DecisionEvent, str]], **end: object) -> str:
+    """The landing report's outcome of a log with these decisions (source, phase, kind, event) and end record."""
+    from companion.app.landing_report import REPORT_NAME, write_landing_report
+
+    recorder = FlightRecorder(tmp_path)
+    mode = end.pop("mode", "fly")
+    recorder.write(RecordKind.HEADER, None, config={"mode": mode}, version="0.1.0", model="m.onnx", model_sha256="ab")
+    state = VehicleState(5.0, 1.0, 2.0, -12.0, 0.0)
+    for k, (phase, kind, event, source) in enumerate(decisions):
+        decision = Decision(5.0 + k, phase, kind, None, None, f"{event.value}", event)
+        recorder.write(RecordKind.DECISION, 5.0 + k, decision=decision, source=source, state=state, inputs={})
+    supervision = end.pop("supervision", None)
+    if supervision is not None:
+        recorder.write(RecordKind.SUPERVISION, 9.0, event=supervision, reason=str(supervision))
+    if end.pop("link_lost_record", False):
+        recorder.write(RecordKind.FAILSAFE, 8.0, reason="link lost: stop commanding")  # an older log: no action
+    if not end.pop("crashed", False):
+        recorder.write(RecordKind.END, None, outcome={"phase": "search", "reason": "", **end})
+    recorder.close()
+    path = write_landing_report(tmp_path)
+    assert path is not None, "no landing report"
+    report = json.loads((tmp_path / REPORT_NAME).read_text())
+    assert report["outcome_says"]
+    return str(report["outcome"])
+
+
+SEARCH = (LandingPhase.SEARCH, CommandKind.SETPOINT, DecisionEvent.HOLD_NO_TARGET, "frame")
+
+
+@pytest.mark.parametrize(
+    ("decisions", "end", "named"),
+    [
+        (
+            [SEARCH, (LandingPhase.LAND, CommandKind.LAND, DecisionEvent.LAND, "frame")],
+            {"phase": "done", "touchdown_ne_m": [1.0, 2.0]},
+            "landed",
+        ),
+        ([SEARCH], {"link_lost": True, "link_lost_record": True}, "link_lost"),
+        (
+            [SEARCH, (LandingPhase.FAILSAFE, CommandKind.HOLD, DecisionEvent.LIMIT, "stop")],
+            {"phase": "failsafe"},
+            "stopped",
+        ),
+        ([SEARCH], {"phase": "search", "supervision": "stopped"}, "stopped"),
+        (
+            [SEARCH, (LandingPhase.YIELDED, CommandKind.NONE, DecisionEvent.PILOT_TOOK_OVER, "takeover")],
+            {"phase": "yielded"},
+            "pilot_took_over",
+        ),
+        (
+            [SEARCH, (LandingPhase.FAILSAFE, CommandKind.HOLD, DecisionEvent.TIME_LIMIT, "time")],
+            {"phase": "failsafe", "supervision": "pilot_has_it"},
+            "pilot_took_over",
+        ),
+        (
+            [SEARCH, (LandingPhase.FAILSAFE, CommandKind.HOLD, DecisionEvent.TIME_LIMIT, "time")],
+            {"phase": "failsafe"},
+            "held",
+        ),
+        (
+            [SEARCH, (LandingPhase.FAILSAFE, CommandKind.RETURN, DecisionEvent.ENERGY_LOW, "energy")],
+            {"phase": "failsafe", "touchdown_ne_m": [0.0, 0.0]},
+            "returned",
+        ),
+        (
+            [SEARCH, (LandingPhase.FAILSAFE, CommandKind.LAND, DecisionEvent.PERCEPTION_FAILSAFE, "silence")],
+            {"phase": "failsafe", "touchdown_ne_m": [1.0, 2.0]},
+            "landed_by_failsafe",
+        ),
+        ([SEARCH], {"crashed": True}, "crashed"),
+        ([SEARCH], {"mode": "dry_run"}, "dry_run"),
+        ([], {"phase": "idle"}, "nothing_flown"),
+    ],
+)
+def test_every_ending_gets_a_landing_report_that_names_it(
+    tmp_path: Path,
+    decisions: list[tuple[LandingPhase, CommandKind, DecisionEvent, str]],
+    end: dict[str, object],
+    named: str,
+) -> None:
+    assert _ended(tmp_path, decisions, **end) == named
+
+
+def test_a_lost_links_failsafe_record_reads_in_the_timeline_with_or_without_its_action(tmp_path: Path) -> None:
+    from companion.app.timeline import flight_events
+
+    recorder = FlightRecorder(tmp_path)
+    recorder.write(RecordKind.FAILSAFE, 8.0, reason="link lost: stop commanding")  # before issue 65: no action
+    recorder.write(RecordKind.FAILSAFE, 9.0, reason="link lost: stop commanding", action="autopilot")
+    recorder.close()
+    events = flight_events(FlightLog.read(tmp_path))
+    assert [e["event"] for e in events] == ["failsafe (autopilot)", "failsafe (autopilot)"]
+
+
+def test_the_path_slz_fly_prints_is_one_slz_report_takes(tmp_path: Path) -> None:
+    # Issue 65: `slz fly` printed .../flight.jsonl and `slz report` looked for .../flight.jsonl/flight.jsonl.
+    from companion.app.flight_log import flight_folder
+
+    recorder = FlightRecorder(tmp_path / "run" / "flight")
+    recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0")
+    recorder.close()
+    folder = tmp_path / "run" / "flight"
+    assert flight_folder(folder / "flight.jsonl") == folder  # the log itself
+    assert flight_folder(folder) == folder
+    assert flight_folder(tmp_path / "run") == folder  # a demo's run folder

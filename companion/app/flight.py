@@ -208,7 +208,7 @@ class FlightApp:
         self.journal.decision(decision, previous, source, state, observed, inputs)
         if decision.phase.value != previous or decision.event is DecisionEvent.FALLBACK_SITE:  # every site said
             await self.report.phase(decision.phase, decision.reason)
-        if decision.phase is LandingPhase.FAILSAFE:
+        if decision.phase is LandingPhase.FAILSAFE and decision.phase.value != previous:
             self.outcome.failsafes.append(decision.reason)
         sent = False
         try:
@@ -234,7 +234,7 @@ class FlightApp:
             return
         t_pose_s, pose = paired
         result = await self.intake.perceive(frame, pose, self._area_centre_ne_m)
-        if result is None:
+        if result is None or self.guidance.phase in TERMINAL:  # a tick may have ended the mission while it perceived
             return
         self._last_frame_t_s = max(self._last_frame_t_s, t_pose_s)
         state = self.vehicle_state()
@@ -259,6 +259,12 @@ class FlightApp:
         self.supervision.saw(status)
         self.journal.pose(state, status)
         if self.supervision.watching is not None:
+            if self.supervision.stop_requested is not None:  # the vehicle is the autopilot's: nothing to give it
+                why = self.supervision.take_stop(last_resort=False)
+                reason = f"{why} while watching after the failsafe: the vehicle is the autopilot's, the program ends"
+                logger.warning("%s", reason)
+                self.ending.end(state.t_s, "stopped", reason, f"{self.outcome.reason}; {reason}")
+                return
             self.ending.watch_tick(state, status)
             return
         if self.dry_run and self.ending.flight_over(state, status, self.guidance.phase is not LandingPhase.IDLE):
@@ -423,7 +429,9 @@ class FlightApp:
         self.outcome.link_lost = True
         self.commands.stop()
         state = self.vehicle_state()
-        self.recorder.write(RecordKind.FAILSAFE, state.t_s if state else None, reason="link lost: stop commanding")
+        self.recorder.write(
+            RecordKind.FAILSAFE, state.t_s if state else None, reason="link lost: stop commanding", action="autopilot"
+        )
         logger.error("link lost: no telemetry for %.1f s; the autopilot's failsafe acts", silent_s)
         if self.lockstep is not None:
             self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act

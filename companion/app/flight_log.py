@@ -104,10 +104,12 @@ _KINDS = {k.value: k for k in RecordKind}
 
 
 def flight_folder(path: Path) -> Path:
-    """The flight folder of ``path``: itself when it holds ``flight.jsonl``, else its ``flight/`` sub-folder when that
-    does (the run folder ``slz demo`` and the campaign's missions print), else itself (the reader names what is
-    missing)."""
+    """The flight folder of ``path``: its folder when it is the log ``flight.jsonl`` itself, itself when it holds one,
+    else its ``flight/`` sub-folder when that does (the run folder ``slz demo`` and the campaign's missions print),
+    else itself (the reader names what is missing)."""
     path = Path(path)
+    if path.name == "flight.jsonl" and path.is_file():
+        return path.parent
     if not (path / "flight.jsonl").is_file() and (path / "flight" / "flight.jsonl").is_file():
         return path / "flight"
     return path

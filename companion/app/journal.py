@@ -74,7 +74,7 @@ class FlightJournal:
                     decision.reason,
                 )
             self._target_id = target.track_id
-        if decision.phase is LandingPhase.FAILSAFE:
+        if decision.phase is LandingPhase.FAILSAFE and decision.phase.value != previous_phase:  # entering it
             self.recorder.write(RecordKind.FAILSAFE, decision.t_s, reason=decision.reason, action=decision.kind)
             logger.warning("%sfailsafe: %s (%s)", self.prefix, decision.reason, decision.kind.value)
 

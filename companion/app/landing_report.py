@@ -13,6 +13,7 @@ what that log did not record (``null``).
 
 from __future__ import annotations
 
+import enum
 import json
 import logging
 import os
@@ -21,11 +22,89 @@ from typing import Any
 
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.timeline import flight_events
+from companion.guidance.vocabulary import DecisionEvent
 
 logger = logging.getLogger(__name__)
 
 REPORT_NAME = "landing_report.json"
-VERSION = 2  # 2: fallback_site, ground_commands
+VERSION = 3  # 2: fallback_site, ground_commands; 3: outcome, outcome_says
+
+
+class FlightEnding(str, enum.Enum):
+    """How a flight ended, named (the landing report's ``outcome``, ``slz fly``'s last line)."""
+
+    LANDED = "landed"
+    """On the ground after the companion's own landing."""
+    LANDED_BY_FAILSAFE = "landed_by_failsafe"
+    """On the ground after a failsafe or last resort the companion commanded (perception silent, its time up)."""
+    RETURNED = "returned"
+    """A return home was commanded (the last resort, an energy budget): the autopilot flies it."""
+    HELD = "held"
+    """A hold was commanded (a failsafe, the last resort): the vehicle hovers for the pilot."""
+    LINK_LOST = "link_lost"
+    """The vehicle's telemetry stopped: the companion stopped commanding and the autopilot's own failsafe acts."""
+    STOPPED = "stopped"
+    """The program was stopped (Ctrl-C, the service stopped): the last resort went out first where it flew."""
+    PILOT_TOOK_OVER = "pilot_took_over"
+    """The pilot switched the flight mode: the companion yielded at once."""
+    CRASHED = "crashed"
+    """The program ended without its end record (an error, a kill): the log says how far it got."""
+    DRY_RUN = "dry_run"
+    """A dry run: the pilot flew; the companion watched and decided."""
+    NOTHING_FLOWN = "nothing_flown"
+    """The run ended before the mission started (no vehicle, no camera, a wait for the pilot's handover)."""
+
+
+ENDING_WORDS = {
+    FlightEnding.LANDED: "landed",
+    FlightEnding.LANDED_BY_FAILSAFE: "landed by a failsafe",
+    FlightEnding.RETURNED: "returning home (the autopilot's)",
+    FlightEnding.HELD: "held for the pilot",
+    FlightEnding.LINK_LOST: "link lost (the autopilot's failsafe acts)",
+    FlightEnding.STOPPED: "stopped",
+    FlightEnding.PILOT_TOOK_OVER: "the pilot took over",
+    FlightEnding.CRASHED: "crashed (no end record)",
+    FlightEnding.DRY_RUN: "dry run over",
+    FlightEnding.NOTHING_FLOWN: "nothing flown",
+}
+
+
+def flight_ending(log: FlightLog) -> FlightEnding:
+    """How the flight of ``log`` ended, from its records (the end record's outcome, the decisions and their
+    sources, the supervision records), in this order: no end record, a lost link, a dry run, the pilot, a stop, a
+    touchdown, the last command."""
+    end = log.last(RecordKind.END)
+    if end is None:
+        return FlightEnding.CRASHED
+    outcome = end["outcome"]
+    if outcome.get("link_lost"):
+        return FlightEnding.LINK_LOST
+    header = log.first(RecordKind.HEADER) or {}
+    if (header.get("config") or {}).get("mode") == "dry_run":
+        return FlightEnding.DRY_RUN
+    decisions = log.decisions()
+    supervision = [str(r.get("event")) for r in log.of(RecordKind.SUPERVISION)]
+    if (
+        outcome.get("phase") == "yielded"
+        or "pilot_has_it" in supervision
+        or any(d.event is DecisionEvent.PILOT_TOOK_OVER for d in decisions)
+    ):
+        return FlightEnding.PILOT_TOOK_OVER
+    if any(d.source == "stop" for d in decisions) or "stopped" in supervision:
+        return FlightEnding.STOPPED
+    active = [d for d in decisions if d.kind in ("land", "hold", "return")]
+    last = active[-1] if active else None
+    if outcome.get("touchdown_ne_m"):
+        if outcome.get("phase") == "done" and last is not None and last.kind == "land" and last.phase == "land":
+            return FlightEnding.LANDED
+        return FlightEnding.RETURNED if last is not None and last.kind == "return" else FlightEnding.LANDED_BY_FAILSAFE
+    if last is None:
+        return FlightEnding.NOTHING_FLOWN
+    if last.kind == "return":
+        return FlightEnding.RETURNED
+    if last.kind == "land":  # commanded, not seen down: the failsafe's or the companion's landing
+        return FlightEnding.LANDED_BY_FAILSAFE if last.phase == "failsafe" else FlightEnding.LANDED
+    return FlightEnding.HELD
 
 
 def _zone(target: dict[str, Any] | None) -> dict[str, Any] | None:
@@ -73,8 +152,11 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
             observed = record["observed"]
     config = header.get("config") or {}
     mode = config.get("mode")
+    ending = flight_ending(log)
     return {
         "version": VERSION,
+        "outcome": ending.value,
+        "outcome_says": ENDING_WORDS[ending],
         "mode": mode,
         "software": header.get("version"),
         "model": header.get("model"),

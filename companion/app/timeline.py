@@ -20,7 +20,9 @@ def flight_events(log: FlightLog) -> list[dict[str, Any]]:
         if kind is RecordKind.PHASE:
             events.append({"t_s": r["t_s"], "event": f"phase {r['previous']} -> {r['phase']}", "reason": r["reason"]})
         elif kind is RecordKind.FAILSAFE:
-            events.append({"t_s": r["t_s"], "event": f"failsafe ({r['action']})", "reason": r["reason"]})
+            # A lost link's record names no command of ours (logs before its action field): the autopilot acts.
+            action = r.get("action", "autopilot")
+            events.append({"t_s": r["t_s"], "event": f"failsafe ({action})", "reason": r["reason"]})
         elif kind is RecordKind.ERROR:
             events.append({"t_s": r["t_s"], "event": f"error in {r['where']}", "reason": r["error"]})
         elif kind is RecordKind.DECISION:
