@@ -145,3 +145,9 @@ def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_t
     assert phases[-1] == "yielded"
     yielded_at = next(r["t_s"] for r in records if r["kind"] == "phase" and r["phase"] == "yielded")
     assert not [r for r in records if r["kind"] == "command" and r["t_s"] > yielded_at]  # nothing sent after
+    # Issue 65: the landing report names the pilot's takeover, and slz report draws the flight.
+    assert "fly: the pilot took over;" in out
+    assert json.loads((tmp_path / "flight" / "landing_report.json").read_text())["outcome"] == "pilot_took_over"
+    from companion.app.report import build_flight_report
+
+    assert build_flight_report(tmp_path / "flight", tmp_path / "report", video=False).files

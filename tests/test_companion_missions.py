@@ -283,3 +283,11 @@ def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path:
     assert "AUTO.LAND" in modes_after
     assert r.landed
     assert math.isfinite(r.touchdown_t_s or math.nan)
+    # Issue 65: the flight an operator most needs a report of gets one, and slz report draws it.
+    report = json.loads((Path(r.run_dir) / "flight" / "landing_report.json").read_text())
+    assert report["outcome"] == "link_lost"
+    assert "failsafe (autopilot)" in [e["event"] for e in report["decisions"]]
+    from companion.app.report import build_flight_report
+
+    drawn = build_flight_report(Path(r.run_dir) / "flight", tmp_path / "report", video=False)
+    assert drawn.files

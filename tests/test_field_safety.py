@@ -308,3 +308,11 @@ def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_f
     assert last["source"] == "stop"
     assert [r["command"] for r in records if r["kind"] == "command"][-1] == "hold"
     assert records[-1]["kind"] == "end"
+    # Issue 65: the landing report names the stop; one failsafe record (the stop's), none for a frame after it.
+    assert "fly: stopped;" in out
+    report = json.loads((tmp_path / "flight" / "landing_report.json").read_text())
+    assert report["outcome"] == "stopped"
+    assert len([r for r in records if r["kind"] == "failsafe"]) == 1
+    from companion.app.report import build_flight_report
+
+    assert build_flight_report(tmp_path / "flight", tmp_path / "report", video=False).files
