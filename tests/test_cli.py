@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -182,10 +183,13 @@ def test_fly_with_a_missing_model_fails_before_any_link(tmp_path: Path) -> None:
     assert not (tmp_path / "flight").exists()
 
 
-def test_fly_with_no_camera_fails_before_touching_the_vehicle(tmp_path: Path) -> None:
-    config = _mission(tmp_path, camera="url: sitl://127.0.0.1:5999")  # nobody serves frames there
+def test_fly_with_no_camera_waits_its_bound_saying_so_and_fails_before_touching_the_vehicle(tmp_path: Path) -> None:
+    config = _mission(tmp_path, camera="{url: 'sitl://127.0.0.1:5999', wait_for_s: 1.5}")  # nobody serves frames there
+    started = time.monotonic()
     result = slz("fly", "--config", str(config), "--out", str(tmp_path / "flight"), timeout_s=60)
+    assert time.monotonic() - started < 30.0  # the bound, not for ever
     assert result.returncode == 1
+    assert "waiting for the camera at sitl://127.0.0.1:5999" in result.stderr  # issue 65: said, not silent
     assert "sitl://127.0.0.1:5999: cannot connect" in result.stderr
     assert "Traceback" not in result.stderr
     records = [json.loads(line) for line in (tmp_path / "flight" / "flight.jsonl").read_text().splitlines()]

@@ -18,7 +18,7 @@ from companion.app.drivers import FreeRunningDriver
 from companion.app.flight import FlightApp
 from companion.app.mission import MissionConfig
 from companion.app.recorder import FlightRecorder, read_log
-from companion.camera.frames import Frame
+from companion.camera.frames import CameraError, CameraFault, Frame
 from companion.guidance.landing import LandingPhase
 from companion.perception.config import PerceptionConfig
 from companion.perception.pipeline import SlzPipeline
@@ -615,7 +615,7 @@ def test_a_frame_perceived_while_a_tick_ended_the_mission_is_not_decided_on(app_
             await tick(app, link, 1.15)  # the stop's last resort goes out while the frame is being perceived
             return result
 
-        app.intake.perceive = slow_perceive  # type: ignore[method-assign]
+        app.intake.perceive = slow_perceive
         link.at(1.1)
         await app.on_frame(Frame(1, 1.1, np.full((480, 640, 3), 90, np.uint8)))
 
@@ -626,3 +626,34 @@ def test_a_frame_perceived_while_a_tick_ended_the_mission_is_not_decided_on(app_
     assert failsafes[0]["reason"].startswith("SIGINT received: stopping")
     assert app.outcome.reason.startswith("SIGINT received: stopping")
     assert app.outcome.failsafes == [app.outcome.reason]
+
+
+class LateCamera(NoFrames):
+    """A camera service that comes up after the companion: its first opens fail."""
+
+    def __init__(self, failures: int) -> None:
+        self.failures = failures
+        self.attempts = 0
+
+    async def open(self) -> None:
+        self.attempts += 1
+        if self.attempts <= self.failures:
+            raise CameraError("sitl", "cannot connect: [Errno 111] Connection refused", CameraFault.CONNECT_FAILED)
+
+
+def test_a_camera_that_comes_up_after_the_companion_is_waited_for_within_its_bound(
+    tmp_path: Path, config: PerceptionConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Issue 65: `slz fly` started before the camera failed at once; on a drone they start in any order.
+    monkeypatch.setattr("companion.app.flight.CAMERA_RETRY_S", 0.01)
+    link = FakeLink()
+    app = field_flight(tmp_path, config, link)
+    app.source = late = LateCamera(failures=3)
+    asyncio.run(app._open_camera())
+    assert late.attempts == 4
+    waits = [r["waiting_for"] for r in read_log(app.recorder.path) if r["kind"] == "waiting"]
+    assert waits == ["the camera: sitl: cannot connect: [Errno 111] Connection refused"]  # said once, not per try
+    app.config = app.config.model_copy(update={"camera": app.config.camera.model_copy(update={"wait_for_s": 0.05})})
+    app.source = LateCamera(failures=1000)
+    with pytest.raises(CameraError, match="cannot connect"):
+        asyncio.run(app._open_camera())  # past the bound: the camera's own error

@@ -75,6 +75,8 @@ TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAIL
 # ignores frames in LAND, which leads only to DONE or YIELDED). A simulator in lockstep is not asked to draw them.
 FRAMES_UNREAD = TERMINAL | {LandingPhase.LAND}
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
+CAMERA_RETRY_S = 0.5  # wall time between attempts to open a camera that is not up yet
+CAMERA_SAY_EVERY_S = 5.0  # how often the wait for the camera is said
 
 
 def yaw_deg_of(pose: Pose) -> float:
@@ -260,10 +262,10 @@ class FlightApp:
         self.journal.pose(state, status)
         if self.supervision.watching is not None:
             if self.supervision.stop_requested is not None:  # the vehicle is the autopilot's: nothing to give it
-                why = self.supervision.take_stop(last_resort=False)
-                reason = f"{why} while watching after the failsafe: the vehicle is the autopilot's, the program ends"
-                logger.warning("%s", reason)
-                self.ending.end(state.t_s, "stopped", reason, f"{self.outcome.reason}; {reason}")
+                asked = self.supervision.take_stop(last_resort=False)
+                words = f"{asked} while watching after the failsafe: the vehicle is the autopilot's, the program ends"
+                logger.warning("%s", words)
+                self.ending.end(state.t_s, "stopped", words, f"{self.outcome.reason}; {words}")
                 return
             self.ending.watch_tick(state, status)
             return
@@ -440,12 +442,35 @@ class FlightApp:
     # -- the flight ------------------------------------------------------------------------------------------------
     async def _open(self) -> None:
         """The camera (missing: no vehicle touched), the vehicle, the fence, the lockstep; a stop ends it (run)."""
-        await self.source.open()
+        await self._open_camera()
         await self.link.connect(self.config.vehicle.connect_timeout_s)
         await self._localize()
         if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
             self.lockstep = None
         await self.desk.open()
+
+    async def _open_camera(self) -> None:
+        """Open the camera, waiting up to ``camera.wait_for_s`` (wall time) for one that is not up yet: retried every
+        ``CAMERA_RETRY_S``, said once and then every ``CAMERA_SAY_EVERY_S``; the last error after the bound."""
+        deadline = time.monotonic() + self.config.camera.wait_for_s
+        said_at = -math.inf
+        while True:
+            try:
+                await self.source.open()
+            except CameraError as exc:
+                now = time.monotonic()
+                if now >= deadline:
+                    raise
+                if now - said_at >= CAMERA_SAY_EVERY_S:
+                    url, left_s = self.config.camera.url, deadline - now
+                    logger.warning("waiting for the camera at %s (%.0f s left): %s", url, left_s, exc)
+                    self.recorder.write(RecordKind.WAITING, None, waiting_for=f"the camera: {exc}")
+                    said_at = now
+                await asyncio.sleep(min(CAMERA_RETRY_S, max(0.0, deadline - now)))
+                continue
+            if said_at > -math.inf:
+                logger.info("the camera at %s is up", self.config.camera.url)
+            return
 
     async def run(self) -> FlightOutcome:
         """Connect, (take off,) land safely or end in a defined failsafe (and, with ``supervision``, stay until the

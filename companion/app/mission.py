@@ -112,6 +112,13 @@ class CameraSourceConfig(StrictModel):
         description="For sources without capture times (V4L2, RTSP, files): time from exposure to arrival "
         "(scripts/measure_latency.py measures it from a recorded flight).",
     )
+    wait_for_s: float = Field(
+        default=30.0,
+        ge=0.0,
+        le=600.0,
+        description="At start, wait this long (wall time) for a camera that is not up yet, retrying and saying so: "
+        "on a drone the camera service and the companion start in any order. 0: fail at once.",
+    )
 
 
 class SimulatorConfig(StrictModel):
