@@ -35,6 +35,7 @@ class FakeLink:
     """A VehicleLink that records every command; the test moves the vehicle and sets its mode."""
 
     name = "fake"
+    system_id = 1
 
     def __init__(self) -> None:
         self.poses = PoseBuffer()

@@ -4,6 +4,7 @@ over real UDP sockets on loopback (a pymavlink ground station on one side, the c
 from __future__ import annotations
 
 import asyncio
+import logging
 import socket
 import time
 from typing import Any
@@ -40,9 +41,11 @@ class Gcs:
         self.rx.signing.secret_key = reply_key  # None: reads unsigned replies
         self.received: list[Any] = []
 
-    def command(self, mav_cmd: int, param1: float = 0.0, target_component: int = 191) -> bytes:
-        """Send COMMAND_LONG to the vehicle's system; the bytes sent."""
-        msg = self.mav.command_long_encode(VEHICLE_SYSID, target_component, mav_cmd, 0, param1, 0, 0, 0, 0, 0, 0)
+    def command(
+        self, mav_cmd: int, param1: float = 0.0, target_component: int = 191, target_system: int = VEHICLE_SYSID
+    ) -> bytes:
+        """Send COMMAND_LONG to the vehicle's system (or ``target_system``); the bytes sent."""
+        msg = self.mav.command_long_encode(target_system, target_component, mav_cmd, 0, param1, 0, 0, 0, 0, 0, 0)
         data = msg.pack(self.mav)
         self.sock.sendto(data, self.address)
         return bytes(data)
@@ -160,6 +163,17 @@ def test_with_a_key_only_signed_fresh_commands_are_taken_the_rest_refused_with_t
     channel = run_channel(port, KEY, script)
     assert [(c.command, c.signed, c.sender) for c in taken] == [(OperatorCommand.GO_AROUND, True, (255, 190))]
     assert channel.pending() == []  # nothing refused was taken
+    # Issue 65: every refusal is handed out for the flight log (the command to the autopilot is not the channel's).
+    refused = [(r.mav_cmd, r.result, r.reason) for r in channel.refused()]
+    assert sorted(refused, key=str) == sorted(
+        [
+            (191, AckResult.DENIED, "not signed"),
+            (191, AckResult.DENIED, "bad signature"),
+            (191, AckResult.DENIED, "replayed or stale signature timestamp"),
+        ],
+        key=str,
+    )
+    assert channel.refused() == []  # handed out once
     assert good.acks() == [(191, AckResult.IN_PROGRESS), (191, AckResult.ACCEPTED), (191, AckResult.DENIED)]
     assert good.texts() == ["refused: replayed or stale signature timestamp"]
     assert unsigned.acks() == [(191, AckResult.DENIED)]
@@ -230,3 +244,24 @@ def test_a_channel_on_a_port_in_use_names_its_url() -> None:
         url = f"udpin://127.0.0.1:{busy.getsockname()[1]}"
         with pytest.raises(CommandChannelError, match=url):
             asyncio.run(CommandChannel(url, 1).open())
+
+
+def test_a_command_to_another_vehicles_companion_is_logged_and_handed_out_never_silently_dropped(
+    port: int, caplog: pytest.LogCaptureFixture
+) -> None:
+    # Issue 65: with `slz sitl --instance 5` the vehicle was system 6 and commands to it vanished without a word.
+    gcs = Gcs(port)
+
+    async def script(channel: CommandChannel) -> None:
+        gcs.command(191, target_system=VEHICLE_SYSID + 5)
+        gcs.command(31011, target_system=VEHICLE_SYSID + 5, target_component=1)  # another autopilot's: not for us
+        await wait_until_async(lambda: channel.counts.not_for_us == 2, 10, "both seen")
+
+    with caplog.at_level(logging.WARNING, logger="companion.ground.command_channel"):
+        channel = run_channel(port, None, script)
+    refused = channel.refused()
+    assert [(r.mav_cmd, r.result) for r in refused] == [(191, None)]  # not answered: another vehicle's
+    assert f"addressed to system {VEHICLE_SYSID + 5}, this vehicle is system {VEHICLE_SYSID}" in refused[0].reason
+    assert any("addressed to system" in r.message for r in caplog.records)
+    assert gcs.acks() == []
+    gcs.close()

@@ -12,7 +12,7 @@ import pytest
 
 from companion.app.operator_desk import OperatorDesk
 from companion.app.recorder import FlightRecorder, read_log
-from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand
+from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand, RefusedCommand
 from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.operator import operator_decision
@@ -103,8 +103,9 @@ def test_land_now_lands_over_the_target_is_denied_away_from_it_or_over_a_person_
 class FakeChannel:
     """The command channel's side the desk uses: commands handed out once, answers kept."""
 
-    def __init__(self, commands: list[GroundCommand]) -> None:
+    def __init__(self, commands: list[GroundCommand], refusals: list[RefusedCommand] | None = None) -> None:
         self.commands = commands
+        self.refusals = refusals or []
         self.answers: list[tuple[OperatorCommand, AckResult, str | None]] = []
 
     def pending(self) -> list[GroundCommand]:
@@ -113,6 +114,11 @@ class FakeChannel:
 
     def answer(self, command: GroundCommand, result: AckResult, text: str | None = None) -> None:
         self.answers.append((command.command, result, text))
+
+    def refused(self) -> list[RefusedCommand]:
+        """The refusals given, handed out once (the channel's own: tests/test_ground_channel.py)."""
+        out, self.refusals = self.refusals, []
+        return out
 
 
 def land_now(force: bool) -> GroundCommand:
@@ -141,3 +147,32 @@ def test_the_desk_denies_a_land_now_over_a_person_on_the_newest_map_and_records_
         ("accepted", True, True),
     ]
     assert "forced" in records[1]["reason"]
+
+
+def test_refused_and_misaddressed_commands_are_ground_command_records_the_landing_report_lists(tmp_path: Path) -> None:
+    # Issue 65: an unsigned command showed only as a console warning; no record, nothing in the landing report.
+    from companion.app.flight_log import FlightLog, RecordKind
+    from companion.app.landing_report import landing_report
+
+    refusals = [
+        RefusedCommand(31011, (255, 190), ("127.0.0.1", 1), AckResult.DENIED, "not signed", False),
+        RefusedCommand(
+            191, (255, 190), ("127.0.0.1", 1), None, "addressed to system 6, this vehicle is system 1", False
+        ),
+        RefusedCommand(400, (255, 190), ("127.0.0.1", 1), AckResult.UNSUPPORTED, "command 400 is not supported", True),
+    ]
+    recorder = FlightRecorder(tmp_path)
+    recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0", model="m.onnx", model_sha256="ab")
+    desk = OperatorDesk(cast(CommandChannel, FakeChannel([], refusals)), recorder, footprint_radius_m=1.0)
+    g = _guidance()
+    approaching(g)
+    assert desk.take(g, VehicleState(3.0, 0.0, 0.0, -12.0, 0.0), None) == []
+    recorder.write(RecordKind.END, None, outcome={"phase": "search", "reason": ""})
+    recorder.close()
+    listed = landing_report(FlightLog.read(tmp_path))["ground_commands"]
+    assert [(c["command"], c["result"], c["reason"]) for c in listed] == [
+        ("land_now", "denied", "not signed"),
+        ("go_around", "not_for_us", "addressed to system 6, this vehicle is system 1"),
+        ("MAV_CMD 400", "unsupported", "command 400 is not supported"),
+    ]
+    assert all(c["t_s"] == 3.0 for c in listed)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -41,3 +42,38 @@ def test_the_link_takes_off_flies_offboard_and_lands(tmp_path: Path, instance: i
     assert reached["altitude_m"] == pytest.approx(5.0, abs=0.3)
     assert reached["interpolation_step_m"] < 0.05  # 5 ms earlier, a few millimetres away
     assert events[4]["dropped"] == 0
+
+
+def test_the_link_takes_the_autopilots_system_id_or_refuses_one_that_differs(tmp_path: Path) -> None:
+    # Issue 65: with `slz sitl --instance 5` the vehicle is system 6 and the companion stayed 1: ground-station
+    # commands to system 6 never reached it. An instance above 0, so that the autopilot is not system 1.
+    import asyncio
+
+    from companion.vehicle.link import VehicleError
+    from companion.vehicle.mavsdk_link import MavsdkVehicleLink
+    from sitl.config import SitlConfig
+    from sitl.harness.instances import leased_instance
+
+    with leased_instance(range(1, 40)) as lease:
+        sysid = SitlConfig(instance=lease.instance).system_id
+        sitl = SitlProcess([], lease.instance, tmp_path).start()
+        url = f"udpin://0.0.0.0:{api_port(lease.instance)}"
+
+        async def link_with(system_id: int | None) -> int:
+            link = MavsdkVehicleLink(url, system_id=system_id)
+            try:
+                await link.connect(20.0)
+                deadline = time.monotonic() + 20.0
+                await link.wait_for(lambda: bool(link.received.get("LOCAL_POSITION_NED")), deadline, "positions")
+                return link.system_id
+            finally:
+                await link.close()
+
+        try:
+            assert asyncio.run(link_with(None)) == sysid  # taken from the heartbeat, telemetry flowing
+            with pytest.raises(VehicleError, match=f"the autopilot is system {sysid}, vehicle.system_id says 1"):
+                asyncio.run(link_with(1))
+            assert asyncio.run(link_with(sysid)) == sysid  # the right one, given
+        finally:
+            sitl.stop()
+    assert sysid != 1

@@ -447,7 +447,7 @@ class FlightApp:
         await self._localize()
         if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
             self.lockstep = None
-        await self.desk.open()
+        await self.desk.open(self.link.system_id)
 
     async def _open_camera(self) -> None:
         """Open the camera, waiting up to ``camera.wait_for_s`` (wall time) for one that is not up yet: retried every
@@ -480,6 +480,7 @@ class FlightApp:
         self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
         if not await unless_done(self._open(), self.done, CANCEL_GRACE_S):  # stopped before the vehicle was found
             self.desk.close()
+            self.outcome.ground_channel = self.desk.counts()
             self.recorder.write(RecordKind.END, None, outcome=self.outcome)
             return self.outcome
         self.outcome.lockstep = self.lockstep is not None
@@ -500,6 +501,7 @@ class FlightApp:
             if self.lockstep is not None:
                 self.lockstep.release()
                 self.lockstep.close()
+            self.outcome.ground_channel = self.desk.counts()
             self.outcome.wall_s = time.monotonic() - wall0
             self.outcome.cpu_s = time.process_time() - cpu0
             self.recorder.write(RecordKind.END, None, outcome=self.outcome)

@@ -67,12 +67,14 @@ class VehicleConfig(StrictModel):
         description="MAVSDK connection URL: udpin://0.0.0.0:14540 (SITL, PX4 offboard port), "
         "serial:///dev/ttyTHS1:921600 (Jetson TELEM2), tcpout://host:port.",
     )
-    system_id: int = Field(
-        default=1,
+    system_id: int | None = Field(
+        default=None,
         ge=1,
         le=255,
-        description="The companion's MAVLink system id: set it to the autopilot's MAV_SYS_ID (PX4's default is 1), so "
-        "a ground station shows the companion's status texts as the vehicle's.",
+        description="The companion's MAVLink system id, which is the autopilot's (MAV_SYS_ID): a ground station then "
+        "shows the companion's status texts as the vehicle's, and commands to the vehicle's system reach it. None "
+        "(the default): taken from the autopilot's heartbeat at connect; a number that differs from the autopilot's "
+        "is refused at connect, naming both.",
     )
     connect_timeout_s: float = Field(default=20.0, gt=0.0, le=600.0, description="Wall time to find the autopilot.")
     telemetry_rate_hz: float = Field(default=50.0, gt=0.0, le=250.0, description="Position and attitude rate asked.")

@@ -11,18 +11,20 @@ not, the answer and why.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig
 from companion.app.recorder import FlightRecorder
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand
+from companion.ground.operator_commands import COMMAND_OF_MAV_CMD
 from companion.guidance.footprint import nearest_occupied_m
 from companion.guidance.landing import Decision, LandingGuidance
 from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
 from companion.perception.pipeline import FrameResult
+from companion.vehicle.mavsdk_link import PROVISIONAL_SYSTEM_ID
 
 logger = logging.getLogger(__name__)
 
@@ -60,21 +62,46 @@ class OperatorDesk:
         ground = config.ground_station
         channel = None
         if ground.command_url is not None:
-            key = ground.signing_key
-            channel = CommandChannel(ground.command_url, config.vehicle.system_id, key, ground.stale_signature_s)
+            key, system_id = ground.signing_key, config.vehicle.system_id or PROVISIONAL_SYSTEM_ID
+            channel = CommandChannel(ground.command_url, system_id, key, ground.stale_signature_s)
         return cls(channel, recorder, config.perception.zones.min_radius_m)
 
-    async def open(self) -> None:
-        """Listen for commands (nothing without a channel)."""
+    async def open(self, system_id: int | None = None) -> None:
+        """Listen for commands to the vehicle's ``system_id`` (the link's, once connected) (nothing without a
+        channel)."""
         if self.channel is not None:
+            if system_id is not None:
+                self.channel.system_id = system_id
             await self.channel.open()
 
     def close(self) -> None:
-        """Deny the commands no tick took (the flight is over), and stop listening."""
+        """Deny the commands no tick took (the flight is over), record the refused ones, and stop listening."""
         if self.channel is not None:
             for command in self.channel.pending():
                 self.channel.answer(command, AckResult.DENIED, f"{command.command.value} denied: the flight is over")
+            self._record_refused(None)
             self.channel.close()
+
+    def counts(self) -> dict[str, int] | None:
+        """What the channel took, refused and dropped, by why (None without a channel): the log's end says it."""
+        return None if self.channel is None else asdict(self.channel.counts)
+
+    def _record_refused(self, t_s: float | None) -> None:
+        """A ``ground_command`` record for every command the channel refused or saw addressed to another vehicle."""
+        assert self.channel is not None
+        for refused in self.channel.refused():
+            known = COMMAND_OF_MAV_CMD.get(refused.mav_cmd)
+            self.recorder.write(
+                RecordKind.GROUND_COMMAND,
+                t_s,
+                command=known.value if known is not None else f"MAV_CMD {refused.mav_cmd}",
+                mav_cmd=refused.mav_cmd,
+                sender=list(refused.sender),
+                signed=refused.signed,
+                result="not_for_us" if refused.result is None else refused.result.name.lower(),
+                reason=refused.reason,
+                force=False,
+            )
 
     def take(
         self, guidance: LandingGuidance, state: VehicleState, newest: FrameResult | None
@@ -83,6 +110,7 @@ class OperatorDesk:
         ones' decisions (answered ``ACCEPTED``); the denied ones answered and recorded here."""
         if self.channel is None:
             return []
+        self._record_refused(state.t_s)
         accepted = []
         for command in self.channel.pending():
             person_seen = self._person_seen(guidance, newest)

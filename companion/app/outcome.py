@@ -30,6 +30,8 @@ class FlightOutcome:
     """Why the camera stopped (a :class:`~companion.camera.frames.CameraFault` value), when it did."""
     link_lost: bool = False
     failsafes: list[str] = field(default_factory=list)
+    ground_channel: dict[str, int] | None = None
+    """The ground station's command channel: commands taken, refused and dropped, by why (None without one)."""
     wall_s: float = 0.0
     cpu_s: float = 0.0
     """Process CPU time (all threads) over the flight: ``cpu_s / wall_s`` is the companion's CPU share."""

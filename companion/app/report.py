@@ -298,7 +298,9 @@ def _landing_lines(landing: dict[str, Any]) -> list[str]:
         lines.append(f"- {where}: free radius {seen}{zone['radius_m']:.2f} m at the land decision")
     for command in landing.get("ground_commands") or []:
         forced = " (forced)" if command.get("force") else ""
-        lines.append(f"- ground station at {command['t_s']:.1f} s: {command['command']}{forced}, {command['result']}")
+        when = "the end" if command.get("t_s") is None else f"{command['t_s']:.1f} s"
+        why = f" ({command['reason']})" if command.get("result") in ("denied", "unsupported", "not_for_us") else ""
+        lines.append(f"- ground station at {when}: {command['command']}{forced}, {command['result']}{why}")
     if landing.get("nearest_occupied_m") is not None:
         lines.append(
             f"- nearest ground the map called occupied, from the landing point: {landing['nearest_occupied_m']:.2f} m "

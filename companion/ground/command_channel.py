@@ -82,6 +82,19 @@ class CommandChannelError(SlzError):
 
 
 @dataclass(frozen=True)
+class RefusedCommand:
+    """A command the channel did not take, for the flight log: its MAV_CMD, who sent it and from where, how it was
+    answered (None: not at all, it was addressed to another vehicle) and why."""
+
+    mav_cmd: int
+    sender: tuple[int, int]
+    address: tuple[str, int]
+    result: AckResult | None
+    reason: str
+    signed: bool
+
+
+@dataclass(frozen=True)
 class GroundCommand:
     """One command taken: what, its MAV_CMD number, forced (param1 = 1 of a land-now), who sent it and from where."""
 
@@ -148,6 +161,7 @@ class CommandChannel:
         self.wall_clock = wall_clock
         self.counts = ChannelCounts()
         self._taken: list[GroundCommand] = []
+        self._refused: list[RefusedCommand] = []
         self._transport: asyncio.DatagramTransport | None = None
         self._seq = 0
         self._text_id = 0
@@ -184,6 +198,11 @@ class CommandChannel:
         taken, self._taken = self._taken, []
         return taken
 
+    def refused(self) -> list[RefusedCommand]:
+        """The commands refused (or addressed to another vehicle) since the last call, oldest first."""
+        refused, self._refused = self._refused, []
+        return refused
+
     # -- receiving ---------------------------------------------------------------------------------------------------
     def _received(self, data: bytes, address: tuple[str, int]) -> None:
         try:
@@ -198,22 +217,31 @@ class CommandChannel:
         if frame.msg_id != COMMAND_LONG.msg_id:
             return  # a heartbeat, a reply of another component: nothing to take
         fields = frame.fields
+        mav_cmd = int(fields["command"])
+        sender, signed = (frame.sys_id, frame.comp_id), frame.signature_ok is not None
         if fields["target_system"] != self.system_id or fields["target_component"] != MAV_COMP_ID_ONBOARD_COMPUTER:
             self.counts.not_for_us += 1
+            if fields["target_component"] == MAV_COMP_ID_ONBOARD_COMPUTER:  # meant for a companion: say where it went
+                target = int(fields["target_system"])
+                reason = f"addressed to system {target}, this vehicle is system {self.system_id}: another vehicle's"
+                logger.warning("command %d from %s %s", mav_cmd, address, reason)
+                self._refused.append(RefusedCommand(mav_cmd, sender, address, None, reason, signed))
             return
-        mav_cmd = int(fields["command"])
         refusal = self._signature_refusal(frame)
         if refusal is not None:
             logger.warning("command %d from %s refused: %s", mav_cmd, address, refusal)
             self._reply(frame, address, mav_cmd, AckResult.DENIED, f"refused: {refusal}")
+            self._refused.append(RefusedCommand(mav_cmd, sender, address, AckResult.DENIED, refusal, signed))
             return
         command = COMMAND_OF_MAV_CMD.get(mav_cmd)
         if command is None:
             self.counts.unsupported += 1
-            self._reply(frame, address, mav_cmd, AckResult.UNSUPPORTED, f"command {mav_cmd} is not supported")
+            reason = f"command {mav_cmd} is not supported"
+            logger.warning("command %d from %s: %s", mav_cmd, address, reason)
+            self._reply(frame, address, mav_cmd, AckResult.UNSUPPORTED, reason)
+            self._refused.append(RefusedCommand(mav_cmd, sender, address, AckResult.UNSUPPORTED, reason, signed))
             return
         force = command is OperatorCommand.LAND_NOW and float(fields["param1"]) == 1.0
-        sender = (frame.sys_id, frame.comp_id)
         taken = GroundCommand(command, mav_cmd, force, sender, address, frame.link_id is not None)
         self.counts.taken += 1
         self._reply(frame, address, mav_cmd, AckResult.IN_PROGRESS)

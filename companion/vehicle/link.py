@@ -80,6 +80,8 @@ class VehicleLink(Protocol):
     poses: PoseBuffer
     clock: VehicleClock
     status: VehicleStatus
+    system_id: int
+    """The vehicle's MAVLink system id (the autopilot's, once connected): the companion's too."""
 
     async def connect(self, timeout_s: float) -> None:
         """Find the autopilot and start the telemetry streams (raises :class:`VehicleError`)."""

@@ -40,6 +40,10 @@ _MODES = {
 }
 
 
+PROVISIONAL_SYSTEM_ID = 1
+"""The companion's MAVLink system id while it looks for an autopilot whose id it is told to take (PX4's default)."""
+
+
 class MavsdkVehicleLink:
     """:class:`companion.vehicle.link.VehicleLink` over MAVSDK.
 
@@ -49,13 +53,17 @@ class MavsdkVehicleLink:
         MAVSDK connection URL (``udpin://0.0.0.0:14540``, ``serial:///dev/ttyTHS1:921600``).
     telemetry_rate_hz : float
         Rate asked for the pose messages.
-    system_id : int
-        The companion's own MAVLink system id (the autopilot's, on a real vehicle).
+    system_id : int or None
+        The companion's own MAVLink system id, which must be the autopilot's (the companion is a component of the
+        vehicle): None takes it from the autopilot's heartbeat at :meth:`connect`; a number that differs from the
+        autopilot's is refused there.
     """
 
-    def __init__(self, url: str, telemetry_rate_hz: float = 50.0, system_id: int = 1) -> None:
+    def __init__(self, url: str, telemetry_rate_hz: float = 50.0, system_id: int | None = None) -> None:
         self.name = url
-        self.system_id = system_id
+        self.configured_system_id = system_id
+        self.system_id = system_id or PROVISIONAL_SYSTEM_ID
+        """The companion's MAVLink system id: the autopilot's once connected."""
         self.url = url
         self.telemetry_rate_hz = telemetry_rate_hz
         self.poses = PoseBuffer(capacity=max(50, int(10 * telemetry_rate_hz)))
@@ -70,20 +78,23 @@ class MavsdkVehicleLink:
         self._updated = asyncio.Event()  # set by every telemetry handler
 
     async def connect(self, timeout_s: float) -> None:
-        """Find the autopilot within ``timeout_s`` (wall) and start the telemetry tasks."""
-        from mavsdk.asyncio import Configuration, Mavsdk
-        from mavsdk.component_type import ComponentType
-
-        config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
-        config.system_id = self.system_id
-        self._mavsdk = Mavsdk(config)
-        try:
-            await asyncio.wait_for(self._mavsdk.add_any_connection(self.url), timeout_s)
-        except Exception as exc:  # MavsdkConnectionError, bad URL, busy port, missing serial device
-            raise VehicleError(self.url, f"cannot open the connection: {exc}") from None
-        self._system = await self._mavsdk.first_autopilot(timeout_s=timeout_s)
-        if self._system is None:
-            raise VehicleError(self.url, f"no autopilot answered within {timeout_s:g} s")
+        """Find the autopilot within ``timeout_s`` (wall), take its system id (or refuse a configured one that
+        differs) and start the telemetry tasks."""
+        deadline = time.monotonic() + timeout_s
+        await self._find_autopilot(timeout_s)
+        autopilot_id = int(await self._system.get_system_id())
+        if autopilot_id != self.system_id:
+            if self.configured_system_id is not None:
+                await self.close()
+                raise VehicleError(
+                    self.url,
+                    f"the autopilot is system {autopilot_id}, vehicle.system_id says {self.configured_system_id}: the "
+                    f"companion must share the autopilot's system id (set it to {autopilot_id}, or leave it out)",
+                )
+            logger.info("the autopilot is system %d: the companion takes its id", autopilot_id)
+            await self.close()  # MAVSDK's own id is set before it connects: again, as the autopilot's component
+            self.system_id = autopilot_id
+            await self._find_autopilot(max(1.0, deadline - time.monotonic()))
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
@@ -105,6 +116,22 @@ class MavsdkVehicleLink:
             asyncio.create_task(self._follow(self._telemetry.subscribe_battery(), self._on_battery)),
             asyncio.create_task(self._follow(self._direct.subscribe_message("HOME_POSITION"), self._on_home)),
         ]
+
+    async def _find_autopilot(self, timeout_s: float) -> None:
+        """A MAVSDK instance as component ``COMPANION_COMPUTER`` of ``system_id``, and the first autopilot it finds."""
+        from mavsdk.asyncio import Configuration, Mavsdk
+        from mavsdk.component_type import ComponentType
+
+        config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
+        config.system_id = self.system_id
+        self._mavsdk = Mavsdk(config)
+        try:
+            await asyncio.wait_for(self._mavsdk.add_any_connection(self.url), timeout_s)
+        except Exception as exc:  # MavsdkConnectionError, bad URL, busy port, missing serial device
+            raise VehicleError(self.url, f"cannot open the connection: {exc}") from None
+        self._system = await self._mavsdk.first_autopilot(timeout_s=timeout_s)
+        if self._system is None:
+            raise VehicleError(self.url, f"no autopilot answered within {timeout_s:g} s")
 
     async def _follow(self, stream: AsyncIterator[Any], handle: Callable[[Any], None]) -> None:
         try:
