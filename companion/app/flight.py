@@ -431,10 +431,14 @@ class FlightApp:
         self.outcome.link_lost = True
         self.commands.stop()
         state = self.vehicle_state()
-        self.recorder.write(
-            RecordKind.FAILSAFE, state.t_s if state else None, reason="link lost: stop commanding", action="autopilot"
+        shared = self.link.status.port_shared
+        why = "link lost: stop commanding" + ("" if shared is None else f" ({shared})")
+        self.recorder.write(RecordKind.FAILSAFE, state.t_s if state else None, reason=why, action="autopilot")
+        logger.error(
+            "link lost: no telemetry for %.1f s; the autopilot's failsafe acts%s",
+            silent_s,
+            "" if shared is None else f"; {shared}",
         )
-        logger.error("link lost: no telemetry for %.1f s; the autopilot's failsafe acts", silent_s)
         if self.lockstep is not None:
             self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act
         self.done.set()

@@ -71,6 +71,8 @@ class VehicleStatus:
     """The current it supplies, amperes (None until reported)."""
     home_ne_m: tuple[float, float] | None = None
     """Home, local NED north and east (m), as the autopilot reports it (None until reported)."""
+    port_shared: str | None = None
+    """Why the link's port is shared with another program, once seen (``companion.vehicle.port_holders``)."""
 
 
 class VehicleLink(Protocol):

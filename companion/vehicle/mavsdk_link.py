@@ -20,6 +20,7 @@ from typing import Any
 
 from companion.vehicle.clock import VehicleClock
 from companion.vehicle.link import FlightMode, Setpoint, VehicleError, VehicleStatus
+from companion.vehicle.port_holders import shared_now, taken_by_another
 from companion.vehicle.pose_buffer import PoseBuffer, PoseBufferError
 
 logger = logging.getLogger(__name__)
@@ -40,6 +41,30 @@ _MODES = {
 }
 
 
+MAVSDK_LOGGER = logging.getLogger("mavsdk")
+"""MAVSDK's own messages (its C++ core), plain, through Python's logging: the console, the journal and a log file
+get them without the terminal colour codes MAVSDK prints itself."""
+_MAVSDK_LEVELS = {0: logging.DEBUG, 1: logging.INFO, 2: logging.WARNING, 3: logging.ERROR}
+_routed: list[Any] = []  # the subscribed callback, kept alive while MAVSDK may call it
+
+
+def route_mavsdk_logs() -> None:
+    """Once per process: MAVSDK's log messages go to the ``mavsdk`` logger (at its levels) instead of MAVSDK's own
+    coloured output."""
+    if _routed:
+        return
+    from mavsdk.logging import LogLevel, log_subscribe
+
+    def forward(level: LogLevel, message: str, file: str | None, line: int) -> bool:
+        MAVSDK_LOGGER.log(_MAVSDK_LEVELS.get(int(level), logging.INFO), "%s", message)
+        return True  # MAVSDK prints nothing itself
+
+    log_subscribe(forward)
+    _routed.append(forward)
+
+
+PORT_CHECK_PERIOD_S = 2.0
+"""Wall seconds between two looks at who else holds the link's UDP port."""
 PROVISIONAL_SYSTEM_ID = 1
 """The companion's MAVLink system id while it looks for an autopilot whose id it is told to take (PX4's default)."""
 
@@ -81,6 +106,9 @@ class MavsdkVehicleLink:
         """Find the autopilot within ``timeout_s`` (wall), take its system id (or refuse a configured one that
         differs) and start the telemetry tasks."""
         deadline = time.monotonic() + timeout_s
+        taken = taken_by_another(self.url)
+        if taken is not None:
+            raise VehicleError(self.url, taken)
         await self._find_autopilot(timeout_s)
         autopilot_id = int(await self._system.get_system_id())
         if autopilot_id != self.system_id:
@@ -115,13 +143,26 @@ class MavsdkVehicleLink:
             asyncio.create_task(self._follow(self._telemetry.subscribe_health(), self._on_health)),
             asyncio.create_task(self._follow(self._telemetry.subscribe_battery(), self._on_battery)),
             asyncio.create_task(self._follow(self._direct.subscribe_message("HOME_POSITION"), self._on_home)),
+            asyncio.create_task(self._watch_port()),
         ]
+
+    async def _watch_port(self) -> None:
+        """Every ``PORT_CHECK_PERIOD_S``: a second program bound on the link's port is said once, and kept in
+        ``status.port_shared`` (the lost link's reason names it)."""
+        while self.status.port_shared is None:
+            shared = shared_now(self.url)
+            if shared is not None:
+                self.status.port_shared = shared
+                logger.error("%s", shared)
+                return
+            await asyncio.sleep(PORT_CHECK_PERIOD_S)
 
     async def _find_autopilot(self, timeout_s: float) -> None:
         """A MAVSDK instance as component ``COMPANION_COMPUTER`` of ``system_id``, and the first autopilot it finds."""
         from mavsdk.asyncio import Configuration, Mavsdk
         from mavsdk.component_type import ComponentType
 
+        route_mavsdk_logs()
         config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
         config.system_id = self.system_id
         self._mavsdk = Mavsdk(config)
