@@ -5,6 +5,7 @@ tests/test_companion_missions.py and tests/test_companion_fly.py."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
@@ -658,3 +659,31 @@ def test_a_camera_that_comes_up_after_the_companion_is_waited_for_within_its_bou
     app.source = LateCamera(failures=1000)
     with pytest.raises(CameraError, match="cannot connect"):
         asyncio.run(app._open_camera())  # past the bound: the camera's own error
+
+
+def test_the_console_says_how_the_flight_goes_every_few_seconds_and_while_watching(
+    tmp_path: Path, config: PerceptionConfig, caplog: pytest.LogCaptureFixture
+) -> None:
+    # Issue 65: nothing on the console for 4 minutes of watching after a failsafe, nor during take-off or descent.
+    link, clock = FakeLink(), Clock()
+    app = limited_flight(tmp_path, config, link, clock)
+
+    async def flight() -> None:
+        await hand_over(app, link)
+        for k in range(1, 60):  # 6 s of searching at 10 Hz
+            await tick(app, link, 1.0 + 0.1 * k)
+        clock.now_s = 300.0  # the wall limit: hold, then watch
+        for k in range(60, 180):  # 12 s of watching
+            await tick(app, link, 1.0 + 0.1 * k)
+
+    with caplog.at_level(logging.INFO, logger="companion.app.journal"):
+        asyncio.run(flight())
+    lines = [r.message for r in caplog.records if r.name == "companion.app.journal" and r.message.startswith("t ")]
+    flying = [line for line in lines if line.startswith("t ") and "search" in line]
+    watching = [line for line in lines if "watching after the failsafe" in line]
+    assert flying
+    assert "altitude 20.0 m" in flying[0]
+    assert "mode OFFBOARD" in flying[0]
+    assert len(watching) >= 2  # every 5 s of vehicle time, calm
+    assert "mode HOLD" in watching[0]
+    assert len(lines) <= 5  # 18 s of flight: a line per 5 s, not per tick

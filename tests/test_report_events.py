@@ -238,3 +238,18 @@ def test_the_path_slz_fly_prints_is_one_slz_report_takes(tmp_path: Path) -> None
     assert flight_folder(folder / "flight.jsonl") == folder  # the log itself
     assert flight_folder(folder) == folder
     assert flight_folder(tmp_path / "run") == folder  # a demo's run folder
+
+
+def test_the_report_says_why_frames_failed_not_only_how_many(tmp_path: Path) -> None:
+    # Issue 65: "frame errors 37" without saying they were all the head plane out of sight after the land command.
+    recorder = FlightRecorder(tmp_path)
+    for k in range(3):
+        recorder.write(RecordKind.FRAME_ERROR, float(k), seq=k, error="projection.gsd: the head plane is not visible")
+    recorder.write(RecordKind.FRAME_ERROR, 4.0, seq=4, error="pipeline.process: frame is 320x240")
+    recorder.close()
+    summary = summarize(FlightLog.read(tmp_path))
+    assert summary["frame_errors"] == 4
+    assert summary["frame_errors_by_why"] == {
+        "projection.gsd: the head plane is not visible": 3,
+        "pipeline.process: frame is 320x240": 1,
+    }

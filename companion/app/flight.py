@@ -229,7 +229,7 @@ class FlightApp:
         if not self.start_sequence.started:
             self.outcome.frames_before_start += 1
             return
-        if self.guidance.phase in TERMINAL:
+        if self.guidance.phase in FRAMES_UNREAD:  # no decision reads it: the landing is the autopilot's, or over
             return
         paired = await self.intake.pose_for(frame)
         if paired is None:
@@ -260,6 +260,8 @@ class FlightApp:
         status = self.link.status
         self.supervision.saw(status)
         self.journal.pose(state, status)
+        if self.start_sequence.started or self.supervision.watching is not None:
+            self.journal.progress(state, status, watching=self.supervision.watching is not None)
         if self.supervision.watching is not None:
             if self.supervision.stop_requested is not None:  # the vehicle is the autopilot's: nothing to give it
                 asked = self.supervision.take_stop(last_resort=False)

@@ -17,6 +17,7 @@ from companion.vehicle.link import VehicleStatus
 logger = logging.getLogger(__name__)
 
 POSE_RECORD_PERIOD_S = 1.0  # vehicle time between two `pose` records: the flight's path in the log
+PROGRESS_PERIOD_S = 5.0  # vehicle time between two progress lines on the console (and the journal)
 
 
 class FlightJournal:
@@ -35,6 +36,8 @@ class FlightJournal:
         self.prefix = "[dry run] " if dry_run else ""
         self._target_id: int | None = None  # the last decision's target (console and log report switches)
         self._pose_recorded_s = -math.inf  # vehicle time of the last `pose` record
+        self._progress_said_s = -math.inf  # vehicle time of the last progress line
+        self._last_decision: Decision | None = None
 
     def reset(self) -> None:
         """A fresh state machine decides (a dry run started again): no target yet."""
@@ -51,6 +54,7 @@ class FlightJournal:
     ) -> None:
         """Record a decision (with what produced it, from which inputs, and what the map showed around its target:
         ``observed``), the phase change from ``previous_phase`` it makes, its target switch and its failsafe."""
+        self._last_decision = decision
         extra = {} if observed is None else {"observed": observed}
         self.recorder.write(
             RecordKind.DECISION, decision.t_s, decision=decision, source=source, state=state, inputs=inputs, **extra
@@ -89,6 +93,30 @@ class FlightJournal:
         if step.handed_over is not None:
             mode = step.handed_over.value
             self.recorder.write(RecordKind.HANDOVER, state.t_s, mode=mode, altitude_m=state.altitude_m)
+
+    def progress(self, state: VehicleState, status: VehicleStatus, watching: bool = False) -> str | None:
+        """A calm progress line (at most every ``PROGRESS_PERIOD_S`` of vehicle time) while flying or watching: the
+        phase (or the watch), altitude, the vehicle's mode, the target and how far it is, and what the last decision
+        said (a wait at the walker gate says how long). Logged (the console, the journal); returned for tests."""
+        if state.t_s - self._progress_said_s < PROGRESS_PERIOD_S:
+            return None
+        self._progress_said_s = state.t_s
+        last = self._last_decision
+        parts = [
+            "watching after the failsafe" if watching else (last.phase.value if last is not None else "starting"),
+            f"altitude {state.altitude_m:.1f} m",
+            f"mode {status.mode.value}",
+        ]
+        if status.in_air is False and watching:
+            parts.append("on the ground")
+        if last is not None and last.target is not None and not watching:
+            away = math.hypot(last.target.north_m - state.north_m, last.target.east_m - state.east_m)
+            parts.append(f"target zone {last.target.track_id} (r {last.target.radius_m:.1f} m, {away:.1f} m away)")
+        if last is not None and not watching:
+            parts.append(last.reason if len(last.reason) <= 80 else last.reason[:77] + "...")
+        line = f"{self.prefix}t {state.t_s:.1f} s: " + ", ".join(parts)
+        logger.info("%s", line)
+        return line
 
     def pose(self, state: VehicleState, status: VehicleStatus) -> None:
         """The vehicle's pose and status, at most once per ``POSE_RECORD_PERIOD_S`` of vehicle time."""

@@ -17,6 +17,7 @@ Plots need matplotlib (the ``report`` extra, also in ``sitl`` and ``dev``); the 
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import math
@@ -103,6 +104,9 @@ def summarize(log: FlightLog) -> dict[str, Any]:
         "outcome": outcome,
         "frames_processed": log.count(RecordKind.FRAME_RESULT),
         "frame_errors": log.count(RecordKind.FRAME_ERROR),
+        "frame_errors_by_why": dict(
+            collections.Counter(str(r.get("error", "")) for r in log.of(RecordKind.FRAME_ERROR)).most_common()
+        ),
         "decisions": len(decisions),
         "commands_sent": log.count(RecordKind.COMMAND),
         "land_command": None
@@ -323,6 +327,8 @@ def _markdown(flight_dir: Path, summary: dict[str, Any], files: list[Path], out_
         f"- frames processed {summary['frames_processed']}, frame errors {summary['frame_errors']}, decisions "
         f"{summary['decisions']}, commands sent {summary['commands_sent']}",
     ]
+    for why, count in (summary.get("frame_errors_by_why") or {}).items():
+        lines.append(f"  - {count} frame error{'s' * (count != 1)}: {why}")
     if outcome.get("touchdown_ne_m"):
         n, e = outcome["touchdown_ne_m"]
         t_s = outcome["touchdown_t_s"]
