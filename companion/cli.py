@@ -69,6 +69,9 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     config, pipeline = validate_for_flight(args.config, never_arm=args.never_arm)  # as `slz check-config` does
     if args.dry_run:
         config = config.model_copy(update={"mode": OperatingMode.DRY_RUN})
+    if args.replayable:  # every frame, losslessly: `slz replay` can re-run the flight
+        recorder_config = config.recorder.model_copy(update={"frame_every": 1, "frame_format": FrameFormat.PNG})
+        config = config.model_copy(update={"recorder": recorder_config})
     validation = validation_of(config.perception.model.path)
     unvalidated = validation is None or not validation.real_imagery
     if unvalidated and config.mode is OperatingMode.FLY and config.simulator.lockstep_url is None:
@@ -304,6 +307,12 @@ def build_parser() -> argparse.ArgumentParser:
         "guidance.last_resort (hold or return) and the program stays until it is on the ground or the pilot has it; "
         "a dry run or a wait for the handover just ends (default: no wall limit; guidance.mission_time_limit_s, on "
         "the vehicle clock, bounds the search)",
+    )
+    fly.add_argument(
+        "--replayable",
+        action="store_true",
+        help="save every frame losslessly (PNG), whatever recorder says, so that slz replay can re-run the flight "
+        "(about 0.5 MB a frame)",
     )
     fly.add_argument(
         "--never-arm",

@@ -196,7 +196,7 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     corners_ne = [(-25.0, -25.0), (-25.0, 25.0), (25.0, 25.0), (25.0, -25.0)]  # sitl.yaml's fence, as a surveyor
     lat0, lon0 = origin.origin_lat_deg, origin.origin_lon_deg
     corners_latlon = [ned_to_geodetic(n, e, 0.0, lat0, lon0, 0.0)[:2] for n, e in corners_ne]
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
+    text = sitl_mission_yaml(instance, flights_dir=tmp_path)  # every 10th frame as JPEG: --replayable overrides it
     fence_ne = "  polygon_ne_m: [[-25.0, -25.0], [-25.0, 25.0], [25.0, 25.0], [25.0, -25.0]]\n"
     assert fence_ne in text
     latlon = ", ".join(f"[{lat:.9f}, {lon:.9f}]" for lat, lon in corners_latlon)
@@ -205,7 +205,7 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     mission.write_text(text)
     try:
         fly = subprocess.run(
-            slz_fly_argv(mission, tmp_path / "flight"),
+            [*slz_fly_argv(mission, tmp_path / "flight"), "--replayable"],
             cwd=REPO_ROOT,
             capture_output=True,
             text=True,
@@ -217,6 +217,7 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     assert fly.returncode == 0, fly.stderr[-3000:]
     assert "ended in done (landed)" in fly.stdout
     records = read_log(tmp_path / "flight" / "flight.jsonl")
+    assert {Path(r["path"]).suffix for r in records if r["kind"] == "frame"} == {".png"}  # issue 65: --replayable
     fence = next(r for r in records if r["kind"] == "fence")
     # PX4's projection (a sphere) against the SITL's (WGS-84 radii at the origin): a few centimetres at 25 m.
     got_ne = [tuple(v) for v in fence["polygon_ne_m"]]
