@@ -156,7 +156,7 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
         min_model_rate_hz=args.min_model_rate, frames=args.frames, min_free_mb=args.min_free_mb, window_s=args.window
     )
     sys.stdout.write(f"slz doctor: {args.config} (slz-lander {__version__})\n")
-    results = asyncio.run(diagnose(config, limits))
+    results = asyncio.run(diagnose(config, limits, actuator_test=args.actuator_test))
     for result in results:
         sys.stdout.write(result.line() + "\n")
         sys.stdout.flush()
@@ -325,6 +325,12 @@ def build_parser() -> argparse.ArgumentParser:
     doctor.add_argument("--config", type=Path, required=True, help="the mission config the flight will use")
     doctor.add_argument("--min-model-rate", type=float, default=10.0, help="inferences per second needed (Hz)")
     doctor.add_argument("--frames", type=int, default=10, help="camera frames to read")
+    doctor.add_argument(
+        "--actuator-test",
+        action="store_true",
+        help="also switch the warning device (guidance.warning) on for 2 s and off again through the autopilot: on "
+        "the bench, props off",
+    )
     doctor.add_argument("--min-free-mb", type=float, default=1024.0, help="free space needed for flight logs (MiB)")
     doctor.add_argument("--window", type=float, default=2.0, help="seconds over which telemetry rates are measured")
     doctor.set_defaults(func=_cmd_doctor)

@@ -124,3 +124,23 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert checks["validation"].startswith(
         "FAIL validation: slz_yolox.onnx is NOT validated for flight over real people"
     )
+
+
+def test_doctor_switches_the_warning_device_on_the_bench_and_back_off(tmp_path: Path, instance: int) -> None:
+    # Issue 65: the warning device could not be checked before a flight: its switches appeared only in the log.
+    sitl_config = tmp_path / "sitl.yaml"
+    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_ACT: 1}\n")
+    config = mission_config(
+        tmp_path, instance, "siren", **{"guidance:\n": "guidance:\n  warning: {enabled: true, actuator: 1}\n"}
+    )
+    sitl = SitlProcess(["--config", str(sitl_config)], instance, tmp_path).start()
+    try:
+        command = [sys.executable, "-m", "companion.cli", "doctor", "--config", str(config), "--frames", "3"]
+        run = subprocess.run([*command, "--actuator-test"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
+        warning = sitl.state()["warning"]
+    finally:
+        sitl.stop()
+    checks = lines_of(run)
+    assert checks["actuator"].startswith("PASS actuator: Offboard Actuator Set 1 switched to 1 for 2 s, then -1")
+    assert warning["times_on"] == 1  # it sounded once, on the SITL's side
+    assert warning["on"] is False  # and is off again

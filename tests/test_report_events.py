@@ -253,3 +253,17 @@ def test_the_report_says_why_frames_failed_not_only_how_many(tmp_path: Path) -> 
         "projection.gsd: the head plane is not visible": 3,
         "pipeline.process: frame is 320x240": 1,
     }
+
+
+def test_the_landing_report_lists_the_warning_devices_switches(tmp_path: Path) -> None:
+    # Issue 65: the warning device's switches appeared only in the log.
+    from companion.app.landing_report import landing_report
+
+    recorder = FlightRecorder(tmp_path)
+    recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0", model="m.onnx", model_sha256="ab")
+    recorder.write(RecordKind.WARNING, 30.0, on=True, sent=True, phase="descent", event="descend", actuator=1)
+    recorder.write(RecordKind.WARNING, 41.0, on=False, sent=True, phase="done", event="landed", actuator=1)
+    recorder.write(RecordKind.END, None, outcome={"phase": "done", "reason": "landed"})
+    recorder.close()
+    switches = landing_report(FlightLog.read(tmp_path))["warning_device"]
+    assert [(s["t_s"], s["on"], s["event"]) for s in switches] == [(30.0, True, "descend"), (41.0, False, "landed")]

@@ -337,8 +337,41 @@ async def check_failsafe(link: MavsdkVehicleLink) -> CheckResult:
     return CheckResult("failsafe", Status.PASS, detail)
 
 
-async def diagnose(config: MissionConfig, limits: DoctorLimits | None = None) -> list[CheckResult]:
-    """Run every check in order: disk, model, validation, link, clock, camera, failsafe."""
+ACTUATOR_ON_S = 2.0
+"""How long the bench test keeps the warning device on (wall seconds)."""
+
+
+async def check_actuator(link: MavsdkVehicleLink, config: MissionConfig, on_s: float = ACTUATOR_ON_S) -> CheckResult:
+    """The warning device on the bench (``--actuator-test``): its output switched to ``on_value``, held ``on_s``,
+    then back to ``off_value``, each through the autopilot (MAV_CMD_DO_SET_ACTUATOR, acknowledged). Whether a siren
+    sounded or a strobe flashed is for the person at the bench to say: the check says what the autopilot answered."""
+    w = config.guidance.warning
+    if not w.enabled:
+        return CheckResult("actuator", Status.SKIP, "guidance.warning is not enabled in this config")
+    try:
+        await link.set_actuator(w.actuator, w.on_value)
+    except VehicleError as exc:
+        return CheckResult("actuator", Status.FAIL, f"output {w.actuator} to {w.on_value:g} refused: {exc}")
+    try:
+        await asyncio.sleep(on_s)
+    finally:
+        try:
+            await link.set_actuator(w.actuator, w.off_value)
+        except VehicleError as exc:
+            return CheckResult("actuator", Status.FAIL, f"switched on, but off ({w.off_value:g}) refused: {exc}")
+    return CheckResult(
+        "actuator",
+        Status.PASS,
+        f"Offboard Actuator Set {w.actuator} switched to {w.on_value:g} for {on_s:g} s, then {w.off_value:g}: "
+        "the autopilot accepted both (did the device sound or flash?)",
+    )
+
+
+async def diagnose(
+    config: MissionConfig, limits: DoctorLimits | None = None, actuator_test: bool = False
+) -> list[CheckResult]:
+    """Run every check in order: disk, model, validation, link, clock, camera, failsafe (and with ``actuator_test``,
+    the warning device on the bench)."""
     limits = limits or DoctorLimits()
     results = [check_disk(config.recorder.directory, limits.min_free_mb)]
     results.append(
@@ -355,6 +388,9 @@ async def diagnose(config: MissionConfig, limits: DoctorLimits | None = None) ->
             results.append(await check_failsafe(link))
         else:
             results.append(CheckResult("failsafe", Status.SKIP, "no link: the autopilot's parameters are unknown"))
+        if actuator_test:
+            no_link = CheckResult("actuator", Status.SKIP, "no link: nothing to switch")
+            results.append(await check_actuator(link, config) if link_results[0].ok else no_link)
     finally:
         await link.close()
     return results

@@ -27,7 +27,7 @@ from companion.guidance.vocabulary import DecisionEvent
 logger = logging.getLogger(__name__)
 
 REPORT_NAME = "landing_report.json"
-VERSION = 3  # 2: fallback_site, ground_commands; 3: outcome, outcome_says
+VERSION = 3  # 2: fallback_site, ground_commands; 3: outcome, outcome_says, warning_device
 
 
 class FlightEnding(str, enum.Enum):
@@ -190,6 +190,9 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
             "seen_from_altitude_m": -descent["state"]["down_m"] if descent.get("state") else None,
         },
         "nearest_occupied_m": None if observed is None else observed.get("nearest_occupied_m"),
+        "warning_device": [
+            {k: r.get(k) for k in ("t_s", "on", "sent", "event", "actuator")} for r in log.of(RecordKind.WARNING)
+        ],
         "ground_commands": [
             {k: r.get(k) for k in ("t_s", "command", "result", "reason", "force", "signed")}
             for r in log.of(RecordKind.GROUND_COMMAND)

@@ -74,6 +74,13 @@ class WarningDevice:
             event=decision.event.value,
             actuator=self.config.actuator,
         )
+        logger.info(
+            "warning device %s (%s, output %d)%s",
+            "on" if wanted else "off",
+            decision.event.value,
+            self.config.actuator,
+            "" if sent else ": not sent (a dry run, or the pilot has the vehicle)",
+        )
         if not sent:
             return
         value = self.config.on_value if wanted else self.config.off_value
