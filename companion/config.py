@@ -94,7 +94,14 @@ def format_validation_error(error: ValidationError, prefix: str = "") -> list[st
         path = ".".join(str(part) for part in (prefix, *item["loc"]) if part != "")
         got = item.get("input")
         got_text = "" if item["type"] == "missing" or isinstance(got, dict) else f" (got {quote(got)})"
-        lines.append(f"{cut(path, 200) or '<root>'}: {cut(item['msg'], 300)}{got_text}")
+        message = item["msg"]
+        if item["type"] == "value_error":  # a validator's own words: they name their fields; no pydantic prefix
+            message = message.removeprefix("Value error, ")
+            if not item["loc"]:  # a check across sections (the fence against the mission): a line per problem
+                lead = f"{prefix}: " if prefix else ""
+                lines.extend(f"{lead}{cut(problem, 300)}" for problem in message.split("\n") if problem)
+                continue
+        lines.append(f"{cut(path, 200) or '<root>'}: {cut(message, 300)}{got_text}")
     return lines
 
 

@@ -53,8 +53,20 @@ def test_a_landing_area_must_lie_inside_the_geofence() -> None:
     )
     assert config.perception.zones.landing_area_ne_m == roi
     beyond = [*roi[:2], (30.0, 15.0), roi[3]]
-    with pytest.raises(ConfigError, match=r"landing_area_ne_m vertex \(30.0, 15.0\) lies outside geofence"):
-        validate_config(MissionConfig, {"geofence": fence, "perception": {"zones": {"landing_area_ne_m": beyond}}})
+    with pytest.raises(ConfigError, match=r"landing_area_ne_m vertex \(30.0, 15.0\) lies outside geofence") as caught:
+        validate_config(
+            MissionConfig,
+            {
+                "geofence": fence,
+                "perception": {"zones": {"landing_area_ne_m": beyond}},
+                "start": {"start_north_m": 90.0, "start_east_m": 0.0},
+            },
+        )
+    # Each contradiction is a line of its own, in the validator's words, without pydantic's "<root>: Value error,".
+    lines = caught.value.problems
+    assert any(line.startswith("perception.zones.landing_area_ne_m vertex (30.0, 15.0)") for line in lines), lines
+    assert any(line.startswith("start.start_north_m, start.start_east_m (90.0, 0.0)") for line in lines), lines
+    assert not any("Value error" in line or "<root>" in line for line in lines), lines
 
 
 def test_latitude_and_longitude_project_as_px4_does_into_the_local_frame() -> None:

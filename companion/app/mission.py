@@ -202,7 +202,7 @@ class MissionConfig(StrictModel):
     def _inside_the_fence(self) -> MissionConfig:
         problems = fence_contradictions(self)
         if problems:
-            raise ValueError("; ".join(problems))
+            raise ValueError("\n".join(problems))  # one line each in the config error
         return self
 
 
