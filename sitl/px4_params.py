@@ -72,7 +72,15 @@ PARAMS: tuple[ParamSpec, ...] = tuple(
             ParamSpec("MPC_TILTMAX_AIR", _F, 35.0, 20.0, 89.0, "Maximum tilt in the air, deg"),
             ParamSpec("MPC_THR_HOVER", _F, 0.5, 0.1, 0.8, "Hover thrust, normalized"),
             ParamSpec("COM_OF_LOSS_T", _F, 1.0, 0.0, 60.0, "Offboard setpoint loss timeout, s"),
-            ParamSpec("COM_OBL_ACT", _I, 0, 0, 2, "Offboard loss action: 0 land, 1 hold, 2 return"),
+            ParamSpec(
+                "COM_OBL_RC_ACT",
+                _I,
+                0,
+                0,
+                7,
+                "Offboard loss failsafe mode (PX4 v1.14+): 0 position, 1 altitude, 2 manual (each needs RC, else "
+                "hold), 3 return, 4 land, 5 hold, 6 terminate, 7 disarm",
+            ),
             ParamSpec("NAV_RCL_ACT", _I, 2, 0, 3, "RC loss action: 0 none, 1 hold, 2 return, 3 land"),
             ParamSpec("COM_RCL_EXCEPT", _I, 0, 0, 7, "RC loss exceptions bitmask: 4 = offboard"),
             ParamSpec("COM_RC_LOSS_T", _F, 0.5, 0.0, 35.0, "RC loss timeout, s"),

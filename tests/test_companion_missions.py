@@ -267,7 +267,9 @@ def test_a_lost_camera_holds_after_t1_then_lands_in_place_after_t2(tmp_path: Pat
 
 
 def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path: Path) -> None:
-    fault = {"faults": [{"kind": "link_loss", "at_s": FAULT_AT_S}]}
+    # COM_OBL_RC_ACT = 4 (land): the failsafe that ends the flight on its own (v1.15's default, position mode,
+    # leaves a hovering vehicle to the pilot: tests/test_sitl_mavsdk.py).
+    fault = {"faults": [{"kind": "link_loss", "at_s": FAULT_AT_S}], "params": {"COM_OBL_RC_ACT": 4}}
     r = _fly(tmp_path, "link", STATIC_SEED, sitl_overrides=fault)
     records = _records(r.run_dir)
     failsafes = [x for x in records if x["kind"] == "failsafe"]

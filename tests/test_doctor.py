@@ -45,9 +45,9 @@ def mission_config(tmp_path: Path, instance: int, name: str, **replace: str) -> 
 
 def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, instance: int) -> None:
     sitl_config = tmp_path / "sitl.yaml"  # offboard loss holds: what deploy/README.md asks of a vehicle over people
-    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_ACT: 1}\n")
-    lands_config = tmp_path / "sitl_lands.yaml"  # PX4's default: offboard loss lands in place
-    lands_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n")
+    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_RC_ACT: 5}\n")
+    lands_config = tmp_path / "sitl_lands.yaml"  # offboard loss lands in place (v1.13's default; 4 on v1.15)
+    lands_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_RC_ACT: 4}\n")
     good = mission_config(tmp_path, instance, "good")
     no_model_no_camera = mission_config(
         tmp_path,
@@ -94,7 +94,7 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert "ATTITUDE_QUATERNION" in checks["link"]
     assert "5 frames 640x480" in checks["camera"]
     assert "COM_OF_LOSS_T = 1 s" in checks["failsafe"]
-    assert "COM_OBL_ACT = 1 (hold)" in checks["failsafe"]
+    assert "COM_OBL_RC_ACT = 5 (hold)" in checks["failsafe"]
     assert ok.stdout.rstrip().endswith("ready to fly")
 
     # No model and no camera: each named, the link still checked and passing, exit 1.
@@ -108,8 +108,8 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
     assert "NOT READY: model, camera failed" in broken.stdout
     # ...and on an autopilot whose offboard-loss action lands in place, the failsafe line warns and names it.
     assert checks["failsafe"].startswith("WARN failsafe:"), checks["failsafe"]
-    assert "COM_OBL_ACT = 0 (land)" in checks["failsafe"]
-    assert "COM_OBL_ACT lands in place" in checks["failsafe"]
+    assert "COM_OBL_RC_ACT = 4 (land)" in checks["failsafe"]
+    assert "COM_OBL_RC_ACT lands in place" in checks["failsafe"]
 
     # No autopilot on the configured port: the link fails within its timeout, the clock cannot be checked.
     checks = lines_of(unlinked)
@@ -129,7 +129,7 @@ def test_doctor_passes_a_good_board_and_names_each_missing_part(tmp_path: Path, 
 def test_doctor_switches_the_warning_device_on_the_bench_and_back_off(tmp_path: Path, instance: int) -> None:
     # Issue 65: the warning device could not be checked before a flight: its switches appeared only in the log.
     sitl_config = tmp_path / "sitl.yaml"
-    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_ACT: 1}\n")
+    sitl_config.write_text("sitl:\n  camera:\n    enabled: true\n  seed: 2\n  params: {COM_OBL_RC_ACT: 5}\n")
     config = mission_config(
         tmp_path, instance, "siren", **{"guidance:\n": "guidance:\n  warning: {enabled: true, actuator: 1}\n"}
     )

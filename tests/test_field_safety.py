@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import json
+import math
 import subprocess
 import sys
 import time
@@ -317,3 +318,45 @@ def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_f
     from companion.app.report import build_flight_report
 
     assert build_flight_report(tmp_path / "flight", tmp_path / "report", video=False).files
+
+
+def test_a_companion_killed_in_flight_leaves_px4_v1_15_hovering_in_position_mode_not_landing(
+    tmp_path: Path, instance: int
+) -> None:
+    # Issue 65 (11): the SITL is PX4 v1.15, whose offboard-loss failsafe is COM_OBL_RC_ACT (default 0: position
+    # mode, the pilot's sticks). deploy/README.md's story of a companion that dies over a crowd, measured on it:
+    # the vehicle hovers where it was, it does not land in place (v1.13's COM_OBL_ACT = 0 did).
+    import signal
+
+    sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port())  # running free: no lockstep
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
+    log = tmp_path / "flight" / "flight.jsonl"
+    fly = subprocess.Popen(
+        slz_fly_argv(mission, tmp_path / "flight"),
+        cwd=REPO_ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        wait_until(lambda: log.is_file() and '"phase":"approach"' in log.read_text(), 180, "the approach")
+        killed = sitl.state()
+        assert killed["mode"] == "OFFBOARD"
+        fly.send_signal(signal.SIGKILL)  # a crash: no last resort, no goodbye
+        fly.wait(timeout=10)
+        failsafe = state_when(sitl, lambda st: bool(st["failsafe"]), 10, "the offboard-loss failsafe")
+        later = state_when(sitl, lambda st: st["t_s"] >= failsafe["t_s"] + 10.0, 30, "ten seconds of the failsafe")
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        sitl.stop()
+    assert failsafe["failsafe"] == "Offboard lost"
+    assert 0.8 <= failsafe["t_s"] - killed["t_s"] <= 2.0  # COM_OF_LOSS_T = 1 s, read through the state channel
+    assert failsafe["mode"] == "POSCTL"
+    # Ten seconds on, still in the air at the altitude it was left at, near where it stopped (it braked first).
+    assert later["mode"] == "POSCTL"
+    assert later["armed"]
+    assert not later["on_ground"]
+    assert abs(later["position_ned_m"][2] - failsafe["position_ned_m"][2]) < 0.5
+    north_m, east_m = (later["position_ned_m"][i] - failsafe["position_ned_m"][i] for i in (0, 1))
+    assert math.hypot(north_m, east_m) < 5.0

@@ -186,7 +186,7 @@ def test_with_a_signing_key_only_correctly_signed_fresh_frames_are_accepted(tmp_
         hb = wait_until(lambda: gcs.latest("HEARTBEAT"), 5.0, "a signed heartbeat")
         assert hb.get_signed()
         sysid = SitlConfig(instance=instance).system_id
-        request = gcs.mav.param_request_read_encode(sysid, 1, b"COM_OBL_ACT", -1)
+        request = gcs.mav.param_request_read_encode(sysid, 1, b"COM_OBL_RC_ACT", -1)
 
         def answered(data: bytes) -> bool:
             gcs.messages.clear()

@@ -119,12 +119,18 @@ def test_offboard_loss_failsafe_fires_after_com_of_loss_t_when_the_client_dies(
     killed_at_s = sitl.state()["t_s"]
     state = state_when(sitl, lambda s: bool(s["failsafe"]), 5.0, "the offboard-loss failsafe")
     assert state["failsafe"] == "Offboard lost"
-    assert state["mode"] == "AUTO.LAND"  # COM_OBL_ACT = 0
+    # PX4 v1.15's default, COM_OBL_RC_ACT = 0, with the RC there: position mode, the pilot's vehicle.
+    assert state["mode"] == "POSCTL"
     # COM_OF_LOSS_T = 1 s after the last setpoint (sent at most ~0.1 s before the kill).
     assert 0.85 <= state["failsafe_since_s"] - killed_at_s <= 1.3
-    final = state_when(sitl, lambda s: s["landed_state"] == "ON_GROUND" and not s["armed"], 40, "landed")
-    assert abs(final["position_ned_m"][0]) < 1.0
-    assert abs(final["position_ned_m"][1]) < 1.0
+    # On centred sticks it hovers where it was: no landing in place.
+    later = state_when(sitl, lambda s: s["t_s"] >= state["t_s"] + 5.0, 15, "five seconds of the failsafe")
+    assert later["mode"] == "POSCTL"
+    assert later["armed"]
+    assert later["landed_state"] == "IN_AIR"
+    moved_m = np.subtract(later["position_ned_m"], state["position_ned_m"])
+    assert np.hypot(moved_m[0], moved_m[1]) < 1.0
+    assert abs(moved_m[2]) < 0.5
 
 
 def test_pilot_takeover_leaves_offboard_and_the_vehicle_obeys_the_pilot(

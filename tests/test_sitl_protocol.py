@@ -123,7 +123,7 @@ def test_parameters_read_set_list(api: MavlinkPeer) -> None:
     values = wait_until(all_params, 3, "the whole parameter list")
     assert values[0].param_id == "_HASH_CHECK"  # first, as PX4 sends it
     names = {v.param_id for v in values[1:]}
-    assert {"MIS_TAKEOFF_ALT", "COM_OF_LOSS_T", "COM_OBL_ACT", "MPC_XY_VEL_MAX"} <= names
+    assert {"MIS_TAKEOFF_ALT", "COM_OF_LOSS_T", "COM_OBL_RC_ACT", "MPC_XY_VEL_MAX"} <= names
 
     def read(name: str) -> Any:
         api.messages.clear()
@@ -134,7 +134,7 @@ def test_parameters_read_set_list(api: MavlinkPeer) -> None:
     # INT32 parameters travel bytewise, as PX4 sends them.
     as_float = struct.unpack("<f", struct.pack("<i", 2))[0]
     api.messages.clear()
-    api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"COM_OBL_ACT", as_float, ParamType.INT32))
+    api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"COM_OBL_RC_ACT", as_float, ParamType.INT32))
     echoed = wait_until(lambda: api.latest("PARAM_VALUE"), 2, "the PARAM_SET echo")
     assert echoed.param_type == ParamType.INT32
     assert struct.unpack("<i", struct.pack("<f", echoed.param_value))[0] == 2
@@ -147,7 +147,9 @@ def test_parameters_read_set_list(api: MavlinkPeer) -> None:
     assert wait_until(lambda: api.latest("PARAM_VALUE"), 2, "echo").param_value == pytest.approx(500.0)
     api.send(api.mav.param_set_encode(api.vehicle_sysid, 1, b"MPC_XY_VEL_MAX", 5.0, ParamType.REAL32))
     api.send(
-        api.mav.param_set_encode(api.vehicle_sysid, 1, b"COM_OBL_ACT", struct.unpack("<f", struct.pack("<i", 0))[0], 6)
+        api.mav.param_set_encode(
+            api.vehicle_sysid, 1, b"COM_OBL_RC_ACT", struct.unpack("<f", struct.pack("<i", 0))[0], 6
+        )
     )
 
 

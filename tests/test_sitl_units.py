@@ -161,8 +161,39 @@ def test_offboard_needs_a_stream_and_loss_triggers_the_configured_action() -> No
     cmd.update(0.9, airborne(), 0.5)
     assert mode_of(cmd) is FlightMode.OFFBOARD  # 0.9 s after the last setpoint: still fine (COM_OF_LOSS_T = 1 s)
     cmd.update(1.05, airborne(), 0.5)
-    assert mode_of(cmd) is FlightMode.AUTO_LAND
+    # PX4 v1.15's default, COM_OBL_RC_ACT = 0: position mode, the vehicle the pilot's (it hovers on centred sticks).
+    assert mode_of(cmd) is FlightMode.POSCTL
     assert cmd.failsafe == "Offboard lost"
+
+
+@pytest.mark.parametrize(
+    ("value", "rc_lost", "expected"),
+    [
+        (0, False, FlightMode.POSCTL),
+        (0, True, FlightMode.AUTO_LOITER),  # position mode needs RC: PX4 falls back to hold
+        (1, False, FlightMode.POSCTL),  # altitude mode, flown as position mode
+        (2, True, FlightMode.AUTO_LOITER),
+        (3, False, FlightMode.AUTO_RTL),
+        (4, False, FlightMode.AUTO_LAND),
+        (5, False, FlightMode.AUTO_LOITER),
+        (6, False, FlightMode.AUTO_LAND),  # terminate, flown as land
+        (7, False, FlightMode.AUTO_LAND),  # disarm, flown as land
+    ],
+)
+def test_each_offboard_loss_mode_of_px4_v1_15_is_flown(value: int, rc_lost: bool, expected: FlightMode) -> None:
+    # NAV_RCL_ACT = 0: the RC's own loss does nothing, so what flies is the offboard loss's choice.
+    cmd = Commander(ParameterStore({"COM_OBL_RC_ACT": value, "NAV_RCL_ACT": 0}), np.zeros(3))
+    cmd.update(0.0, grounded(), 0.0)
+    cmd.offboard_setpoint(np.array([0.0, 0.0, -5.0]), np.full(3, np.nan), math.nan)
+    assert cmd.set_mode(FlightMode.OFFBOARD) is MavResult.ACCEPTED
+    assert cmd.arm() is MavResult.ACCEPTED
+    cmd.update(0.1, grounded(), 0.0)
+    cmd.update(0.5, airborne(), 0.5)
+    if rc_lost:
+        cmd.set_rc_lost(True)
+    cmd.update(1.2, airborne(), 0.5)  # COM_OF_LOSS_T (1 s) after the last setpoint
+    assert cmd.failsafe == "Offboard lost"
+    assert mode_of(cmd) is expected
 
 
 def test_bad_setpoints() -> None:
@@ -222,7 +253,7 @@ def test_unused_arming_times_out() -> None:
 # -- parameters, modes, geodesy, schedules, config -------------------------------------------------------------
 def test_int_parameters_travel_bytewise() -> None:
     store = ParameterStore()
-    spec = store.spec("COM_OBL_ACT")
+    spec = store.spec("COM_OBL_RC_ACT")
     wire = encode_value(spec, 2)
     assert struct.unpack("<i", struct.pack("<f", wire))[0] == 2
     assert decode_value(spec, wire, ParamType.INT32) == 2
@@ -245,13 +276,13 @@ def test_a_wire_value_is_stored_as_px4_stores_it_and_flown_within_its_range() ->
     assert store.set_from_wire("MPC_XY_VEL_MAX", 50.0) is False  # outside [0.5, 20]: stored, and said so
     assert (store.raw("MPC_XY_VEL_MAX"), store["MPC_XY_VEL_MAX"]) == (50.0, 20.0)
     assert store.hash_check() != before  # a ground station's cache of the old value no longer matches
-    assert store.set_from_wire("COM_OBL_ACT", 2.4) is True
-    assert store.raw("COM_OBL_ACT") == 2.0
+    assert store.set_from_wire("COM_OBL_RC_ACT", 2.4) is True
+    assert store.raw("COM_OBL_RC_ACT") == 2.0
     for bad in (math.nan, math.inf):
         with pytest.raises(ParamError, match="is not a real32"):
             store.set_from_wire("MPC_XY_VEL_MAX", bad)
     with pytest.raises(ParamError, match="is not a int32"):
-        store.set_from_wire("COM_OBL_ACT", 3e9)
+        store.set_from_wire("COM_OBL_RC_ACT", 3e9)
     assert store.raw("MPC_XY_VEL_MAX") == 50.0
     assert store.names() == sorted(store.names())
     assert store.index(store.names()[7]) == 7

@@ -270,11 +270,11 @@ async def check_camera(config: MissionConfig, link: MavsdkVehicleLink | None, li
 
 
 # What each offboard-loss setting does, and whether it lands where the vehicle is (over whatever is below it).
-PX4_OBL_ACT = {0: ("land", True), 1: ("hold", False), 2: ("return", False)}  # PX4 up to v1.13 (and this SITL)
-PX4_OBL_RC_ACT = {  # PX4 v1.14 and later
-    0: ("position mode", False),
-    1: ("altitude mode", False),
-    2: ("manual", False),
+PX4_OBL_ACT = {0: ("land", True), 1: ("hold", False), 2: ("return", False)}  # PX4 up to v1.13
+PX4_OBL_RC_ACT = {  # PX4 v1.14 and later (and this project's SITL): the three manual modes need RC, else hold
+    0: ("position mode: the pilot's sticks, hold without RC", False),
+    1: ("altitude mode: the pilot's sticks, hold without RC", False),
+    2: ("manual: the pilot's sticks, hold without RC", False),
     3: ("return", False),
     4: ("land", True),
     5: ("hold", False),

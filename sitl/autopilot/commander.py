@@ -59,7 +59,8 @@ class Fence:
 
 
 # What each failsafe parameter's values do (anything else: land).
-OBL_ACTIONS = {0: "land", 1: "hold", 2: "rtl"}  # COM_OBL_ACT
+OBL_RC_ACTIONS = {3: "rtl", 4: "land", 5: "hold", 6: "land", 7: "land"}  # COM_OBL_RC_ACT beyond the manual modes
+OBL_RC_MANUAL = {0: "position", 1: "altitude", 2: "manual"}  # COM_OBL_RC_ACT: modes flown on the pilot's sticks
 RCL_ACTIONS = {1: "hold", 2: "rtl", 3: "land"}  # NAV_RCL_ACT (0: none, never triggered)
 GF_ACTIONS = {1: "warn", 2: "hold", 3: "rtl", 4: "land", 5: "land"}  # 4 (terminate) is flown as land: no parachute
 
@@ -358,13 +359,33 @@ class Commander:
             return
         self._geofence()
         if self.mode is FlightMode.OFFBOARD and not self.offboard_stream_ok():
-            self._trigger_failsafe("Offboard lost", OBL_ACTIONS.get(int(self.params["COM_OBL_ACT"]), "land"))
+            self._trigger_failsafe("Offboard lost", self._offboard_loss_action())
         if self.rc_lost and t_s - self._rc_lost_since_s >= self.params["COM_RC_LOSS_T"]:
             excepted = self.mode is FlightMode.OFFBOARD and int(self.params["COM_RCL_EXCEPT"]) & 4
             exposed = self.mode in (FlightMode.POSCTL, FlightMode.OFFBOARD, FlightMode.AUTO_LOITER)
             action = int(self.params["NAV_RCL_ACT"])
             if exposed and not excepted and action > 0 and self.failsafe != "RC lost":
                 self._trigger_failsafe("RC lost", RCL_ACTIONS.get(action, "land"))
+
+    def _offboard_loss_action(self) -> str:
+        """What PX4 v1.15 flies when the offboard stream stops, by ``COM_OBL_RC_ACT``.
+
+        0-2 (position, altitude, manual: the default is 0) hand the vehicle to the pilot's sticks, flown here as
+        position mode (this autopilot has no altitude or stabilized mode); without RC those modes cannot run and PX4
+        falls back to hold, as here. 6 (terminate) and 7 (disarm) are flown as land: nothing here cuts the motors.
+        """
+        value = int(self.params["COM_OBL_RC_ACT"])
+        manual = OBL_RC_MANUAL.get(value)
+        if manual is not None:
+            if self.rc_lost:
+                self.event(f"Offboard loss: {manual} mode needs RC: hold", Severity.WARNING)
+                return "hold"
+            if manual != "position":
+                self.event(f"Offboard loss: {manual} mode flown as position mode", Severity.INFO)
+            return "position"
+        if value in (6, 7):
+            self.event(f"Offboard loss: {'terminate' if value == 6 else 'disarm'} flown as land", Severity.WARNING)
+        return OBL_RC_ACTIONS.get(value, "land")
 
     def battery_failsafe(self, level: BatteryLevel) -> None:
         """PX4's battery failsafe at a new, worse level: a warning, then the action ``COM_LOW_BAT_ACT`` asks."""
@@ -375,8 +396,13 @@ class Commander:
             self._trigger_failsafe(f"battery {level.name.lower()}", action)
 
     def _trigger_failsafe(self, reason: str, name: str) -> None:
-        """Fly the failsafe action ``name`` (land, hold or rtl; hold on the ground) for ``reason``."""
-        mode = {"land": FlightMode.AUTO_LAND, "hold": FlightMode.AUTO_LOITER, "rtl": FlightMode.AUTO_RTL}[name]
+        """Fly the failsafe action ``name`` (land, hold, rtl or position; hold on the ground) for ``reason``."""
+        mode = {
+            "land": FlightMode.AUTO_LAND,
+            "hold": FlightMode.AUTO_LOITER,
+            "rtl": FlightMode.AUTO_RTL,
+            "position": FlightMode.POSCTL,
+        }[name]
         if self.landed_state is LandedState.ON_GROUND and mode is not FlightMode.AUTO_LOITER:
             mode = FlightMode.AUTO_LOITER
         self.failsafe = reason

@@ -76,7 +76,14 @@ HANDLED_COMMANDS = (
     mavlink.MAV_CMD_DO_PAUSE_CONTINUE,
     519,  # REQUEST_PROTOCOL_VERSION
 )
-PARAM_NAMES = (b"COM_OF_LOSS_T", b"COM_OBL_ACT", b"MPC_XY_VEL_MAX", b"MIS_TAKEOFF_ALT", b"MAV_SYS_ID", b"NAV_RCL_ACT")
+PARAM_NAMES = (
+    b"COM_OF_LOSS_T",
+    b"COM_OBL_RC_ACT",
+    b"MPC_XY_VEL_MAX",
+    b"MIS_TAKEOFF_ALT",
+    b"MAV_SYS_ID",
+    b"NAV_RCL_ACT",
+)
 KINDS = ("structured", "any_message", "mutated", "bad_signature", "unknown_id", "noise", "mavlink1")
 KIND_WEIGHTS = (0.40, 0.12, 0.18, 0.08, 0.06, 0.10, 0.06)
 INT_RANGES = {
