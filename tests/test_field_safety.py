@@ -360,3 +360,10 @@ def test_a_companion_killed_in_flight_leaves_px4_v1_15_hovering_in_position_mode
     assert abs(later["position_ned_m"][2] - failsafe["position_ned_m"][2]) < 0.5
     north_m, east_m = (later["position_ned_m"][i] - failsafe["position_ned_m"][i] for i in (0, 1))
     assert math.hypot(north_m, east_m) < 5.0
+    # The killed flight's log survives to its last record, and slz report names the ending and draws it.
+    from companion.app.flight_log import FlightLog
+    from companion.app.landing_report import FlightEnding, landing_report
+    from companion.app.report import build_flight_report
+
+    assert landing_report(FlightLog.read(tmp_path / "flight"))["outcome"] == FlightEnding.CRASHED.value
+    assert build_flight_report(tmp_path / "flight", tmp_path / "report", video=False).files
