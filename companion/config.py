@@ -89,7 +89,7 @@ def host_port(url: str, scheme: str) -> tuple[str, int]:
 
 def format_validation_error(error: ValidationError, prefix: str = "") -> list[str]:
     """One line per pydantic error: ``dotted.field.path: message (got value)``, the value quoted briefly."""
-    lines = []
+    lines: list[str] = []
     for item in error.errors(include_input=True, include_url=False):
         path = ".".join(str(part) for part in (prefix, *item["loc"]) if part != "")
         got = item.get("input")
