@@ -184,7 +184,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from companion.app.flight_log import flight_folder
 
     try:
-        report = build_flight_report(flight_folder(args.flight), args.out, video=not args.no_video)
+        report = build_flight_report(flight_folder(args.flight), args.out, video=not args.no_video, ulog=args.ulog)
     except (ReportError, RecorderError, ReplayError, OSError) as exc:
         sys.stderr.write(f"slz report: {exc}\n")
         return 1
@@ -346,6 +346,12 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("flight", type=Path, help="flight folder (flight.jsonl, frames/), or a demo's run folder")
     report.add_argument("--out", type=Path, help="output folder (default FLIGHT/report)")
     report.add_argument("--no-video", action="store_true", help="skip camera.mp4 (the contact sheet is kept)")
+    report.add_argument(
+        "--ulog",
+        type=Path,
+        help="the autopilot's PX4 ULog of the same flight (an SD card's, or the SITL's flight.ulg): drawn beside the "
+        "companion's log on the same clock",
+    )
     report.set_defaults(func=_cmd_report)
 
     height = sub.add_parser(

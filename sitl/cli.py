@@ -215,6 +215,7 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "dynamics": args.dynamics,
             "log_path": str(args.log) if args.log else None,
+            "ulog_path": str(args.ulog) if args.ulog else None,
             "duration_s": args.duration,
             "bind_address": args.bind,
         }.items()
@@ -255,6 +256,7 @@ def _sitl_arguments(sitl: argparse.ArgumentParser) -> None:
     sitl.add_argument("--seed", type=int)
     sitl.add_argument("--dynamics", choices=["rigid_body", "jsbsim_f450"])
     sitl.add_argument("--log", type=Path, help="write the true trajectory here (CSV)")
+    sitl.add_argument("--ulog", type=Path, help="write the flight here as a PX4 ULog (.ulg), as PX4's SITL does")
     sitl.add_argument("--duration", type=float, help="stop after this many simulated seconds")
     sitl.add_argument("--bind", help="local address (default 127.0.0.1)")
     sitl.add_argument(

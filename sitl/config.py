@@ -152,6 +152,11 @@ class SitlConfig(StrictModel):
     params: dict[str, float] = Field(default_factory=dict, description="Parameter overrides, PX4 names.")
     log_path: Path | None = Field(default=None, description="Trajectory log (CSV), ground truth.")
     log_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
+    ulog_path: Path | None = Field(
+        default=None,
+        description="The flight as a PX4 ULog (.ulg), as PX4's SITL writes one: Flight Review, pyulog and PlotJuggler "
+        "read it; its samples at log_rate_hz of simulated time.",
+    )
     truth_path: Path | None = Field(
         default=None,
         description="Ground-truth log (JSON lines) at every camera frame instant: the vehicle, its landed state and "

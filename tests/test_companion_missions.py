@@ -127,6 +127,53 @@ def test_the_demo_writes_a_top_view_and_an_annotated_video(demo: Demo) -> None:
     assert demo.summary["replay_identical"]
 
 
+def test_the_sitls_ulog_lines_up_with_the_companions_log_in_slz_report(demo: Demo, tmp_path: Path) -> None:
+    # Issue 67: the SITL writes the flight as PX4's SITL does; `slz report --ulog` draws the autopilot beside the
+    # companion on the one boot clock.
+    ulog = demo.run_dir / "flight.ulg"
+    out = tmp_path / "report"
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "companion.cli",
+            "report",
+            str(demo.run_dir),
+            "--no-video",
+            "--ulog",
+            str(ulog),
+            "--out",
+            str(out),
+        ],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert f"wrote {out / 'autopilot.png'}" in done.stdout
+    from companion.app.autopilot_log import read_autopilot_log
+
+    autopilot = read_autopilot_log(ulog)
+    modes = [m for _, m in autopilot.modes]
+    # Take-off, the companion's offboard flight, its landing: in that order, the landing last.
+    assert modes.index("AUTO.TAKEOFF") < modes.index("OFFBOARD") < modes.index("AUTO.LAND") == len(modes) - 1
+    assert "OFFBOARD" in modes
+    assert modes[-1] == "AUTO.LAND"
+    # The companion's land command and the autopilot's switch to AUTO.LAND are one outer step apart at most (the
+    # ULog samples at 50 Hz of the same clock).
+    land_sent_s = next(
+        float(r["t_s"]) for r in _records(demo.run_dir) if r["kind"] == "command" and r["command"] == "land"
+    )
+    land_mode_s = next(t for t, m in autopilot.modes if m == "AUTO.LAND")
+    assert 0.0 <= land_mode_s - land_sent_s <= 0.1
+    page = (out / "report.md").read_text()
+    assert "## The autopilot beside the companion" in page
+    assert "| autopilot | mode AUTO.LAND |" in page
+    assert "| companion | sent land |" in page
+
+
 def test_every_setpoint_stays_in_the_geofence_and_within_the_descent_rate(demo: Demo) -> None:
     records = _records(demo.run_dir)
     config = next(r for r in records if r["kind"] == "header")["config"]

@@ -7,6 +7,7 @@ trajectory log (simulated time).
 from __future__ import annotations
 
 import csv
+import itertools
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -107,9 +108,10 @@ def test_mavsdk_flies_an_offboard_square_while_a_ground_station_watches(
 
 
 def test_offboard_loss_failsafe_fires_after_com_of_loss_t_when_the_client_dies(
-    sitl_factory: Callable[..., SitlProcess],
+    sitl_factory: Callable[..., SitlProcess], tmp_path: Path
 ) -> None:
-    sitl = sitl_factory("--speed", "1")
+    ulog, csv_log = tmp_path / "flight.ulg", tmp_path / "flight.csv"
+    sitl = sitl_factory("--speed", "1", "--ulog", str(ulog), "--log", str(csv_log))
     client = Client("hover", sitl.instance)
     try:
         client.expect("offboard", 60)
@@ -131,6 +133,31 @@ def test_offboard_loss_failsafe_fires_after_com_of_loss_t_when_the_client_dies(
     moved_m = np.subtract(later["position_ned_m"], state["position_ned_m"])
     assert np.hypot(moved_m[0], moved_m[1]) < 1.0
     assert abs(moved_m[2]) < 0.5
+    sitl.stop()
+    # Issue 67: the SITL wrote the flight as PX4's SITL does, a ULog pyulog reads, whose modes and failsafe are the
+    # SITL's own log's on the same clock.
+    from pyulog import ULog
+
+    flight = ULog(str(ulog))
+    assert flight.msg_info_dict["ver_sw_release"] == "v1.15.0"
+    assert flight.initial_parameters["COM_OBL_RC_ACT"] == 0
+    status = flight.get_dataset("vehicle_status").data
+    t_us, nav_state = status["timestamp"], status["nav_state"]
+    changes = [int(nav_state[0])] + [int(b) for a, b in itertools.pairwise(nav_state) if a != b]
+    assert changes[-2:] == [14, 2]  # OFFBOARD, then position mode: the failsafe
+    switched_s = t_us[list(nav_state).index(2)] / 1e6
+    assert abs(switched_s - state["failsafe_since_s"]) <= 0.05  # the sample after the switch (50 Hz)
+    assert bool(status["failsafe"][-1])
+    assert any("Failsafe: Offboard lost, position" in m.message for m in flight.logged_messages)
+    commands = flight.get_dataset("vehicle_command_ack").data
+    assert 400 in set(commands["command"].tolist())  # MAV_CMD_COMPONENT_ARM_DISARM, taken
+    # The trajectory CSV's modes at the same instants.
+    rows = list(csv.DictReader(csv_log.open()))
+    first_posctl_s = next(float(r["t_s"]) for r in rows if r["mode"] == "POSCTL")
+    assert abs(first_posctl_s - switched_s) <= 0.05
+    position = flight.get_dataset("vehicle_local_position").data
+    last_csv = rows[-1]
+    assert position["z"][-1] == pytest.approx(float(last_csv["down_m"]), abs=0.05)
 
 
 def test_pilot_takeover_leaves_offboard_and_the_vehicle_obeys_the_pilot(

@@ -362,7 +362,46 @@ def _markdown(flight_dir: Path, summary: dict[str, Any], files: list[Path], out_
     return "\n".join(lines) + "\n"
 
 
-def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bool = True) -> FlightReport:
+def _autopilot_section(flight: FlightLog, ulog: Path, out: Path) -> tuple[list[str], Path]:
+    """The autopilot's ULog beside the flight: its picture and the merged timeline's lines (markdown)."""
+    from companion.app.autopilot_log import (
+        AutopilotLogError,
+        check_same_flight,
+        merged_timeline,
+        plot_side_by_side,
+        read_autopilot_log,
+    )
+
+    try:
+        log = read_autopilot_log(ulog)
+        times = [r["t_s"] for r in flight.records if r.get("t_s") is not None]
+        if not times:
+            raise ReportError(f"{flight.path}: no timed record to line the ULog up with")
+        check_same_flight(log, float(min(times)), float(max(times)))
+    except AutopilotLogError as exc:
+        raise ReportError(str(exc)) from None
+    picture = out / "autopilot.png"
+    plot_side_by_side(flight, log, picture)
+    lines = [
+        "## The autopilot beside the companion",
+        "",
+        f"`{ulog.name}` ({log.software}), on the vehicle's boot clock, the flight log's:",
+        "",
+        f"![autopilot]({picture.relative_to(out)})",
+        "",
+        "| t (s) | who | what |",
+        "| --- | --- | --- |",
+    ]
+    t0, t1 = float(min(times)), float(max(times))
+    for t, who, what in merged_timeline(flight, log):
+        if t0 - 5.0 <= t <= t1 + 5.0:
+            lines.append(f"| {t:.2f} | {who} | {what.replace('|', '/')} |")
+    return lines, picture
+
+
+def build_flight_report(
+    flight_dir: Path, out_dir: Path | None = None, video: bool = True, ulog: Path | None = None
+) -> FlightReport:
     """Write the report of the flight in ``flight_dir`` (its ``flight.jsonl``, and ``frames/`` when saved).
 
     Parameters
@@ -373,6 +412,9 @@ def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bo
         Where to write (default ``flight_dir / "report"``).
     video : bool
         Also write ``camera.mp4`` (the contact sheet is written whenever frames were saved).
+    ulog : Path, optional
+        The autopilot's PX4 ULog of the same flight: ``autopilot.png`` and a merged timeline beside the companion's
+        (:mod:`companion.app.autopilot_log`).
 
     Raises
     ------
@@ -413,7 +455,13 @@ def build_flight_report(flight_dir: Path, out_dir: Path | None = None, video: bo
                 writer.close()
             report.files.append(out / "camera.mp4")
     report.summary["camera_frames"] = len(views)
+    autopilot_lines: list[str] = []
+    if ulog is not None:
+        autopilot_lines, picture = _autopilot_section(flight, ulog, out)
+        report.files.append(picture)
+        report.summary["ulog"] = str(ulog)
     (out / "summary.json").write_text(json.dumps(report.summary, indent=1) + "\n")
-    (out / "report.md").write_text(_markdown(flight_dir, report.summary, report.files, out))
+    page = _markdown(flight_dir, report.summary, [f for f in report.files if f.name != "autopilot.png"], out)
+    (out / "report.md").write_text(page + ("\n" + "\n".join(autopilot_lines) + "\n" if autopilot_lines else ""))
     report.files += [out / "summary.json", out / "report.md"]
     return report

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 from sitl.autopilot.battery import Battery
 from sitl.autopilot.commander import Commander
@@ -58,10 +59,14 @@ class Broadcaster:
         """Each link's telemetry schedule, by the link's ``id()`` (SET_MESSAGE_INTERVAL changes it)."""
         self._last_heartbeat_wall = -math.inf
         self._statustext_id = 0
+        self.sink: Callable[[Severity, str], None] | None = None
+        """Also given every STATUSTEXT sent (the flight's ULog)."""
 
     def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
         """A STATUSTEXT on every link, at PX4's severity (refusals and failsafes CRITICAL), in chunks of 50
         characters when longer (MAVLink 2's ``id`` and ``chunk_seq``)."""
+        if self.sink is not None:
+            self.sink(severity, text)
         self._statustext_id = (self._statustext_id + 1) % 65536 or 1
         for link in self.links:
             for message in statustext_messages(link.mav, text, int(severity), self._statustext_id):

@@ -19,6 +19,7 @@ from sitl.autopilot.actuators import ActuatorOutputs
 from sitl.autopilot.battery import Battery
 from sitl.autopilot.commander import FORCE_MAGIC, Commander
 from sitl.autopilot.controller import CascadedController
+from sitl.autopilot.flight_ulog import FlightULog
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mission_server import MAX_DISTANCE_M
 from sitl.autopilot.modes import FlightMode, MainMode
@@ -84,6 +85,8 @@ class AutopilotHost(Protocol):
     """Each link's telemetry schedule, by the link's ``id()``."""
     lockstep: LockstepGate
     actuators: ActuatorOutputs
+    ulog: FlightULog | None
+    """The flight's ULog, when the config asks for one (commands and parameter changes go in)."""
 
     def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
         """A STATUSTEXT on every link."""

@@ -27,6 +27,7 @@ from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
 from sitl.autopilot.mission_server import MissionServer
 from sitl.autopilot.params import ParamError, decode_value, encode_value
 from sitl.autopilot.status import MavResult, Severity
+from sitl.px4_params import ParamType
 
 logger = logging.getLogger(__name__)
 
@@ -171,6 +172,8 @@ class MavlinkServer:
         cmd = self.v.commander
         request = CommandRequest(link, msg, is_int)
         result = self.commands.handle(request)
+        if self.v.ulog is not None:
+            self.v.ulog.command(self.v.clock.now_s, msg, int(result))
         self._send_ack(link, msg, result)
         if request.follow_up is not None:
             link.send(
@@ -268,6 +271,8 @@ class MavlinkServer:
                     Severity.WARNING,
                 )
             self.v.refresh_limits()
+            if self.v.ulog is not None:
+                self.v.ulog.parameter(name, params.raw(name), spec.param_type is ParamType.INT32)
         except ParamError as exc:
             self.v.statustext(str(exc), Severity.CRITICAL)
         for each in self.v.links:

@@ -172,6 +172,7 @@ def write_configs(spec: MissionSpec) -> tuple[Path, Path]:
             "truth_path": str(spec.run_dir / "truth.jsonl"),
             "end_after_touchdown_s": TRUTH_AFTER_TOUCHDOWN_S,  # the SITL ends itself: no full-speed run past it
             "log_path": str(spec.run_dir / "trajectory.csv"),
+            "ulog_path": str(spec.run_dir / "flight.ulg"),  # as PX4's SITL: the autopilot's log of the flight
         },
         spec.sitl_overrides,
     )

@@ -26,6 +26,7 @@ from sitl.autopilot.battery import Battery, BatteryMonitor
 from sitl.autopilot.broadcast import HEARTBEAT_PERIOD_S, Broadcaster
 from sitl.autopilot.commander import Commander
 from sitl.autopilot.controller import CascadedController, ControllerLimits, Setpoint
+from sitl.autopilot.flight_ulog import FlightULog
 from sitl.autopilot.mavlink_link import MavlinkLink
 from sitl.autopilot.mavlink_server import MavlinkServer
 from sitl.autopilot.params import ParameterStore
@@ -77,6 +78,7 @@ class SitlVehicle:
         self.config = config
         self.trajectory: TrajectoryLog | None = None  # first, so close() works from any failure below
         self.truth: TruthWriter | None = None
+        self.ulog: FlightULog | None = None
         try:
             home_ned_m = np.array([*config.home_ne_m, 0.0])
             self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz, home_ned_m)
@@ -155,6 +157,9 @@ class SitlVehicle:
             self.truth = TruthWriter(Path(config.truth_path), config.seed)
         if config.log_path is not None:
             self.trajectory = TrajectoryLog(Path(config.log_path), config.log_rate_hz)
+        if config.ulog_path is not None:
+            self.ulog = FlightULog(Path(config.ulog_path), config.log_rate_hz, self.params, config.system_id)
+            self.broadcast.sink = lambda severity, text: self._ulog_statustext(severity, text)
 
     # -- lifecycle ---------------------------------------------------------------------------------------------
     def limits(self) -> ControllerLimits:
@@ -197,6 +202,9 @@ class SitlVehicle:
         if self.trajectory is not None:
             self.trajectory.close()
             self.trajectory = None
+        if self.ulog is not None:
+            self.ulog.close()
+            self.ulog = None
         if self.truth is not None:
             self.truth.close()
             self.truth = None
@@ -369,10 +377,17 @@ class SitlVehicle:
 
     def _write_log_row(self, force: bool = False) -> None:
         t_s = self.clock.now_s
+        cmd = self.commander
+        if self.ulog is not None and (force or self.ulog.due(t_s)):
+            level = int(self.battery_monitor.level)
+            self.ulog.sample(t_s, self.dynamics.state(), cmd, self._setpoint, self.battery, level)
         if self.trajectory is None or not (force or self.trajectory.due(t_s)):
             return
-        cmd = self.commander
         self.trajectory.write(t_s, self.dynamics.state(), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, force)
+
+    def _ulog_statustext(self, severity: Severity, text: str) -> None:
+        if self.ulog is not None:
+            self.ulog.statustext(self.clock.now_s, severity, text)
 
     # -- inputs --------------------------------------------------------------------------------------------------
     def _poll(self) -> None:
