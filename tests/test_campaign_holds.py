@@ -137,7 +137,7 @@ def _results(spec: CampaignSpec, over_a_person: set[str], held: dict[str, str | 
                 time_to_land_s=40.0, path_length_m=30.0, reselections=0, aborts=0, failsafes=0,
                 touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0, obstacle_kind="bench",
                 touched_obstacle=False, people_cells=[], hold_cause=held.get(plan.mission_id), zones_chosen=1,
-                ending="hold" if hold else "zone", sites_flown_to=0,
+                ending="hold" if hold else "zone", sites_flown_to=0, first_zone_north_m=1.0, first_zone_east_m=2.0,
             ).to_json()
         )  # fmt: skip
     return rows

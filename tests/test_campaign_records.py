@@ -34,7 +34,7 @@ def _line(**changes: Any) -> dict[str, Any]:
         nearest_person_mean_m=4.0, nearest_person_min_m=2.5, zone_iou=0.8, time_to_land_s=40.0, path_length_m=30.0,
         reselections=1, aborts=0, failsafes=0, touchdown_north_m=1.0, touchdown_east_m=2.0,
         obstacle_distance_m=math.nan, obstacle_kind=None, touched_obstacle=False, people_cells=[[20, 21, 1]],
-        hold_cause=None, zones_chosen=1, ending="zone", sites_flown_to=0,
+        hold_cause=None, zones_chosen=1, ending="zone", sites_flown_to=0, first_zone_north_m=1.0, first_zone_east_m=2.0,
     ).to_json()  # fmt: skip
     run = {"wall_s": 12.5, "node": "vm", "segment": 1, "commit": "abc", "finished_utc": "2026-11-28T12:00:00Z"}
     return line | run | changes

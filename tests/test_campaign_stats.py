@@ -470,7 +470,7 @@ def _results(spec: CampaignSpec, failed: dict[str, set[int]]) -> list[dict[str, 
                 time_to_land_s=40.0, path_length_m=30.0, reselections=0, aborts=0, failsafes=0,
                 touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0, obstacle_kind="bench",
                 touched_obstacle=False, people_cells=[], hold_cause=None, zones_chosen=1, ending="zone",
-                sites_flown_to=0,
+                sites_flown_to=0, first_zone_north_m=1.0, first_zone_east_m=2.0,
             ).to_json()
         )  # fmt: skip
     return rows
@@ -503,7 +503,7 @@ def test_the_people_map_averages_the_missions_that_carry_one() -> None:
         nearest_person_mean_m=4.0, nearest_person_min_m=4.0, zone_iou=0.8, time_to_land_s=40.0, path_length_m=30.0,
         reselections=0, aborts=0, failsafes=0, touchdown_north_m=1.0, touchdown_east_m=2.0, obstacle_distance_m=5.0,
         obstacle_kind="bench", touched_obstacle=False, people_cells=None, hold_cause=None, zones_chosen=1,
-        ending="zone", sites_flown_to=0,
+        ending="zone", sites_flown_to=0, first_zone_north_m=1.0, first_zone_east_m=2.0,
     ).to_json()  # fmt: skip
     del line["people_cells"]  # as restored from results.csv
     rows = flown_missions(
