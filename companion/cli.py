@@ -193,6 +193,28 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from companion.app.flight_log import flight_folder
+    from companion.app.mcap_export import ExportError, export_mcap
+
+    if not args.mcap:
+        sys.stderr.write("slz export: say the format: --mcap\n")
+        return 2
+    flight_dir = flight_folder(args.flight)
+    truth = args.truth
+    if truth is None:  # a SITL run's truth beside its flight folder, when there is one
+        found = [p / "truth.jsonl" for p in (Path(args.flight), flight_dir.parent) if (p / "truth.jsonl").is_file()]
+        truth = found[0] if found else None
+    out = args.out or flight_dir / "flight.mcap"
+    try:
+        counts = export_mcap(flight_dir, out, truth)
+    except (ExportError, OSError) as exc:
+        sys.stderr.write(f"slz export: {exc}\n")
+        return 1
+    sys.stdout.write(f"wrote {out}: " + ", ".join(f"{topic} {n}" for topic, n in sorted(counts.items())) + "\n")
+    return 0
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
     from companion.app.flight_log import flight_folder
     from companion.app.recorder import RecorderError
@@ -341,6 +363,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     replay.add_argument("--video", type=Path, help="also write the annotated camera view here (MP4)")
     replay.set_defaults(func=_cmd_replay)
+
+    export = sub.add_parser("export", help="write a recorded flight in a format other tools open (MCAP: Foxglove)")
+    export.add_argument("flight", type=Path, help="flight folder (flight.jsonl, frames/), or a demo's run folder")
+    export.add_argument("--mcap", action="store_true", help="as MCAP, with Foxglove's schemas")
+    export.add_argument("--out", type=Path, help="the file (default FLIGHT/flight.mcap)")
+    export.add_argument(
+        "--truth", type=Path, help="a SITL run's truth.jsonl (default: the run folder's, when there is one)"
+    )
+    export.set_defaults(func=_cmd_export)
 
     report = sub.add_parser("report", help="turn a flight log (real, dry run or SITL) into plots, video and a page")
     report.add_argument("flight", type=Path, help="flight folder (flight.jsonl, frames/), or a demo's run folder")

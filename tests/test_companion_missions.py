@@ -174,6 +174,47 @@ def test_the_sitls_ulog_lines_up_with_the_companions_log_in_slz_report(demo: Dem
     assert "| companion | sent land |" in page
 
 
+def test_slz_export_writes_the_demo_as_mcap_with_every_record_foxglove_reads(demo: Demo, tmp_path: Path) -> None:
+    # Issue 67: the flight in the file Foxglove opens; the mcap package's own reader counts every topic.
+    out = tmp_path / "demo.mcap"
+    command = [sys.executable, "-m", "companion.cli", "export", str(demo.run_dir), "--mcap", "--out", str(out)]
+    done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-3000:]
+    from mcap.reader import make_reader
+
+    with out.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        assert summary.statistics is not None
+        counts = {
+            ch.topic: summary.statistics.channel_message_counts.get(cid, 0) for cid, ch in summary.channels.items()
+        }
+        schemas = {summary.schemas[ch.schema_id].name for ch in summary.channels.values()}
+        times = [m.log_time for _, _, m in reader.iter_messages(log_time_order=False)]
+    records = _records(demo.run_dir)
+
+    def count(kind: str, **match: object) -> int:
+        return sum(1 for r in records if r["kind"] == kind and all(r.get(k) == v for k, v in match.items()))
+
+    frames_saved = sum(1 for r in records if r["kind"] == "frame" and r.get("path"))
+    assert counts["/camera/image"] == frames_saved > 100
+    assert counts["/slz/zones"] == count("frame_result") == counts["/tf"] - 1  # and world_ned under world, once
+    assert counts["/slz/decisions"] == count("decision")
+    assert counts["/slz/phase"] == count("phase")
+    assert counts["/slz/setpoint"] == count("command", command="setpoint")
+    assert counts["/slz/commands"] == count("command") - count("command", command="setpoint") >= 1  # the land
+    assert counts["/truth/people"] >= 1  # the SITL's truth, found beside the flight folder
+    assert schemas == {
+        "foxglove.CompressedImage",
+        "foxglove.FrameTransform",
+        "foxglove.SceneUpdate",
+        "foxglove.Log",
+        "foxglove.PoseInFrame",
+    }
+    assert times == sorted(times)  # in log-time order, as a player replays it
+
+
 def test_every_setpoint_stays_in_the_geofence_and_within_the_descent_rate(demo: Demo) -> None:
     records = _records(demo.run_dir)
     config = next(r for r in records if r["kind"] == "header")["config"]
