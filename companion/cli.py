@@ -96,6 +96,9 @@ def _cmd_fly(args: argparse.Namespace) -> int:
                 config.camera.url, vehicle_time_s=link.clock.now_s, latency_s=config.camera.latency_s
             )
             app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=args.timeout)
+            if view is not None:
+                recorder.listeners.append(view.record)
+                app.intake.viewers.append(view.frame)
             loop = asyncio.get_running_loop()
             for stop_signal in STOP_SIGNALS:  # the service stopped, Ctrl-C: the last resort first, then the end
                 loop.add_signal_handler(stop_signal, app.request_stop, f"{stop_signal.name} received")
@@ -106,12 +109,30 @@ def _cmd_fly(args: argparse.Namespace) -> int:
                     loop.remove_signal_handler(stop_signal)
         finally:
             await link.close()
+            if view is not None:
+                view.close()
         ended.append(f"ended in {outcome.phase} ({outcome.reason})")
         if outcome.phase in ("done", "yielded") or config.mode is OperatingMode.DRY_RUN:
             return 0
         return EXIT_FAILSAFE if outcome.phase == "failsafe" else 1
 
     ended: list[str] = []  # the flight's own words, for the last line
+    view = None
+    if args.live_view is not None or config.live_view.enabled:  # the flight in Foxglove, while it flies
+        from companion.app.live_view import LiveView, LiveViewError
+        from companion.app.live_view_config import LiveViewConfig
+        from companion.config import validate_config
+
+        view_config = config.live_view
+        try:
+            if args.live_view is not None:
+                asked = {**view_config.model_dump(), "enabled": True, "port": args.live_view}
+                view_config = validate_config(LiveViewConfig, asked, source="--live-view", prefix="live_view")
+            view = LiveView(view_config)
+        except (LiveViewError, ConfigError) as exc:
+            sys.stderr.write(f"slz fly: live view: {exc}\n")
+            return 2
+        sys.stdout.write(f"live view: ws://{view_config.host}:{view.port} (open it in Foxglove)\n")
 
     try:
         model_path = config.perception.model.path
@@ -329,6 +350,12 @@ def build_parser() -> argparse.ArgumentParser:
         "guidance.last_resort (hold or return) and the program stays until it is on the ground or the pilot has it; "
         "a dry run or a wait for the handover just ends (default: no wall limit; guidance.mission_time_limit_s, on "
         "the vehicle clock, bounds the search)",
+    )
+    fly.add_argument(
+        "--live-view",
+        type=int,
+        metavar="PORT",
+        help="serve the flight to Foxglove on this port while it flies (live_view in the config says the rest)",
     )
     fly.add_argument(
         "--replayable",

@@ -205,7 +205,11 @@ def test_slz_export_writes_the_demo_as_mcap_with_every_record_foxglove_reads(dem
     assert counts["/slz/setpoint"] == count("command", command="setpoint")
     assert counts["/slz/commands"] == count("command") - count("command", command="setpoint") >= 1  # the land
     assert counts["/truth/people"] >= 1  # the SITL's truth, found beside the flight folder
+    events = sum(count(kind) for kind in ("failsafe", "error", "warning", "ground_command", "supervision"))
+    assert counts.get("/slz/events", 0) == events
+    assert counts.get("/slz/map", 0) == 0  # not in a flight log: the live view sends it
     assert schemas == {
+        "foxglove.Grid",
         "foxglove.CompressedImage",
         "foxglove.FrameTransform",
         "foxglove.SceneUpdate",

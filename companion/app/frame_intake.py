@@ -9,6 +9,7 @@ import asyncio
 import concurrent.futures
 import functools
 import time
+from collections.abc import Callable
 
 from companion.app.flight_log import RecordKind
 from companion.app.outcome import FlightOutcome
@@ -55,6 +56,8 @@ class FrameIntake:
         self.last_result: FrameResult | None = None
         """The newest frame perceived (None: none yet)."""
         self._executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="perception")
+        self.viewers: list[Callable[[Frame, FrameResult], None]] = []
+        """Also given each perceived frame and its result (the live view); they must not raise."""
 
     def pose_reaches(self, t_s: float) -> bool:
         """The pose buffer holds a pose stamped at ``t_s`` or later (to the vehicle clock's resolution)."""
@@ -112,6 +115,8 @@ class FrameIntake:
             target=result.target,
             timings_ms=result.timings_ms,
         )
+        for viewer in self.viewers:
+            viewer(frame, result)
         return result
 
     def close(self) -> None:

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
+from companion.app.live_view_config import LiveViewConfig
 from companion.config import ConfigError, StrictModel, format_validation_error, host_port, load_yaml_config
 from companion.ground.config import GroundStationConfig
 from companion.guidance.config import GuidanceConfig
@@ -197,6 +198,7 @@ class MissionConfig(StrictModel):
     simulator: SimulatorConfig = Field(default_factory=SimulatorConfig)
     supervision: SupervisionConfig = Field(default_factory=SupervisionConfig)
     ground_station: GroundStationConfig = Field(default_factory=GroundStationConfig)
+    live_view: LiveViewConfig = Field(default_factory=LiveViewConfig)
 
     @model_validator(mode="after")
     def _inside_the_fence(self) -> MissionConfig:

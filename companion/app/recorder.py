@@ -13,6 +13,7 @@ import json
 import logging
 import math
 import os
+from collections.abc import Callable
 from dataclasses import asdict, is_dataclass
 from enum import Enum
 from pathlib import Path
@@ -75,6 +76,8 @@ class FlightRecorder:
         self.lossless = lossless
         self._frames_seen = 0
         self.records = 0
+        self.listeners: list[Callable[[dict[str, Any]], None]] = []
+        """Also given each record once it is written (the live view); they must not raise."""
         try:
             directory.mkdir(parents=True, exist_ok=True)
             self._file: IO[str] | None = self.path.open("a", encoding="utf-8")
@@ -94,6 +97,8 @@ class FlightRecorder:
         except OSError as exc:
             raise RecorderError(f"cannot write flight log {self.path}: {exc.strerror or exc}") from None
         self.records += 1
+        for listener in self.listeners:
+            listener(record)
 
     def frame(self, seq: int, t_s: float, image_bgr: npt.NDArray[np.uint8]) -> Path | None:
         """Save a frame (JPEG, or PNG when lossless) if it is one of every ``frame_every``; returns its path."""
