@@ -66,7 +66,8 @@ def fly_one(seed: int, variant: str, tmp: Path) -> dict[str, Any]:
         result = fly(spec)
     finally:
         lease.release()
-        watcher.join(timeout=5.0)
+        if watcher.is_alive():
+            watcher.join(timeout=5.0)
         received = sum(clients[0].counts.values()) if clients else 0
         for client in clients:
             client.close()

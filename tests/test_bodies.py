@@ -313,7 +313,7 @@ def test_crowd_figures_follow_the_crowds_heights_and_sitters() -> None:
     for a, f in zip(crowd.appearances, figures, strict=True):
         assert f.height_m == a.height_m
         assert (f.pose == "sit01") == ("sitting" in a.body.value)
-    assert crowd_figures(Crowd(ScenarioConfig(), 33)) is None
+    assert crowd_figures(Crowd(ScenarioConfig(people=PeopleModel.PROCEDURAL), 33)) is None  # the option
 
 
 @pytest.mark.unit

@@ -19,7 +19,7 @@ from packaging.requirements import Requirement
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 LAB = ("sitl", "models", "tests")
-DRONE_COMMANDS = {"check-config", "fly", "doctor", "replay", "report", "serve"}
+DRONE_COMMANDS = {"check-config", "fly", "doctor", "replay", "report", "export", "height-map", "serve"}
 LAB_COMMANDS = {"sitl", "demo", "campaign"}
 
 

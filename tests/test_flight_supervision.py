@@ -647,18 +647,18 @@ def test_a_camera_that_comes_up_after_the_companion_is_waited_for_within_its_bou
     tmp_path: Path, config: PerceptionConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # Issue 65: `slz fly` started before the camera failed at once; on a drone they start in any order.
-    monkeypatch.setattr("companion.app.flight.CAMERA_RETRY_S", 0.01)
+    monkeypatch.setattr("companion.camera.waiting.CAMERA_RETRY_S", 0.01)
     link = FakeLink()
     app = field_flight(tmp_path, config, link)
     app.source = late = LateCamera(failures=3)
-    asyncio.run(app._open_camera())
+    asyncio.run(app._open())  # the camera first: no vehicle touched before it is up
     assert late.attempts == 4
     waits = [r["waiting_for"] for r in read_log(app.recorder.path) if r["kind"] == "waiting"]
     assert waits == ["the camera: sitl: cannot connect: [Errno 111] Connection refused"]  # said once, not per try
     app.config = app.config.model_copy(update={"camera": app.config.camera.model_copy(update={"wait_for_s": 0.05})})
     app.source = LateCamera(failures=1000)
     with pytest.raises(CameraError, match="cannot connect"):
-        asyncio.run(app._open_camera())  # past the bound: the camera's own error
+        asyncio.run(app._open())  # past the bound: the camera's own error
 
 
 def test_the_console_says_how_the_flight_goes_every_few_seconds_and_while_watching(

@@ -30,6 +30,7 @@ can re-run a flight from its log.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import math
 import time
@@ -54,6 +55,7 @@ from companion.app.supervision import Supervision
 from companion.app.task_group import run_until_first_ends, unless_done
 from companion.app.warning_device import WarningDevice
 from companion.camera.frames import CameraError, Frame, FrameSource
+from companion.camera.waiting import open_when_up
 from companion.geometry import Pose, polygon_centroid_ne_m
 from companion.guidance.energy import EnergyBudget
 from companion.guidance.footprint import nearest_occupied_m
@@ -75,8 +77,6 @@ TERMINAL = frozenset({LandingPhase.DONE, LandingPhase.YIELDED, LandingPhase.FAIL
 # ignores frames in LAND, which leads only to DONE or YIELDED). A simulator in lockstep is not asked to draw them.
 FRAMES_UNREAD = TERMINAL | {LandingPhase.LAND}
 CANCEL_GRACE_S = 5.0  # wall time for the flight's tasks to stop once cancelled
-CAMERA_RETRY_S = 0.5  # wall time between attempts to open a camera that is not up yet
-CAMERA_SAY_EVERY_S = 5.0  # how often the wait for the camera is said
 
 
 def yaw_deg_of(pose: Pose) -> float:
@@ -263,13 +263,7 @@ class FlightApp:
         if self.start_sequence.started or self.supervision.watching is not None:
             self.journal.progress(state, status, watching=self.supervision.watching is not None)
         if self.supervision.watching is not None:
-            if self.supervision.stop_requested is not None:  # the vehicle is the autopilot's: nothing to give it
-                asked = self.supervision.take_stop(last_resort=False)
-                words = f"{asked} while watching after the failsafe: the vehicle is the autopilot's, the program ends"
-                logger.warning("%s", words)
-                self.ending.end(state.t_s, "stopped", words, f"{self.outcome.reason}; {words}")
-                return
-            self.ending.watch_tick(state, status)
+            self.ending.watch_tick(state, status)  # a stop asked for ends it at once: the vehicle is the autopilot's
             return
         if self.dry_run and self.ending.flight_over(state, status, self.guidance.phase is not LandingPhase.IDLE):
             return
@@ -330,10 +324,8 @@ class FlightApp:
         for the pilot's handover) just ends."""
         if self._flying_it():
             await self.apply(self.guidance.give_up(state, limit), "limit", state, reason=limit)
-            return
-        reason = f"{limit}: nothing commanded, the run ends"
-        logger.warning("%s", reason)
-        self.ending.end(state.t_s, "wall_limit", reason)
+        else:
+            self.ending.end(state.t_s, "wall_limit", f"{limit}: nothing commanded, the run ends", warn=True)
 
     def request_stop(self, why: str) -> None:
         """Ask the program to stop (``slz fly`` on SIGINT or SIGTERM: the service stopped, Ctrl-C): at the next tick
@@ -423,24 +415,14 @@ class FlightApp:
         return self.commands.take_tick_setpoint()
 
     def camera_lost(self, exc: CameraError) -> None:
-        self.outcome.camera_lost = True
-        self.outcome.camera_fault = exc.fault.value
-        logger.error("camera fault %s: %s (the perception-silence failsafe acts)", exc.fault.value, exc)
-        t_s = self.link.poses.latest_t_s
-        self.recorder.write(RecordKind.ERROR, t_s, where="camera", fault=exc.fault.value, error=str(exc))
+        self.outcome.camera_lost, self.outcome.camera_fault = True, exc.fault.value
+        self.journal.camera_fault(self.link.poses.latest_t_s, exc.fault.value, str(exc))
 
     def link_lost(self, silent_s: float) -> None:
         self.outcome.link_lost = True
         self.commands.stop()
         state = self.vehicle_state()
-        shared = self.link.status.port_shared
-        why = "link lost: stop commanding" + ("" if shared is None else f" ({shared})")
-        self.recorder.write(RecordKind.FAILSAFE, state.t_s if state else None, reason=why, action="autopilot")
-        logger.error(
-            "link lost: no telemetry for %.1f s; the autopilot's failsafe acts%s",
-            silent_s,
-            "" if shared is None else f"; {shared}",
-        )
+        self.journal.link_lost(state.t_s if state else None, silent_s, self.link.status.port_shared)
         if self.lockstep is not None:
             self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act
         self.done.set()
@@ -448,35 +430,14 @@ class FlightApp:
     # -- the flight ------------------------------------------------------------------------------------------------
     async def _open(self) -> None:
         """The camera (missing: no vehicle touched), the vehicle, the fence, the lockstep; a stop ends it (run)."""
-        await self._open_camera()
+        waiting = functools.partial(self.recorder.write, RecordKind.WAITING, None)  # said as a record too
+        url, wait_for_s = self.config.camera.url, self.config.camera.wait_for_s
+        await open_when_up(self.source, url, wait_for_s, lambda why: waiting(waiting_for=f"the camera: {why}"))
         await self.link.connect(self.config.vehicle.connect_timeout_s)
         await self._localize()
         if self.lockstep is not None and not await self.lockstep.open(frames=self.wants_frames):
             self.lockstep = None
         await self.desk.open(self.link.system_id)
-
-    async def _open_camera(self) -> None:
-        """Open the camera, waiting up to ``camera.wait_for_s`` (wall time) for one that is not up yet: retried every
-        ``CAMERA_RETRY_S``, said once and then every ``CAMERA_SAY_EVERY_S``; the last error after the bound."""
-        deadline = time.monotonic() + self.config.camera.wait_for_s
-        said_at = -math.inf
-        while True:
-            try:
-                await self.source.open()
-            except CameraError as exc:
-                now = time.monotonic()
-                if now >= deadline:
-                    raise
-                if now - said_at >= CAMERA_SAY_EVERY_S:
-                    url, left_s = self.config.camera.url, deadline - now
-                    logger.warning("waiting for the camera at %s (%.0f s left): %s", url, left_s, exc)
-                    self.recorder.write(RecordKind.WAITING, None, waiting_for=f"the camera: {exc}")
-                    said_at = now
-                await asyncio.sleep(min(CAMERA_RETRY_S, max(0.0, deadline - now)))
-                continue
-            if said_at > -math.inf:
-                logger.info("the camera at %s is up", self.config.camera.url)
-            return
 
     async def run(self) -> FlightOutcome:
         """Connect, (take off,) land safely or end in a defined failsafe (and, with ``supervision``, stay until the
@@ -485,10 +446,7 @@ class FlightApp:
         wall0, cpu0 = time.monotonic(), time.process_time()
         self.recorder.write(RecordKind.START, None, mode=cfg.mode, vehicle=cfg.vehicle.url, camera=cfg.camera.url)
         if not await unless_done(self._open(), self.done, CANCEL_GRACE_S):  # stopped before the vehicle was found
-            self.desk.close()
-            self.outcome.ground_channel = self.desk.counts()
-            self.recorder.write(RecordKind.END, None, outcome=self.outcome)
-            return self.outcome
+            return self._end()
         self.outcome.lockstep = self.lockstep is not None
         self.recorder.write(RecordKind.CLOCK, None, lockstep=self.outcome.lockstep)
         if self.lockstep is None:
@@ -503,12 +461,16 @@ class FlightApp:
         finally:
             self.watchdog.stop()
             self.intake.close()
-            self.desk.close()
             if self.lockstep is not None:
                 self.lockstep.release()
                 self.lockstep.close()
-            self.outcome.ground_channel = self.desk.counts()
-            self.outcome.wall_s = time.monotonic() - wall0
-            self.outcome.cpu_s = time.process_time() - cpu0
-            self.recorder.write(RecordKind.END, None, outcome=self.outcome)
+            self.outcome.wall_s, self.outcome.cpu_s = time.monotonic() - wall0, time.process_time() - cpu0
+            self._end()
+        return self.outcome
+
+    def _end(self) -> FlightOutcome:
+        """The ground channel closed and counted, and the end record."""
+        self.desk.close()
+        self.outcome.ground_channel = self.desk.counts()
+        self.recorder.write(RecordKind.END, None, outcome=self.outcome)
         return self.outcome

@@ -118,6 +118,19 @@ class FlightJournal:
         logger.info("%s", line)
         return line
 
+    def camera_fault(self, t_s: float | None, fault: str, error: str) -> None:
+        """The camera failed in flight (the perception-silence failsafe acts): logged and recorded."""
+        logger.error("camera fault %s: %s (the perception-silence failsafe acts)", fault, error)
+        self.recorder.write(RecordKind.ERROR, t_s, where="camera", fault=fault, error=error)
+
+    def link_lost(self, t_s: float | None, silent_s: float, shared: str | None) -> None:
+        """The vehicle's telemetry stopped for ``silent_s``: the companion stops commanding, the autopilot's failsafe
+        acts (``shared``: a second program on the vehicle's port, when one was seen)."""
+        why = "link lost: stop commanding" + ("" if shared is None else f" ({shared})")
+        self.recorder.write(RecordKind.FAILSAFE, t_s, reason=why, action="autopilot")
+        also = "" if shared is None else f"; {shared}"
+        logger.error("link lost: no telemetry for %.1f s; the autopilot's failsafe acts%s", silent_s, also)
+
     def pose(self, state: VehicleState, status: VehicleStatus) -> None:
         """The vehicle's pose and status, at most once per ``POSE_RECORD_PERIOD_S`` of vehicle time."""
         if state.t_s - self._pose_recorded_s < POSE_RECORD_PERIOD_S:

@@ -47,9 +47,13 @@ class RunEnd:
         self.outcome = outcome
         self.done = done
 
-    def end(self, t_s: float | None, event: str, reason: str, outcome_reason: str | None = None) -> None:
+    def end(
+        self, t_s: float | None, event: str, reason: str, outcome_reason: str | None = None, warn: bool = False
+    ) -> None:
         """End the run without a command: ``reason`` in a ``supervision`` record of ``event`` and the outcome's
-        reason (``outcome_reason`` where it says more)."""
+        reason (``outcome_reason`` where it says more); ``warn``: also a warning in the log."""
+        if warn:
+            logger.warning("%s", reason)
         self.outcome.reason = reason if outcome_reason is None else outcome_reason
         self.recorder.write(RecordKind.SUPERVISION, t_s, event=event, reason=reason)
         self.done.set()
@@ -63,7 +67,13 @@ class RunEnd:
 
     def watch_tick(self, state: VehicleState, status: VehicleStatus) -> None:
         """After a failsafe command: end once the vehicle is on the ground, or the pilot has switched it to a mode
-        other than the one the failsafe asked for (OFFBOARD still reported is telemetry lagging the command)."""
+        other than the one the failsafe asked for (OFFBOARD still reported is telemetry lagging the command); a stop
+        asked for (Ctrl-C, the service stopped) ends it at once: the vehicle is the autopilot's, nothing to give it."""
+        if self.supervision.stop_requested is not None:
+            asked = self.supervision.take_stop(last_resort=False)
+            words = f"{asked} while watching after the failsafe: the vehicle is the autopilot's, the program ends"
+            self.end(state.t_s, "stopped", words, f"{self.outcome.reason}; {words}", warn=True)
+            return
         end = self.supervision.watch_ends(status)
         if end is None:
             return

@@ -18,6 +18,7 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
+from companion.vehicle import mavsdk_stored as stored
 from companion.vehicle.clock import VehicleClock
 from companion.vehicle.link import FlightMode, Setpoint, VehicleError, VehicleStatus
 from companion.vehicle.port_holders import shared_now, taken_by_another
@@ -372,61 +373,29 @@ class MavsdkVehicleLink:
         action, _ = self._plugins()
         await self._call(f"actuator {index} to {value:g}", lambda: action.set_actuator(index, value), timeout_s=5.0)
 
-    async def global_origin(self, timeout_s: float) -> tuple[float, float]:
-        """The EKF origin (GPS_GLOBAL_ORIGIN), latitude and longitude in degrees (see VehicleLink)."""
+    def _connected(self) -> Any:
+        """The MAVSDK system; VehicleError when not connected."""
         if self._system is None:
             raise VehicleError(self.url, "not connected")
-        try:
-            origin = await asyncio.wait_for(self._telemetry.get_gps_global_origin(), timeout_s)
-        except asyncio.TimeoutError:
-            raise VehicleError(self.url, f"no GPS_GLOBAL_ORIGIN within {timeout_s:g} s") from None
-        except Exception as exc:  # TelemetryError: the autopilot has no origin yet
-            raise VehicleError(self.url, f"no GPS_GLOBAL_ORIGIN: {exc}") from None
-        lat, lon = float(origin.latitude_deg), float(origin.longitude_deg)
-        if not (math.isfinite(lat) and math.isfinite(lon)):
-            raise VehicleError(self.url, "GPS_GLOBAL_ORIGIN not set (no GPS fix yet?)")
-        return lat, lon
+        return self._system
+
+    async def global_origin(self, timeout_s: float) -> tuple[float, float]:
+        """The EKF origin (GPS_GLOBAL_ORIGIN), latitude and longitude in degrees (see VehicleLink)."""
+        self._connected()
+        return await stored.global_origin(self._telemetry, self.url, timeout_s)
 
     async def rally_points(self, timeout_s: float) -> list[tuple[float, float]]:
         """The autopilot's rally points, latitude and longitude in degrees (see VehicleLink)."""
-        if self._system is None:
-            raise VehicleError(self.url, "not connected")
-        from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
-
-        try:
-            items = await asyncio.wait_for(MissionRawAsync(self._system).download_rallypoints(), timeout_s)
-        except asyncio.TimeoutError:
-            raise VehicleError(self.url, f"no rally point list within {timeout_s:g} s") from None
-        except Exception as exc:  # MissionRawError: the autopilot refused or timed out the download
-            raise VehicleError(self.url, f"rally points not downloaded: {exc}") from None
-        return [(item.x * 1e-7, item.y * 1e-7) for item in items]
+        return await stored.rally_points(self._connected(), self.url, timeout_s)
 
     async def read_parameters(self, timeout_s: float = 15.0) -> dict[str, float] | None:
-        """Every parameter of the autopilot by name (integers as floats), from one list request; None when the list
-        does not arrive within ``timeout_s``. Asking for the list, not for names it may lack, leaves no retries and
-        no "Retrying failed" errors for a parameter that another autopilot version names differently."""
-        if self._system is None:
-            raise VehicleError(self.url, "not connected")
-        from mavsdk.asyncio.plugins.param import ParamAsync
-
-        if not hasattr(self, "_param"):
-            self._param = ParamAsync(self._system)
-        try:
-            every = await asyncio.wait_for(self._param.get_all_params(), timeout_s)
-        except asyncio.TimeoutError:
-            return None
-        except Exception as exc:  # ParamError: the list could not be read
-            logger.warning("%s: the parameter list could not be read: %s", self.url, exc)
-            return None
-        values = {p.name: float(p.value) for p in every.int_params}
-        values.update({p.name: float(p.value) for p in every.float_params})
-        return values
+        """Every parameter of the autopilot by name (:func:`companion.vehicle.mavsdk_stored.parameters`)."""
+        return await stored.parameters(self._connected(), self.url, timeout_s)
 
     async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
         """One message through MAVSDK's MAVLink-direct plugin (libmav packs it from the fields' JSON), broadcast: the
         autopilot forwards it to its ground-station link."""
-        if self._system is None:
-            raise VehicleError(self.url, "not connected")
+        self._connected()
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         message = MavlinkMessage(message_name=name, fields_json=json.dumps(fields, allow_nan=False))

@@ -61,6 +61,45 @@ class Fence:
 # What each failsafe parameter's values do (anything else: land).
 OBL_RC_ACTIONS = {3: "rtl", 4: "land", 5: "hold", 6: "land", 7: "land"}  # COM_OBL_RC_ACT beyond the manual modes
 OBL_RC_MANUAL = {0: "position", 1: "altitude", 2: "manual"}  # COM_OBL_RC_ACT: modes flown on the pilot's sticks
+FAILSAFE_MODES = {
+    "land": FlightMode.AUTO_LAND,
+    "hold": FlightMode.AUTO_LOITER,
+    "rtl": FlightMode.AUTO_RTL,
+    "position": FlightMode.POSCTL,
+}
+
+
+def setpoint_refusal(position_ned_m: F64Array, velocity_ned_mps: F64Array, yaw_rad: float) -> str | None:
+    """Why an offboard setpoint (NaN = not controlled) is refused; None when it is taken."""
+    used = np.concatenate([position_ned_m[~np.isnan(position_ned_m)], velocity_ned_mps[~np.isnan(velocity_ned_mps)]])
+    if used.size == 0:
+        return "no position or velocity"
+    if not np.all(np.isfinite(used)):
+        return "non-finite value"
+    if np.any(np.abs(position_ned_m[~np.isnan(position_ned_m)]) > 10_000.0):
+        return "position beyond 10 km"
+    if np.any(np.abs(velocity_ned_mps[~np.isnan(velocity_ned_mps)]) > 50.0):
+        return "velocity beyond 50 m/s"
+    if math.isinf(yaw_rad):
+        return "infinite yaw"
+    return None
+
+
+def offboard_loss_action(value: int, rc_lost: bool) -> tuple[str, str | None]:
+    """What PX4 v1.15 flies when the offboard stream stops, by ``COM_OBL_RC_ACT`` ``value``, and what it says.
+
+    0-2 (position, altitude, manual: the default is 0) hand the vehicle to the pilot's sticks, flown here as position
+    mode (this autopilot has no altitude or stabilized mode); without RC those modes cannot run and PX4 falls back
+    to hold, as here. 6 (terminate) and 7 (disarm) are flown as land: nothing here cuts the motors.
+    """
+    manual = OBL_RC_MANUAL.get(value)
+    if manual is not None:
+        if rc_lost:
+            return "hold", f"Offboard loss: {manual} mode needs RC: hold"
+        return "position", None if manual == "position" else f"Offboard loss: {manual} mode flown as position mode"
+    if value in (6, 7):
+        return "land", f"Offboard loss: {'terminate' if value == 6 else 'disarm'} flown as land"
+    return OBL_RC_ACTIONS.get(value, "land"), None
 RCL_ACTIONS = {1: "hold", 2: "rtl", 3: "land"}  # NAV_RCL_ACT (0: none, never triggered)
 GF_ACTIONS = {1: "warn", 2: "hold", 3: "rtl", 4: "land", 5: "land"}  # 4 (terminate) is flown as land: no parachute
 
@@ -230,19 +269,9 @@ class Commander:
         self, position_ned_m: F64Array, velocity_ned_mps: F64Array, yaw_rad: float
     ) -> tuple[bool, str]:
         """Store a setpoint (NaN = not controlled); returns (accepted, reason)."""
-        used = np.concatenate(
-            [position_ned_m[~np.isnan(position_ned_m)], velocity_ned_mps[~np.isnan(velocity_ned_mps)]]
-        )
-        if used.size == 0:
-            return False, "no position or velocity"
-        if not np.all(np.isfinite(used)):
-            return False, "non-finite value"
-        if np.any(np.abs(position_ned_m[~np.isnan(position_ned_m)]) > 10_000.0):
-            return False, "position beyond 10 km"
-        if np.any(np.abs(velocity_ned_mps[~np.isnan(velocity_ned_mps)]) > 50.0):
-            return False, "velocity beyond 50 m/s"
-        if math.isinf(yaw_rad):
-            return False, "infinite yaw"
+        refused = setpoint_refusal(position_ned_m, velocity_ned_mps, yaw_rad)
+        if refused is not None:
+            return False, refused
         self.offboard = OffboardSetpoint(position_ned_m.copy(), velocity_ned_mps.copy(), yaw_rad, self.now_s)
         return True, ""
 
@@ -368,24 +397,11 @@ class Commander:
                 self._trigger_failsafe("RC lost", RCL_ACTIONS.get(action, "land"))
 
     def _offboard_loss_action(self) -> str:
-        """What PX4 v1.15 flies when the offboard stream stops, by ``COM_OBL_RC_ACT``.
-
-        0-2 (position, altitude, manual: the default is 0) hand the vehicle to the pilot's sticks, flown here as
-        position mode (this autopilot has no altitude or stabilized mode); without RC those modes cannot run and PX4
-        falls back to hold, as here. 6 (terminate) and 7 (disarm) are flown as land: nothing here cuts the motors.
-        """
-        value = int(self.params["COM_OBL_RC_ACT"])
-        manual = OBL_RC_MANUAL.get(value)
-        if manual is not None:
-            if self.rc_lost:
-                self.event(f"Offboard loss: {manual} mode needs RC: hold", Severity.WARNING)
-                return "hold"
-            if manual != "position":
-                self.event(f"Offboard loss: {manual} mode flown as position mode", Severity.INFO)
-            return "position"
-        if value in (6, 7):
-            self.event(f"Offboard loss: {'terminate' if value == 6 else 'disarm'} flown as land", Severity.WARNING)
-        return OBL_RC_ACTIONS.get(value, "land")
+        """What PX4 v1.15 flies when the offboard stream stops (:func:`offboard_loss_action`)."""
+        action, note = offboard_loss_action(int(self.params["COM_OBL_RC_ACT"]), self.rc_lost)
+        if note is not None:
+            self.event(note, Severity.WARNING)
+        return action
 
     def battery_failsafe(self, level: BatteryLevel) -> None:
         """PX4's battery failsafe at a new, worse level: a warning, then the action ``COM_LOW_BAT_ACT`` asks."""
@@ -397,12 +413,7 @@ class Commander:
 
     def _trigger_failsafe(self, reason: str, name: str) -> None:
         """Fly the failsafe action ``name`` (land, hold, rtl or position; hold on the ground) for ``reason``."""
-        mode = {
-            "land": FlightMode.AUTO_LAND,
-            "hold": FlightMode.AUTO_LOITER,
-            "rtl": FlightMode.AUTO_RTL,
-            "position": FlightMode.POSCTL,
-        }[name]
+        mode = FAILSAFE_MODES[name]
         if self.landed_state is LandedState.ON_GROUND and mode is not FlightMode.AUTO_LOITER:
             mode = FlightMode.AUTO_LOITER
         self.failsafe = reason

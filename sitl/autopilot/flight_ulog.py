@@ -240,6 +240,10 @@ class FlightULog:
         """A STATUSTEXT the vehicle sent, as a logged string."""
         self.writer.log(_us(t_s), int(severity), text)
 
+    def statustext_at(self, clock: Any, severity: Severity, text: str) -> None:
+        """A STATUSTEXT sent now on ``clock`` (anything with ``now_s``, the simulated time)."""
+        self.statustext(float(clock.now_s), severity, text)
+
     def command(self, t_s: float, msg: Any, result: int) -> None:
         """A COMMAND_LONG or COMMAND_INT the autopilot took (``msg``, pymavlink's) and its result."""
         us = _us(t_s)

@@ -7,6 +7,7 @@ mode or arming change), so MAVSDK stays connected at any simulation speed.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import select
@@ -159,7 +160,7 @@ class SitlVehicle:
             self.trajectory = TrajectoryLog(Path(config.log_path), config.log_rate_hz)
         if config.ulog_path is not None:
             self.ulog = FlightULog(Path(config.ulog_path), config.log_rate_hz, self.params, config.system_id)
-            self.broadcast.sink = lambda severity, text: self._ulog_statustext(severity, text)
+            self.broadcast.sink = functools.partial(self.ulog.statustext_at, self.clock)
 
     # -- lifecycle ---------------------------------------------------------------------------------------------
     def limits(self) -> ControllerLimits:
@@ -385,9 +386,6 @@ class SitlVehicle:
             return
         self.trajectory.write(t_s, self.dynamics.state(), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, force)
 
-    def _ulog_statustext(self, severity: Severity, text: str) -> None:
-        if self.ulog is not None:
-            self.ulog.statustext(self.clock.now_s, severity, text)
 
     # -- inputs --------------------------------------------------------------------------------------------------
     def _poll(self) -> None:
