@@ -100,6 +100,8 @@ def offboard_loss_action(value: int, rc_lost: bool) -> tuple[str, str | None]:
     if value in (6, 7):
         return "land", f"Offboard loss: {'terminate' if value == 6 else 'disarm'} flown as land"
     return OBL_RC_ACTIONS.get(value, "land"), None
+
+
 RCL_ACTIONS = {1: "hold", 2: "rtl", 3: "land"}  # NAV_RCL_ACT (0: none, never triggered)
 GF_ACTIONS = {1: "warn", 2: "hold", 3: "rtl", 4: "land", 5: "land"}  # 4 (terminate) is flown as land: no parachute
 

@@ -386,7 +386,6 @@ class SitlVehicle:
             return
         self.trajectory.write(t_s, self.dynamics.state(), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, force)
 
-
     # -- inputs --------------------------------------------------------------------------------------------------
     def _poll(self) -> None:
         """Handle what came in on the links and the control channel. One select() asks which sockets have something,
