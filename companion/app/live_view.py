@@ -2,10 +2,12 @@
 Foxglove's WebSocket protocol (the foxglove-sdk package, the ``live`` extra) on the companion, with the topics and
 schemas of :mod:`companion.app.foxglove_topics`, the same as ``slz export --mcap`` writes.
 
-It never slows the flight: nothing is built for a topic no client subscribes to; the camera goes out at
-``camera_rate_hz`` as JPEG; each client has a bounded queue (``backlog_messages``) whose oldest message is dropped
-when a slow client falls behind (the SDK's server, on its own threads); and a failure in the view is logged once and
-switches it off, never raised into the flight. The decisions, phases, commands and events come from the flight
+It never slows the flight: the flight's loop only queues a job (bounded by ``backlog_messages``; a full queue drops
+the job) for the view's own thread, which builds the JSON and the JPEG; nothing is queued while no client is
+connected, nor built for a topic no client subscribes to; the camera goes out at ``camera_rate_hz``; each client has
+a bounded queue (``backlog_messages``) whose oldest message is dropped when a slow client falls behind (the SDK's
+server, on its own threads); and a failure in the view is logged once and switches it off, never raised into the
+flight. The decisions, phases, commands and events come from the flight
 recorder's records as they are written (:meth:`LiveView.record`), the frames, the map, the zones and the pose from
 each processed frame (:meth:`LiveView.frame`).
 """
@@ -13,6 +15,8 @@ each processed frame (:meth:`LiveView.frame`).
 from __future__ import annotations
 
 import logging
+import queue
+import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -81,7 +85,31 @@ class LiveView:
         self._next_image_s = -1e9
         self.failed = False
         self.sent: dict[str, int] = dict.fromkeys(self._channels, 0)
+        self.dropped = 0
+        """Jobs dropped because the view's own queue was full (the flight never waits for the view)."""
+        self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(maxsize=config.backlog_messages)
+        self._worker = threading.Thread(target=self._work, name="live-view", daemon=True)
+        self._worker.start()
         logger.info("live view on ws://%s:%d (Foxglove: open a connection to it)", config.host, self.port)
+
+    def _watched(self) -> bool:
+        return any(channel.has_sinks() for channel in self._channels.values())
+
+    def _post(self, job: Callable[[], None]) -> None:
+        """Hand ``job`` to the view's thread: the flight's loop only queues (the JSON, the JPEG are built there)."""
+        if self.failed or not self._watched():  # no client: nothing queued, nothing built
+            return
+        try:
+            self._jobs.put_nowait(job)
+        except queue.Full:
+            self.dropped += 1
+
+    def _work(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            self._guard(job)
 
     def _send(self, topic: str, t_s: float, message: dict[str, Any] | Callable[[], dict[str, Any]]) -> None:
         channel = self._channels[topic]
@@ -110,7 +138,7 @@ class LiveView:
             for topic, t_s, message in messages_of(record, None):
                 self._send(topic, t_s, message)
 
-        self._guard(send)
+        self._post(send)
 
     def frame(self, frame: Frame, result: FrameResult) -> None:
         """A processed frame's head-plane map, and its camera image at ``camera_rate_hz`` (its pose, zones and
@@ -126,10 +154,17 @@ class LiveView:
                 if ok:
                     self._send("/camera/image", t_s, image_message(t_s, jpeg.tobytes(), "jpeg"))
 
-        self._guard(send)
+        self._post(send)
 
     def close(self) -> None:
-        """Stop serving."""
+        """Stop the view's thread (what is queued is dropped) and serving."""
+        while True:
+            try:
+                self._jobs.get_nowait()
+            except queue.Empty:
+                break
+        self._jobs.put(None)
+        self._worker.join(timeout=5.0)
         self._guard(self.server.stop)
 
 
