@@ -216,6 +216,7 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
             "dynamics": args.dynamics,
             "log_path": str(args.log) if args.log else None,
             "ulog_path": str(args.ulog) if args.ulog else None,
+            "live_view_port": args.live_view,
             "duration_s": args.duration,
             "bind_address": args.bind,
         }.items()
@@ -257,6 +258,9 @@ def _sitl_arguments(sitl: argparse.ArgumentParser) -> None:
     sitl.add_argument("--dynamics", choices=["rigid_body", "jsbsim_f450"])
     sitl.add_argument("--log", type=Path, help="write the true trajectory here (CSV)")
     sitl.add_argument("--ulog", type=Path, help="write the flight here as a PX4 ULog (.ulg), as PX4's SITL does")
+    sitl.add_argument(
+        "--live-view", type=int, metavar="PORT", help="serve the truth (people, vehicle) to Foxglove on this port"
+    )
     sitl.add_argument("--duration", type=float, help="stop after this many simulated seconds")
     sitl.add_argument("--bind", help="local address (default 127.0.0.1)")
     sitl.add_argument(

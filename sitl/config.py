@@ -152,6 +152,12 @@ class SitlConfig(StrictModel):
     params: dict[str, float] = Field(default_factory=dict, description="Parameter overrides, PX4 names.")
     log_path: Path | None = Field(default=None, description="Trajectory log (CSV), ground truth.")
     log_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
+    live_view_port: int | None = Field(
+        default=None,
+        ge=1,
+        le=65535,
+        description="Serve the truth (every person, the vehicle) to Foxglove on this TCP port (slz sitl --live-view).",
+    )
     ulog_path: Path | None = Field(
         default=None,
         description="The flight as a PX4 ULog (.ulg), as PX4's SITL writes one: Flight Review, pyulog and PlotJuggler "

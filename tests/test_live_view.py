@@ -122,3 +122,37 @@ def test_a_sitl_flight_with_the_live_view_on_serves_every_topic_with_its_schema(
     assert image.first["format"] == "jpeg"
     times_s = np.array(image.log_times_ns) / 1e9
     assert np.all(np.diff(times_s) >= 0.5 - 1e-6)  # camera_rate_hz 2 on the vehicle's clock
+
+
+@pytest.mark.sitl
+def test_the_sitl_serves_its_truth_live_beside_the_companions_view(tmp_path: Path, instance: int) -> None:
+    # Issue 67: `slz sitl --live-view PORT`: every person where they really are, and the vehicle, in Foxglove.
+    port = free_tcp_port()
+    config = tmp_path / "sitl.yaml"
+    config.write_text(f"sitl:\n  camera:\n    enabled: true\n  seed: 3\n  live_view_port: {port}\n")
+    from sitl.harness.process import SitlProcess
+
+    sitl = SitlProcess(["--config", str(config), "--speed", "1"], instance, tmp_path).start()
+    client = None
+    try:
+        client = FoxgloveClient(f"ws://127.0.0.1:{port}", connect_timeout_s=30)
+        wait_until(
+            lambda: client.received().get("/truth/people") and client.received()["/truth/people"].count >= 3,
+            30,
+            "the truth",
+        )
+        wait_until(lambda: client.received().get("/tf") and client.received()["/tf"].count >= 2, 30, "the vehicle")
+        received = client.received()
+        state = sitl.state()
+    finally:
+        if client is not None:
+            client.close()
+        sitl.stop()
+    people = received["/truth/people"]
+    assert people.schema_name == "foxglove.SceneUpdate"
+    assert people.first is not None
+    assert len(people.first["entities"]) >= 80  # the scenario's crowd, 80-120 people
+    assert received["/tf"].schema_name == "foxglove.FrameTransform"
+    times_s = np.array(people.log_times_ns) / 1e9
+    assert np.all(np.diff(times_s) >= 0.2 - 1e-6)  # 5 Hz of simulated time
+    assert times_s[-1] <= state["t_s"] + 1e-6  # stamped with the vehicle's clock

@@ -40,6 +40,7 @@ from sitl.vehicle.clock import SimClock
 from sitl.vehicle.control_channel import ControlChannel
 from sitl.vehicle.control_requests import ControlRequests
 from sitl.vehicle.fault_schedule import FaultSchedule
+from sitl.vehicle.live_truth import LiveTruth, LiveTruthError
 from sitl.vehicle.lockstep_gate import LockstepGate
 from sitl.vehicle.run_end import RunEnd
 from sitl.vehicle.trajectory_log import TrajectoryLog
@@ -72,6 +73,16 @@ def describe(c: SitlConfig) -> str:
     )
 
 
+def open_links(config: SitlConfig, links: list[MavlinkLink]) -> None:
+    """The companion's (``api``) and the ground station's (``gcs``) MAVLink links, each signed when the config says,
+    appended to ``links`` as each opens (so that a failure closes the ones already open)."""
+    sysid, bind, signing = config.system_id, config.bind_address, config.signing
+    keys = {name: signing.key if signing is not None and name in signing.links else None for name in LinkName}
+    api, gcs = LinkName.API, LinkName.GCS
+    links.append(MavlinkLink("api", bind, config.api_port_local, config.api_port_remote, sysid, signing_key=keys[api]))
+    links.append(MavlinkLink("gcs", bind, config.gcs_port_local, config.gcs_port_remote, sysid, signing_key=keys[gcs]))
+
+
 class SitlVehicle:
     """One simulated PX4 quadrotor. Build it, then :meth:`run` until shutdown; :meth:`close` frees the ports."""
 
@@ -80,6 +91,7 @@ class SitlVehicle:
         self.trajectory: TrajectoryLog | None = None  # first, so close() works from any failure below
         self.truth: TruthWriter | None = None
         self.ulog: FlightULog | None = None
+        self.live: LiveTruth | None = None
         try:
             home_ned_m = np.array([*config.home_ne_m, 0.0])
             self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz, home_ned_m)
@@ -116,17 +128,8 @@ class SitlVehicle:
         self.camera: SimCamera | None = None
         self._next_frame_s = 0.0
         try:
-            sysid, bind = config.system_id, config.bind_address
-            signing = config.signing
-            keys = {name: signing.key if signing is not None and name in signing.links else None for name in LinkName}
-            api, gcs = LinkName.API, LinkName.GCS
-            self.links.append(
-                MavlinkLink("api", bind, config.api_port_local, config.api_port_remote, sysid, signing_key=keys[api])
-            )
-            self.links.append(
-                MavlinkLink("gcs", bind, config.gcs_port_local, config.gcs_port_remote, sysid, signing_key=keys[gcs])
-            )
-            self.control = ControlChannel(bind, config.control_port)
+            open_links(config, self.links)
+            self.control = ControlChannel(config.bind_address, config.control_port)
         except Exception as exc:
             self.close()
             raise SitlError("network", str(exc)) from None
@@ -161,6 +164,12 @@ class SitlVehicle:
         if config.ulog_path is not None:
             self.ulog = FlightULog(Path(config.ulog_path), config.log_rate_hz, self.params, config.system_id)
             self.broadcast.sink = functools.partial(self.ulog.statustext_at, self.clock)
+        if config.live_view_port is not None:
+            try:
+                self.live = LiveTruth(config.live_view_port, config.bind_address)
+            except LiveTruthError as exc:
+                self.close()
+                raise SitlError("live_view", str(exc)) from None
 
     # -- lifecycle ---------------------------------------------------------------------------------------------
     def limits(self) -> ControllerLimits:
@@ -203,9 +212,10 @@ class SitlVehicle:
         if self.trajectory is not None:
             self.trajectory.close()
             self.trajectory = None
-        if self.ulog is not None:
-            self.ulog.close()
-            self.ulog = None
+        for log in (self.ulog, self.live):
+            if log is not None:
+                log.close()
+        self.ulog = self.live = None
         if self.truth is not None:
             self.truth.close()
             self.truth = None
@@ -382,6 +392,8 @@ class SitlVehicle:
         if self.ulog is not None and (force or self.ulog.due(t_s)):
             level = int(self.battery_monitor.level)
             self.ulog.sample(t_s, self.dynamics.state(), cmd, self._setpoint, self.battery, level)
+        if self.live is not None and self.live.due(t_s):  # the crowd as it stands: never advanced here
+            self.live.sample(t_s, None if self.camera is None else self.camera.people(), self.dynamics.state())
         if self.trajectory is None or not (force or self.trajectory.due(t_s)):
             return
         self.trajectory.write(t_s, self.dynamics.state(), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, force)
