@@ -26,7 +26,15 @@ VEHICLE_SYSID = 1
 class Gcs:
     """A pymavlink ground station (system 255, component 190) on its own UDP socket, signing with ``key`` if given."""
 
-    def __init__(self, port: int, key: bytes | None = None, link_id: int = 0, reply_key: bytes | None = None) -> None:
+    def __init__(
+        self,
+        port: int,
+        key: bytes | None = None,
+        link_id: int = 0,
+        reply_key: bytes | None = None,
+        vehicle_sysid: int = VEHICLE_SYSID,
+    ) -> None:
+        self.vehicle_sysid = vehicle_sysid  # the companion answers on its autopilot's system id (issue 65)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
@@ -42,9 +50,10 @@ class Gcs:
         self.received: list[Any] = []
 
     def command(
-        self, mav_cmd: int, param1: float = 0.0, target_component: int = 191, target_system: int = VEHICLE_SYSID
+        self, mav_cmd: int, param1: float = 0.0, target_component: int = 191, target_system: int | None = None
     ) -> bytes:
         """Send COMMAND_LONG to the vehicle's system (or ``target_system``); the bytes sent."""
+        target_system = self.vehicle_sysid if target_system is None else target_system
         msg = self.mav.command_long_encode(target_system, target_component, mav_cmd, 0, param1, 0, 0, 0, 0, 0, 0)
         data = msg.pack(self.mav)
         self.sock.sendto(data, self.address)

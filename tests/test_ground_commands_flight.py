@@ -19,6 +19,7 @@ from companion.app.replay import replay
 from companion.ground import mavlink_frames as frames
 from companion.ground.command_channel import AckResult
 from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
+from sitl.config import SitlConfig
 from sitl.testing.helpers import free_udp_port, sitl_mission_yaml, slz_fly_argv, start_camera_sitl, wait_until
 from tests.mavproxy_client import MavProxy
 from tests.test_ground_channel import Gcs
@@ -80,9 +81,12 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
     mission = tmp_path / "mission.yaml"
     mission.write_text(text)
     log = tmp_path / "flight" / "flight.jsonl"
+    sysid = SitlConfig(instance=instance).system_id  # the autopilot's, which the companion takes and answers on
     link_args, console = documented_mavproxy(port)
+    link_args = [a.replace("--target-system=1", f"--target-system={sysid}") for a in link_args]
     assert console[:2] == ["signing key secret", "long DO_GO_AROUND"]
-    pilot, stranger = Gcs(port, KEY, link_id=1, reply_key=KEY), Gcs(port, reply_key=KEY)
+    pilot = Gcs(port, KEY, link_id=1, reply_key=KEY, vehicle_sysid=sysid)
+    stranger = Gcs(port, reply_key=KEY, vehicle_sysid=sysid)
     fly = subprocess.Popen(
         slz_fly_argv(mission, tmp_path / "flight"),
         cwd=REPO_ROOT,
@@ -101,7 +105,7 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
         n_before = len(decisions(log))
         pilot.command(LAND_NOW)  # searching again, or approaching the next zone from afar: nothing to land on here
         assert answered(pilot, LAND_NOW) == AckResult.DENIED
-        mavproxy.expect(r"Detected vehicle 1:191", 20)  # the companion's heartbeat
+        mavproxy.expect(rf"Detected vehicle {sysid}:191", 20)  # the companion's heartbeat, on its autopilot's id
         mavproxy.send(console[0])  # signing key secret
         mavproxy.expect(r"Setup signing key", 10)
         # A new zone, and a descent over it (below 15 m: the go-around has somewhere to climb back to).
@@ -131,6 +135,7 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
     records = read_log(log)
     commands = [r for r in records if r["kind"] == "ground_command"]
     assert [(r["command"], r["result"]) for r in commands] == [
+        ("go_around", "denied"),  # the stranger's, unsigned: refused, and recorded since issue 65
         ("reject_zone", "accepted"),
         ("land_now", "denied"),
         ("go_around", "accepted"),
@@ -164,7 +169,7 @@ def test_next_fallback_site_from_the_ground_station_flies_to_the_site_checks_it_
     port = free_udp_port()
     site = f"{{name: lawn, north_m: {site_ne_m[0]}, east_m: {site_ne_m[1]}, radius_m: 3.0}}"
     fly, log = fly_with_commands(tmp_path, instance, port, f"  fallback: {{sites: [{site}]}}")
-    pilot = Gcs(port)
+    pilot = Gcs(port, vehicle_sysid=SitlConfig(instance=instance).system_id)
     try:
         wait_until(lambda: any(d["phase"] == "approach" for d in decisions(log)), 180, "the first approach")
         pilot.command(NEXT_SITE)
@@ -207,7 +212,7 @@ def test_land_now_over_a_person_at_the_walker_gate_is_denied_unless_forced_and_t
     port = free_udp_port()
     # The person is seen from 12 m down to the gate: no abort on the way (the gate waits, as for a walker).
     fly, log = fly_with_commands(tmp_path, instance, port, "  unsafe_frames_to_abort: 100")
-    pilot = Gcs(port)
+    pilot = Gcs(port, vehicle_sysid=SitlConfig(instance=instance).system_id)
     try:
         wait_until(
             lambda: any(d["phase"] == "descent" for d in decisions(log)) and -sitl.state()["position_ned_m"][2] < 12.0,
