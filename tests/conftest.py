@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from companion.perception.blob_model import build_blob_density_model, save_model
 from companion.perception.config import PerceptionConfig
 from companion.perception.density import OnnxDensityModel
+from models.blob_detector.graph import build_blob_density_model, save_model
 from sitl.harness.instances import InstanceLease, lease_instance, leased_instance
 
 REPO_ROOT = Path(__file__).resolve().parent.parent

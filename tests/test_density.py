@@ -12,7 +12,6 @@ import onnx
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from companion.perception.blob_model import build_blob_density_model, save_model
 from companion.perception.density import (
     CONTRACT_METADATA_KEY,
     ChannelOrder,
@@ -21,11 +20,13 @@ from companion.perception.density import (
     OnnxDensityModel,
     TensorLayout,
     downscaled_size,
-    input_extent_px,
     input_scale,
     predict_downscaled,
 )
 from companion.perception.errors import PerceptionError
+from models.blob_detector.graph import build_blob_density_model, save_model
+from models.density.onnx_files import stamp_any_size
+from models.density.receptive_field import input_extent_px
 
 pytestmark = pytest.mark.integration
 
@@ -290,8 +291,11 @@ def test_a_scale_outside_0_1_is_refused(blob_model: OnnxDensityModel, scale: flo
         predict_downscaled(blob_model, np.zeros((480, 640, 3), np.uint8), scale)
 
 
-def save_stride2_graph(path: Path, name: str, nodes: list[onnx.NodeProto], inits: list[onnx.TensorProto]) -> Path:
-    """Save a graph from a 64x48 ``frame`` to a 32x24 ``density`` (stride 2) with its contract."""
+def save_stride2_graph(
+    path: Path, name: str, nodes: list[onnx.NodeProto], inits: list[onnx.TensorProto], stamp: bool = True
+) -> Path:
+    """Save a graph from a 64x48 ``frame`` to a 32x24 ``density`` (stride 2) with its contract, stamped to run at any
+    size as the export stamps it (``stamp``; :func:`stamp_any_size`)."""
     graph = helper.make_graph(
         nodes,
         name,
@@ -304,6 +308,8 @@ def save_stride2_graph(path: Path, name: str, nodes: list[onnx.NodeProto], inits
     contract = {"input_width_px": 64, "input_height_px": 48, "output_stride": 2}
     helper.set_model_props(model, {CONTRACT_METADATA_KEY: json.dumps(contract)})
     onnx.save(model, str(path))
+    if stamp:
+        stamp_any_size(path)
     return path
 
 
@@ -321,7 +327,7 @@ def assert_cropped_as_padded(model: OnnxDensityModel, frame: np.ndarray) -> None
         )
 
 
-def conv_model(path: Path, spatial_addend: bool = False) -> Path:
+def conv_model(path: Path, spatial_addend: bool = False, stamp: bool = True) -> Path:
     """A small fully convolutional graph: 3x3 stride 2, ReLU, 3x3 dilated 2, 1x1 (stride 2 overall); with
     ``spatial_addend`` an addend of the contract's spatial size after the first convolution (which only that size
     can take)."""
@@ -341,7 +347,7 @@ def conv_model(path: Path, spatial_addend: bool = False) -> Path:
         helper.make_node("Conv", ["c2", "w3"], ["c3"]),
         helper.make_node("Abs", ["c3"], ["density"]),
     ]
-    return save_stride2_graph(path, "conv", nodes, inits)
+    return save_stride2_graph(path, "conv", nodes, inits, stamp)
 
 
 def test_the_context_a_cell_reads_is_followed_through_the_graph(tmp_path: Path) -> None:
@@ -354,6 +360,22 @@ def test_the_context_a_cell_reads_is_followed_through_the_graph(tmp_path: Path) 
     frame = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
     assert model.predict_any_size(frame[:32, :48]).shape == (16, 24)  # any multiple of the stride, as it is
     assert_cropped_as_padded(model, frame)
+
+
+def test_a_model_without_the_stamp_runs_on_its_contract_size_and_says_how_to_stamp_it(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # The drone does not analyse graphs (no onnx package there): the context comes from the export's stamp only.
+    path = conv_model(tmp_path / "conv.onnx", stamp=False)
+    with caplog.at_level(logging.INFO, logger="companion.perception.density"):
+        model = OnnxDensityModel(path)
+    assert model.context_px is None
+    assert "python -m models.density.onnx_files" in caplog.text
+    small_w, small_h = downscaled_size(64, 48, 0.5)
+    shrunk = predict_downscaled(model, np.zeros((48, 64, 3), np.uint8), 0.5)
+    assert shrunk.values.shape == (small_h // 2, small_w // 2)
+    assert stamp_any_size(path) == 16
+    assert OnnxDensityModel(path).context_px == 16
 
 
 def focus_model(path: Path, upsample: str = "scales", coordinates: str = "asymmetric") -> Path:
@@ -416,8 +438,10 @@ def test_graphs_whose_context_is_unbounded_here_run_on_the_contract_size(
     tmp_path: Path, blob_model: OnnxDensityModel
 ) -> None:
     assert blob_model.context_px is None  # edge padding and a resize on the image's path
-    pooled = OnnxDensityModel(pool_model(tmp_path / "pool.onnx", [1, 3, 48, 64], [1, 1, 6, 8], 8, CONTRACT))
-    assert pooled.context_px is None  # a mean over the channels (ReduceMean) is not followed
+    pool_path = pool_model(tmp_path / "pool.onnx", [1, 3, 48, 64], [1, 1, 6, 8], 8, CONTRACT)
+    assert stamp_any_size(pool_path) is None  # a mean over the channels (ReduceMean) is not followed
+    pooled = OnnxDensityModel(pool_path)
+    assert pooled.context_px is None
     with pytest.raises(PerceptionError, match=r"density.predict_any_size: .* runs on 64x48 only"):
         pooled.predict_any_size(np.zeros((16, 16, 3), np.uint8))
     # An addend of the contract's size: the graph reads as convolutional, but only that size runs; the check at

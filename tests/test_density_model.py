@@ -210,13 +210,13 @@ def test_on_the_drones_lock_alone_the_density_stage_at_8_m_runs_the_cropped_inpu
     assert width_px < seen["frame"][1], seen
 
 
-@pytest.mark.parametrize("name", [*SHIPPED, "slz_lite_wide_real"])
+@pytest.mark.parametrize("name", [*SHIPPED, "slz_lite_wide_real", "candidates/wide_cb", "candidates/wide_gb"])
 def test_every_shipped_model_is_stamped_to_run_at_any_size(name: str) -> None:
     """Each shipped model's contract carries the context its graph reads (``models.density.onnx_files``), measured
     again here from the graph: the stamp is what the graph says."""
     import onnx
 
-    from companion.perception.density import make_any_size
+    from models.density.receptive_field import make_any_size
 
     path = REPO_ROOT / "models/density" / f"{name}.onnx"
     stamped = json.loads(read_metadata(path)[CONTRACT_KEY])["context_px"]

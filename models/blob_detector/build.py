@@ -10,7 +10,7 @@ import hashlib
 import sys
 from pathlib import Path
 
-from companion.perception.blob_model import build_blob_density_model, save_model
+from models.blob_detector.graph import build_blob_density_model, save_model
 
 
 def main() -> int:

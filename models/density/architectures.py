@@ -178,7 +178,7 @@ class YoloxLite(nn.Module):
             factor = stride // strides[0]
             if tuple(stride4.shape[-2:]) == (factor * c.shape[-2], factor * c.shape[-1]):
                 # By a constant factor where the sides divide (always at export): the ONNX Resize then runs at any
-                # input size, so a shrunk frame runs cropped (companion.perception.density.input_extent_px).
+                # input size, so a shrunk frame runs cropped (models.density.receptive_field.input_extent_px).
                 up.append(nn.functional.interpolate(c, scale_factor=float(factor), mode="nearest"))
             else:  # sides that do not divide (a whole validation frame): to stride4's size, as before
                 up.append(nn.functional.interpolate(c, size=stride4.shape[-2:], mode="nearest"))

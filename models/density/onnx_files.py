@@ -10,7 +10,7 @@ from pathlib import Path
 import onnx
 
 from companion.errors import SlzError
-from companion.perception.density import make_any_size
+from models.density.receptive_field import make_any_size
 
 CONTRACT_KEY = "slz.contract"
 """JSON input contract read by ``companion.perception.density.OnnxDensityModel``."""
