@@ -11,7 +11,8 @@ import logging
 import sys
 from pathlib import Path
 
-from sitl.render.bodies.library import CELL_DM, PACK_PATH, pack
+from sitl.assets.makehuman_pack import pack
+from sitl.render.bodies.library import CELL_DM, PACK_PATH
 
 DEFAULT_ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets" / "makehuman"
 

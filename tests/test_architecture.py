@@ -49,6 +49,7 @@ FLOORS: dict[str, int] = {
     "sitl.config": 11,
     "sitl.vehicle.fault_schedule": 11,
     "sitl.render": 11,
+    "sitl.assets": 12,  # build-time packing of the render's assets (MakeHuman bodies)
     # the autopilot (configured by the SITL's config)
     "sitl.autopilot": 12,
     # the SITL vehicle process (the package; its parts above sit on their own floors)

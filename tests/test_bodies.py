@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from sitl.assets.makehuman_files import AssetFormatError, read_bvh, read_fitting
+from sitl.assets.makehuman_pack import pack
 from sitl.render import camera as camera_module
 from sitl.render.bodies.figure import (
     DETAIL_CELLS_M,
@@ -22,8 +24,7 @@ from sitl.render.bodies.figure import (
     figure_mesh,
     walk_phase_at,
 )
-from sitl.render.bodies.library import PACK_PATH, PartKind, load_library, pack
-from sitl.render.bodies.makehuman_files import AssetFormatError, read_bvh, read_fitting
+from sitl.render.bodies.library import PACK_PATH, PartKind, load_library
 from sitl.render.bodies.rig import Rig, axis_rotation, skin
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd

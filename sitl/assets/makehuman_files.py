@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.errors import SlzError
+from sitl.render.bodies.library import Fitting
 from sitl.render.bodies.rig import axis_rotation
 
 F64Array = npt.NDArray[np.float64]
@@ -115,44 +116,6 @@ def read_target(path: Path) -> tuple[I64Array, F64Array]:
         except (ValueError, IndexError) as exc:
             raise AssetFormatError(path, f"line {number}: {exc}") from None
     return np.array(indices, dtype=np.int64), np.array(offsets, dtype=np.float64).reshape(-1, 3)
-
-
-@dataclass(frozen=True)
-class Fitting:
-    """How a proxy body or garment follows the base mesh (a ``.proxy`` or ``.mhclo`` file).
-
-    Attributes
-    ----------
-    refs : ndarray, shape (N, 3), int64
-        Three base-mesh vertices per fitted vertex (a single-index line repeats its vertex).
-    weights : ndarray, shape (N, 3), float64
-        Their weights.
-    offsets : ndarray, shape (N, 3), float64
-        Offset per fitted vertex, in units of the scale axes.
-    scale_refs : ndarray, shape (3, 2), int64
-        Per axis x, y, z: the two base vertices whose distance along that axis measures the body.
-    scale_ref_m : ndarray, shape (3,), float64
-        Those distances on the body the garment was made for (MakeHuman units).
-    delete_verts : ndarray, shape (D,), int64
-        Base vertices the garment hides.
-    obj_file : str
-        The garment's mesh, beside the fitting file.
-    """
-
-    refs: I64Array
-    weights: F64Array
-    offsets: F64Array
-    scale_refs: I64Array
-    scale_ref_m: F64Array
-    delete_verts: I64Array
-    obj_file: str
-
-    def fit(self, base_vertices: F64Array) -> F64Array:
-        """Fitted vertex positions (N, 3) on a base mesh (V, 3) (shaped by targets or not)."""
-        scale = np.abs(base_vertices[self.scale_refs[:, 0]] - base_vertices[self.scale_refs[:, 1]])
-        scale = np.array([scale[0, 0], scale[1, 1], scale[2, 2]]) / self.scale_ref_m
-        fitted = np.einsum("nk,nkd->nd", self.weights, base_vertices[self.refs])
-        return np.asarray(fitted + self.offsets * scale, dtype=np.float64)
 
 
 def read_fitting(path: Path) -> Fitting:
