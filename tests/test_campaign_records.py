@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +18,7 @@ from sitl.campaign.metrics import METRICS_VERSION, MissionMetrics
 from sitl.campaign.record import FlownMission, MissionFailure, ResultError, compared_fields, parse_result
 from sitl.campaign.report import MEANS, RATES
 from sitl.campaign.runner import read_results
+from sitl.testing.helpers import run_python
 
 pytestmark = pytest.mark.unit
 
@@ -135,11 +134,7 @@ def test_slz_campaign_report_names_a_misspelt_field_and_fails(tmp_path: Path) ->
     line = _line(mission_id="static/oldest/0000", run=0)
     line["zone_area"] = line.pop("zone_area_m2")
     (out / "results.jsonl").write_text(json.dumps(line) + "\n")
-    command = ["campaign", "--spec", str(spec_path), "--out", str(out), "--report-only"]
-    done = subprocess.run(
-        [sys.executable, "-m", "companion.cli", *command],
-        cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+    done = run_python("-m", "companion.cli", "campaign", "--spec", str(spec_path), "--out", str(out), "--report-only")
     assert done.returncode == 1, done.stdout + done.stderr[-2000:]
     assert "unknown field(s) zone_area" in done.stderr
     assert not (out / "report.md").exists()

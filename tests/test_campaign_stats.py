@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -32,6 +30,7 @@ from sitl.campaign.spec import CampaignSpec, load_campaign_spec
 from sitl.campaign.stats import bootstrap_mean, holm, mcnemar_exact, paired_mean_difference, rate_difference, wilson
 from sitl.campaign.worker import error_result
 from sitl.config import SitlConfig
+from sitl.testing.helpers import run_python
 from sitl.world.park import ObjectKind
 
 pytestmark = pytest.mark.unit
@@ -567,10 +566,7 @@ def test_slz_campaign_check_against_exits_1_with_a_readable_diff(tmp_path: Path)
     baseline = tmp_path / "baseline.json"
     baseline.write_text(json.dumps(make_baseline(spec, _records(spec, {}))))
     command = ["campaign", "--spec", str(spec_path), "--out", str(out), "--report-only", "--check-against"]
-    done = subprocess.run(
-        [sys.executable, "-m", "companion.cli", *command, str(baseline)],
-        cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+    done = run_python("-m", "companion.cli", *command, str(baseline))
     assert done.returncode == 1, done.stdout + done.stderr[-2000:]
     assert "# Regression gate: FAILED" in done.stdout
     assert "| nearest | success | 12 | 100.0 % | 33.3 % | 8 | 0 |" in done.stdout
@@ -587,11 +583,7 @@ def test_report_only_refuses_a_folder_of_another_campaign_and_leaves_it_as_it_wa
     (out / "spec.yaml").write_text(yaml.safe_dump(other, sort_keys=False))
     (out / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _results(spec, {})))
     before = sorted(p.name for p in out.iterdir())
-    command = ["campaign", "--spec", str(spec_path), "--out", str(out), "--report-only"]
-    done = subprocess.run(
-        [sys.executable, "-m", "companion.cli", *command],
-        cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+    done = run_python("-m", "companion.cli", "campaign", "--spec", str(spec_path), "--out", str(out), "--report-only")
     assert done.returncode == 1, done.stdout + done.stderr[-2000:]
     assert "holds another campaign's results (someone_elses differs from" in done.stderr
     assert sorted(p.name for p in out.iterdir()) == before  # no report written over it

@@ -12,13 +12,15 @@ import pytest
 from companion.app.replay import replay
 from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import (
+    CompanionFlight,
     GroundStation,
+    fly_to_the_end,
     free_udp_port,
     pilot_takes_off,
-    sitl_mission_yaml,
     start_camera_sitl,
     state_when,
     wait_until,
+    write_sitl_mission,
 )
 
 pytestmark = pytest.mark.sitl
@@ -29,8 +31,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 def start_sitl_with_camera(tmp_path: Path, instance: int, seed: int, gcs_port: int) -> SitlProcess:
     """A SITL instance with its camera, its ground-station link on ``gcs_port``, and ``tmp_path/mission.yaml``:
     mission_configs/sitl.yaml on its ports."""
-    mission = sitl_mission_yaml(instance, replayable=True)  # the SITL runs free: no lockstep
-    (tmp_path / "mission.yaml").write_text(mission)
+    write_sitl_mission(tmp_path, instance, replayable=True)  # the SITL runs free: no lockstep
     return start_camera_sitl(tmp_path, instance, seed, gcs_port)
 
 
@@ -41,19 +42,12 @@ def test_a_dry_run_perceives_and_decides_but_never_commands(tmp_path: Path, inst
     try:
         pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)
         before = sitl.state()
-        command = ["fly", "--config", str(tmp_path / "mission.yaml"), "--dry-run"]
-        command += ["--out", str(tmp_path / "flight"), "--timeout", "8"]
-        fly = subprocess.run(
-            [sys.executable, "-m", "companion.cli", *command],
-            cwd=REPO_ROOT,
-            capture_output=True,
-            text=True,
-            timeout=90,
-        )
-        after = sitl.state()
+        dry_run = ("--dry-run", "--timeout", "8")
+        fly = fly_to_the_end(sitl, tmp_path / "mission.yaml", tmp_path / "flight", *dry_run, timeout_s=90)
     finally:
         gcs.close()
-        sitl.stop()
+        sitl.stop()  # already stopped unless the takeoff failed
+    after = fly.truth
     assert fly.returncode == 0, fly.stderr[-3000:]
     # At the SITL's side: no setpoint, no arming, no mode change from the companion (the pilot's hold stays).
     assert after["setpoints_by_sender"] == before["setpoints_by_sender"] == {}
@@ -105,32 +99,23 @@ def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_t
     sitl = start_sitl_with_camera(tmp_path, instance, seed=4, gcs_port=gcs_port)
     field = (tmp_path / "mission.yaml").read_text().replace("arm_and_takeoff: true", "arm_and_takeoff: false")
     (tmp_path / "field.yaml").write_text(field)
-    log = tmp_path / "flight" / "flight.jsonl"
-    command = ["fly", "--config", str(tmp_path / "field.yaml"), "--never-arm", "--out", str(tmp_path / "flight")]
-    fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", *command, "--timeout", "120"],
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    gcs = GroundStation(instance, gcs_port)
-    try:
-        # On the ground the companion only waits: it never arms, never takes off, sends nothing.
-        wait_until(lambda: log.is_file() and '"kind":"waiting_for_handover"' in log.read_text(), 60, "the wait")
-        on_ground = sitl.state()
-        # The pilot takes off and hands over by switching to HOLD (the end of a takeoff is HOLD): the companion
-        # takes OFFBOARD from there. Then the pilot takes over in position control: it must yield at once.
-        pilot_takes_off(sitl, gcs, instance, altitude_m=10.0, then_modes=("OFFBOARD",))
-        state_when(sitl, lambda st: st["mode"] == "OFFBOARD", 30, "the companion in OFFBOARD after the handover")
-        assert sitl.request({"cmd": "pilot_mode", "mode": "POSCTL"})["result"] == 0
-        out, err = fly.communicate(timeout=20)  # it must yield and end, not fight the pilot
-        after = sitl.state()
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        gcs.close()
-        sitl.stop()
+    field_options = ("--never-arm", "--timeout", "120")
+    with CompanionFlight(sitl, tmp_path / "field.yaml", tmp_path / "flight", *field_options) as fly:
+        gcs = GroundStation(instance, gcs_port)
+        try:
+            # On the ground the companion only waits: it never arms, never takes off, sends nothing.
+            wait_until(lambda: fly.logged('"kind":"waiting_for_handover"'), 60, "the wait")
+            on_ground = sitl.state()
+            # The pilot takes off and hands over by switching to HOLD (the end of a takeoff is HOLD): the companion
+            # takes OFFBOARD from there. Then the pilot takes over in position control: it must yield at once.
+            pilot_takes_off(sitl, gcs, instance, altitude_m=10.0, then_modes=("OFFBOARD",))
+            state_when(sitl, lambda st: st["mode"] == "OFFBOARD", 30, "the companion in OFFBOARD after the handover")
+            assert sitl.request({"cmd": "pilot_mode", "mode": "POSCTL"})["result"] == 0
+            out, err = fly.finish(20)  # it must yield and end, not fight the pilot
+            after = sitl.state()
+        finally:
+            gcs.close()
+    log = fly.log
     assert not on_ground["armed"]
     assert on_ground["setpoints_by_sender"] == {}
     assert fly.returncode == 0, err[-3000:]

@@ -6,7 +6,6 @@ a 100-mission campaign in docs/results/fallback_crowded.md."""
 from __future__ import annotations
 
 import math
-import subprocess
 from pathlib import Path
 
 import pytest
@@ -17,17 +16,16 @@ from companion.app.replay import replay
 from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
 from sitl.testing.helpers import (
     GroundStation,
+    fly_to_the_end,
     free_udp_port,
-    sitl_mission_yaml,
-    slz_fly_argv,
     start_camera_sitl,
     wait_until,
+    write_sitl_mission,
 )
 from tests.test_sitl_gcs import geo, upload
 
 pytestmark = pytest.mark.sitl
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
 SITE_NE_M = (21.0, -4.0)  # north of the crowd's ROI, inside the fence; the park keeps objects off it
 
 
@@ -48,21 +46,8 @@ def test_when_the_search_time_is_used_up_the_vehicle_lands_at_the_ground_station
     finally:
         station.close()
     budget = "  mission_time_limit_s: 4.0\n  fallback: {rally_points: true}"
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True, guidance=budget)
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(text)
-    try:
-        fly = subprocess.run(
-            slz_fly_argv(mission, tmp_path / "flight"),
-            cwd=REPO_ROOT,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            check=False,
-        )
-        truth = sitl.state()
-    finally:
-        sitl.stop()
+    mission = write_sitl_mission(tmp_path, instance, replayable=True, guidance=budget)
+    fly = fly_to_the_end(sitl, mission, tmp_path / "flight")
     assert fly.returncode == 0, fly.stderr[-3000:]
     assert "ended in done (landed)" in fly.stdout
     sites = FlightLog.read(tmp_path / "flight").first(RecordKind.FALLBACK_SITES)
@@ -75,7 +60,7 @@ def test_when_the_search_time_is_used_up_the_vehicle_lands_at_the_ground_station
     outcome = landing_outcome_of_run(tmp_path / "flight")
     assert outcome.kind is LandingKind.FALLBACK_SITE
     assert outcome.site_ne_m == pytest.approx(rally_ne_m)
-    north_m, east_m, _ = truth["position_ned_m"]
+    north_m, east_m, _ = fly.truth["position_ned_m"]
     assert math.hypot(north_m - SITE_NE_M[0], east_m - SITE_NE_M[1]) <= 1.5  # down at the site's centre
     report = replay(tmp_path / "flight")
     assert report.identical, report.differences

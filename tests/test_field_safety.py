@@ -28,15 +28,17 @@ from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 from sitl.config import SitlConfig
 from sitl.testing.helpers import (
+    CompanionFlight,
     GroundStation,
+    fly_to_the_end,
     free_udp_port,
     pilot_takes_off,
     sitl_mission_yaml,
-    slz_fly_argv,
     start_camera_sitl,
     state_when,
     wait_until,
     wait_until_async,
+    write_sitl_mission,
 )
 
 pytestmark = pytest.mark.sitl
@@ -61,8 +63,7 @@ def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_p
     tmp_path: Path, instance: int
 ) -> None:
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
+    mission = write_sitl_mission(tmp_path, instance)
     config, pipeline = validate_for_flight(mission)  # as `slz fly` loads it
     clock = TripsInDescent()
     recorder = FlightRecorder(tmp_path / "flight")
@@ -132,32 +133,21 @@ def test_a_dry_run_started_on_the_ground_records_the_whole_flight_the_pilot_flie
 ) -> None:
     gcs_port = free_udp_port()
     sitl = start_camera_sitl(tmp_path, instance, seed=3, gcs_port=gcs_port, lockstep=False)
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(sitl_mission_yaml(instance))
-    log = tmp_path / "flight" / "flight.jsonl"
-    command = ["fly", "--config", str(mission), "--dry-run", "--out", str(tmp_path / "flight")]
-    fly = subprocess.Popen(
-        [sys.executable, "-m", "companion.cli", *command],
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    gcs = GroundStation(instance, gcs_port)
-    try:
-        wait_until(lambda: log.is_file() and '"kind":"waiting"' in log.read_text(), 60, "the dry run waiting")
-        assert fly.poll() is None  # on the bench it waits: no failsafe ends it
-        pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)  # the dry run commands nothing: the takeoff holds
-        wait_until(lambda: '"source":"frame"' in log.read_text(), 30, "decisions on frames")
-        sysid = SitlConfig(instance=instance).system_id
-        gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0))
-        out, err = fly.communicate(timeout=60)  # it ends by itself once the vehicle is down and disarmed
-        after = sitl.state()
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        gcs.close()
-        sitl.stop()
+    mission = write_sitl_mission(tmp_path, instance)
+    with CompanionFlight(sitl, mission, tmp_path / "flight", "--dry-run") as fly:
+        gcs = GroundStation(instance, gcs_port)
+        try:
+            wait_until(lambda: fly.logged('"kind":"waiting"'), 60, "the dry run waiting")
+            assert fly.process.poll() is None  # on the bench it waits: no failsafe ends it
+            pilot_takes_off(sitl, gcs, instance, altitude_m=10.0)  # the dry run commands nothing: the takeoff holds
+            wait_until(lambda: fly.logged('"source":"frame"'), 30, "decisions on frames")
+            sysid = SitlConfig(instance=instance).system_id
+            gcs.send(gcs.mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0))
+            out, err = fly.finish(60)  # it ends by itself once the vehicle is down and disarmed
+            after = sitl.state()
+        finally:
+            gcs.close()
+    log = fly.log
     assert fly.returncode == 0, err[-3000:]
     assert "dry_run: dry run over; ended in" in out  # the landing report's ending first (issue 65)
     assert "the flight is over: on the ground and disarmed" in out
@@ -204,17 +194,7 @@ def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_
     text = text.replace(fence_ne, f"  polygon_latlon_deg: [{latlon}]\n")
     mission = tmp_path / "mission.yaml"
     mission.write_text(text)
-    try:
-        fly = subprocess.run(
-            [*slz_fly_argv(mission, tmp_path / "flight"), "--replayable"],
-            cwd=REPO_ROOT,
-            capture_output=True,
-            text=True,
-            timeout=180,
-            check=False,
-        )
-    finally:
-        sitl.stop()
+    fly = fly_to_the_end(sitl, mission, tmp_path / "flight", "--replayable", timeout_s=180)
     assert fly.returncode == 0, fly.stderr[-3000:]
     assert "ended in done (landed)" in fly.stdout
     records = read_log(tmp_path / "flight" / "flight.jsonl")
@@ -256,22 +236,11 @@ def test_a_service_stopped_before_its_vehicle_answers_ends_at_once_not_at_the_co
     text = text.replace(f"udpin://0.0.0.0:{14540 + instance}", f"udpin://0.0.0.0:{free_udp_port()}")
     assert "connect_timeout_s: 20.0" in text
     mission.write_text(text.replace("connect_timeout_s: 20.0", "connect_timeout_s: 120.0"))
-    log = tmp_path / "flight" / "flight.jsonl"
-    fly = subprocess.Popen(
-        slz_fly_argv(mission, tmp_path / "flight"),
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        wait_until(lambda: log.is_file() and '"kind":"start"' in log.read_text(), 120, "the run's start")
-        fly.send_signal(signal.SIGTERM)  # what a worker's death sends (sitl.harness.process.die_with_parent)
-        out, err = fly.communicate(timeout=30)  # a quarter of the connect timeout
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        sitl.stop()
+    with CompanionFlight(sitl, mission, tmp_path / "flight") as fly:
+        wait_until(lambda: fly.logged('"kind":"start"'), 120, "the run's start")
+        fly.process.send_signal(signal.SIGTERM)  # what a worker's death sends (sitl.harness.process.die_with_parent)
+        out, err = fly.finish(30)  # a quarter of the connect timeout
+    log = fly.log
     assert "SIGTERM received: no vehicle tick within 3 s, ending without the last resort" in out, err[-3000:]
     assert [r["kind"] for r in read_log(log)][-3:] == ["start", "supervision", "end"]
 
@@ -282,25 +251,12 @@ def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_f
     import signal
 
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
-    log = tmp_path / "flight" / "flight.jsonl"
-    fly = subprocess.Popen(
-        slz_fly_argv(mission, tmp_path / "flight"),
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        wait_until(lambda: log.is_file() and '"phase":"approach"' in log.read_text(), 120, "the approach")
-        fly.send_signal(signal.SIGINT)  # the systemd unit's KillSignal
-        out, err = fly.communicate(timeout=30)
+    with CompanionFlight(sitl, write_sitl_mission(tmp_path, instance), tmp_path / "flight") as fly:
+        wait_until(lambda: fly.logged('"phase":"approach"'), 120, "the approach")
+        fly.process.send_signal(signal.SIGINT)  # the systemd unit's KillSignal
+        out, err = fly.finish(30)
         held = state_when(sitl, lambda st: st["mode"] == "AUTO.LOITER", 10, "the hold")
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        sitl.stop()
+    log = fly.log
     assert fly.returncode == 3, err[-3000:]  # a failsafe: the service does not restart on it
     assert "SIGINT received: stopping: hold" in out
     assert not held["on_ground"]
@@ -329,27 +285,15 @@ def test_a_companion_killed_in_flight_leaves_px4_v1_15_hovering_in_position_mode
     import signal
 
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port())  # running free: no lockstep
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(sitl_mission_yaml(instance, flights_dir=tmp_path))
-    log = tmp_path / "flight" / "flight.jsonl"
-    fly = subprocess.Popen(
-        slz_fly_argv(mission, tmp_path / "flight"),
-        cwd=REPO_ROOT,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    try:
-        wait_until(lambda: log.is_file() and '"phase":"approach"' in log.read_text(), 180, "the approach")
+    mission = write_sitl_mission(tmp_path, instance)
+    with CompanionFlight(sitl, mission, tmp_path / "flight", capture=False) as fly:
+        wait_until(lambda: fly.logged('"phase":"approach"'), 180, "the approach")
         killed = sitl.state()
         assert killed["mode"] == "OFFBOARD"
-        fly.send_signal(signal.SIGKILL)  # a crash: no last resort, no goodbye
-        fly.wait(timeout=10)
+        fly.process.send_signal(signal.SIGKILL)  # a crash: no last resort, no goodbye
+        fly.process.wait(timeout=10)
         failsafe = state_when(sitl, lambda st: bool(st["failsafe"]), 10, "the offboard-loss failsafe")
         later = state_when(sitl, lambda st: st["t_s"] >= failsafe["t_s"] + 10.0, 30, "ten seconds of the failsafe")
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        sitl.stop()
     assert failsafe["failsafe"] == "Offboard lost"
     assert 0.8 <= failsafe["t_s"] - killed["t_s"] <= 2.0  # COM_OF_LOSS_T = 1 s, read through the state channel
     assert failsafe["mode"] == "POSCTL"

@@ -296,10 +296,9 @@ class Clock:
         return self.now_s
 
 
-def limited_flight(
-    tmp_path: Path, config: PerceptionConfig, link: FakeLink, clock: Clock, **guidance: object
-) -> FlightApp:
-    """A field flight as :func:`field_flight` with a wall limit of 300 s on ``clock``."""
+def limited_flight(tmp_path: Path, config: PerceptionConfig, **guidance: object) -> tuple[FlightApp, FakeLink, Clock]:
+    """A field flight as :func:`field_flight` with a wall limit of 300 s: the app, its fake link and its wall clock."""
+    link, clock = FakeLink(), Clock()
     mission = MissionConfig.model_validate(
         {
             "start": {"arm_and_takeoff": False},
@@ -309,9 +308,8 @@ def limited_flight(
         }
     )
     pipeline = SlzPipeline.from_config(mission.perception)
-    return FlightApp(
-        mission, link, NoFrames(), pipeline, FlightRecorder(tmp_path), wall_limit_s=300.0, wall_clock=clock
-    )
+    app = FlightApp(mission, link, NoFrames(), pipeline, FlightRecorder(tmp_path), wall_limit_s=300.0, wall_clock=clock)
+    return app, link, clock
 
 
 def supervision(tmp_path: Path) -> list[tuple[str, str]]:
@@ -321,8 +319,7 @@ def supervision(tmp_path: Path) -> list[tuple[str, str]]:
 def test_a_wall_limit_in_flight_holds_and_the_program_stays_until_the_pilot_has_the_vehicle(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
-    link, clock = FakeLink(), Clock()
-    app = limited_flight(tmp_path, config, link, clock)
+    app, link, clock = limited_flight(tmp_path, config)
 
     async def flight() -> None:
         await hand_over(app, link)
@@ -355,8 +352,7 @@ def test_a_wall_limit_in_flight_holds_and_the_program_stays_until_the_pilot_has_
 def test_a_wall_limit_with_return_as_last_resort_watches_the_return_down_to_the_ground(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
-    link, clock = FakeLink(), Clock()
-    app = limited_flight(tmp_path, config, link, clock, last_resort="return")
+    app, link, clock = limited_flight(tmp_path, config, last_resort="return")
 
     async def flight() -> None:
         await hand_over(app, link)
@@ -382,9 +378,8 @@ def test_a_wall_limit_with_return_as_last_resort_watches_the_return_down_to_the_
 def test_a_wall_limit_before_the_handover_ends_the_run_and_commands_nothing(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
-    link, clock = FakeLink(), Clock()
+    app, link, clock = limited_flight(tmp_path, config)
     link.status.mode = FlightMode.POSCTL  # the pilot flies and has not handed over
-    app = limited_flight(tmp_path, config, link, clock)
 
     async def flight() -> None:
         await tick(app, link, 1.0)
@@ -452,8 +447,7 @@ def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the_vehic
 def test_a_pilot_who_takes_over_as_the_wall_limit_passes_keeps_the_vehicle(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
-    link, clock = FakeLink(), Clock()
-    app = limited_flight(tmp_path, config, link, clock)
+    app, link, clock = limited_flight(tmp_path, config)
 
     async def flight() -> None:
         await hand_over(app, link)
@@ -579,8 +573,7 @@ def test_a_stop_while_watching_after_a_failsafe_ends_at_once_and_says_so(
 ) -> None:
     # Issue 65: a stop while watching after a failsafe logged "no vehicle tick within 3 s" with ticks all along.
     monkeypatch.setattr("companion.app.run_end.STOP_UNHEARD_S", 0.2)
-    link, clock = FakeLink(), Clock()
-    app = limited_flight(tmp_path, config, link, clock)
+    app, link, clock = limited_flight(tmp_path, config)
 
     async def flight() -> None:
         await hand_over(app, link)
@@ -665,8 +658,7 @@ def test_the_console_says_how_the_flight_goes_every_few_seconds_and_while_watchi
     tmp_path: Path, config: PerceptionConfig, caplog: pytest.LogCaptureFixture
 ) -> None:
     # Issue 65: nothing on the console for 4 minutes of watching after a failsafe, nor during take-off or descent.
-    link, clock = FakeLink(), Clock()
-    app = limited_flight(tmp_path, config, link, clock)
+    app, link, clock = limited_flight(tmp_path, config)
 
     async def flight() -> None:
         await hand_over(app, link)

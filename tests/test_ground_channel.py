@@ -78,6 +78,14 @@ class Gcs:
     def close(self) -> None:
         self.sock.close()
 
+    def __enter__(self) -> Gcs:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        """The replies still pending read (:meth:`texts` and :meth:`acks` keep them), then the socket closed."""
+        self.poll()
+        self.close()
+
 
 @pytest.fixture
 def port() -> int:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +19,8 @@ from companion.ground import mavlink_frames as frames
 from companion.ground.command_channel import AckResult
 from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
 from sitl.config import SitlConfig
-from sitl.testing.helpers import free_udp_port, sitl_mission_yaml, slz_fly_argv, start_camera_sitl, wait_until
+from sitl.harness.process import SitlProcess
+from sitl.testing.helpers import CompanionFlight, free_udp_port, start_camera_sitl, wait_until, write_sitl_mission
 from tests.mavproxy_client import MavProxy
 from tests.test_ground_channel import Gcs
 
@@ -59,16 +59,14 @@ def answered(gcs: Gcs, mav_cmd: int, timeout_s: float = 30.0, nth: int = 1) -> i
     return int(final[0])
 
 
-def fly_with_commands(tmp_path: Path, instance: int, port: int, guidance: str) -> tuple[subprocess.Popen[str], Path]:
-    """``slz fly`` started on instance ``instance`` with ``guidance`` lines and the command channel on ``port``
-    (unsigned), every frame saved for a replay; the process and its flight log's path."""
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True, guidance=guidance)
-    text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n"
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(text)
-    argv = slz_fly_argv(mission, tmp_path / "flight")
-    fly = subprocess.Popen(argv, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    return fly, tmp_path / "flight" / "flight.jsonl"
+def fly_with_commands(
+    sitl: SitlProcess, tmp_path: Path, instance: int, port: int, guidance: str, ground_station: str = ""
+) -> CompanionFlight:
+    """``slz fly`` started against ``sitl`` with ``guidance`` lines and the command channel on ``port`` (unsigned,
+    or as the further ``ground_station`` lines say), every frame saved for a replay."""
+    section = f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n{ground_station}"
+    mission = write_sitl_mission(tmp_path, instance, replayable=True, guidance=guidance, extra=section)
+    return CompanionFlight(sitl, mission, tmp_path / "flight")
 
 
 def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_and_the_flight_replays(
@@ -76,59 +74,43 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
 ) -> None:
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
     port = free_udp_port()
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True)
-    text += f"ground_station:\n  command_url: udpin://127.0.0.1:{port}\n  signing_key_hex: {KEY.hex()}\n"
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(text)
-    log = tmp_path / "flight" / "flight.jsonl"
     sysid = SitlConfig(instance=instance).system_id  # the autopilot's, which the companion takes and answers on
     link_args, console = documented_mavproxy(port)
     link_args = [a.replace("--target-system=1", f"--target-system={sysid}") for a in link_args]
     assert console[:2] == ["signing key secret", "long DO_GO_AROUND"]
     pilot = Gcs(port, KEY, link_id=1, reply_key=KEY, vehicle_sysid=sysid)
     stranger = Gcs(port, reply_key=KEY, vehicle_sysid=sysid)
-    fly = subprocess.Popen(
-        slz_fly_argv(mission, tmp_path / "flight"),
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    mavproxy = MavProxy(port, tmp_path, link_args)  # the pilot's console, as docs/ground_station.md writes it
-    try:
-        wait_until(lambda: any(d["phase"] == "approach" for d in decisions(log)), 180, "the first approach")
-        mavproxy.start()
-        stranger.command(GO_AROUND)  # unsigned: refused, and the vehicle flies on
-        assert answered(stranger, GO_AROUND) == AckResult.DENIED
-        pilot.command(REJECT)
-        assert answered(pilot, REJECT) == AckResult.ACCEPTED, pilot.texts()
-        n_before = len(decisions(log))
-        pilot.command(LAND_NOW)  # searching again, or approaching the next zone from afar: nothing to land on here
-        assert answered(pilot, LAND_NOW) == AckResult.DENIED
-        mavproxy.expect(rf"Detected vehicle {sysid}:191", 20)  # the companion's heartbeat, on its autopilot's id
-        mavproxy.send(console[0])  # signing key secret
-        mavproxy.expect(r"Setup signing key", 10)
-        # A new zone, and a descent over it (below 15 m: the go-around has somewhere to climb back to).
-        wait_until(
-            lambda: (
-                any(d["phase"] == "descent" for d in decisions(log)[n_before:])
-                and -sitl.state()["position_ned_m"][2] < 15.0
-            ),
-            180,
-            "a descent over another zone",
-        )
-        mavproxy.send(console[1])  # long DO_GO_AROUND
-        mavproxy.expect(r"Got COMMAND_ACK: DO_GO_AROUND: ACCEPTED", 30)
-        _, err = fly.communicate(timeout=300)  # the landing goes on to its end
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        mavproxy.close()
-        sitl.stop()
-        pilot.poll()
-        stranger.poll()
-        pilot.close()
-        stranger.close()
+    signed = f"  signing_key_hex: {KEY.hex()}\n"
+    with fly_with_commands(sitl, tmp_path, instance, port, "", signed) as fly, pilot, stranger:
+        log = fly.log
+        mavproxy = MavProxy(port, tmp_path, link_args)  # the pilot's console, as docs/ground_station.md writes it
+        try:
+            wait_until(lambda: any(d["phase"] == "approach" for d in decisions(log)), 180, "the first approach")
+            mavproxy.start()
+            stranger.command(GO_AROUND)  # unsigned: refused, and the vehicle flies on
+            assert answered(stranger, GO_AROUND) == AckResult.DENIED
+            pilot.command(REJECT)
+            assert answered(pilot, REJECT) == AckResult.ACCEPTED, pilot.texts()
+            n_before = len(decisions(log))
+            pilot.command(LAND_NOW)  # searching again, or approaching the next zone from afar: nothing to land here
+            assert answered(pilot, LAND_NOW) == AckResult.DENIED
+            mavproxy.expect(rf"Detected vehicle {sysid}:191", 20)  # the companion's heartbeat, on the autopilot's id
+            mavproxy.send(console[0])  # signing key secret
+            mavproxy.expect(r"Setup signing key", 10)
+            # A new zone, and a descent over it (below 15 m: the go-around has somewhere to climb back to).
+            wait_until(
+                lambda: (
+                    any(d["phase"] == "descent" for d in decisions(log)[n_before:])
+                    and -sitl.state()["position_ned_m"][2] < 15.0
+                ),
+                180,
+                "a descent over another zone",
+            )
+            mavproxy.send(console[1])  # long DO_GO_AROUND
+            mavproxy.expect(r"Got COMMAND_ACK: DO_GO_AROUND: ACCEPTED", 30)
+            _, err = fly.finish(300)  # the landing goes on to its end
+        finally:
+            mavproxy.close()
     assert fly.returncode == 0, err[-3000:]
     assert stranger.texts() == ["refused: not signed"]
     assert [t for t in pilot.texts() if t.startswith("land_now denied: ")]
@@ -168,22 +150,16 @@ def test_next_fallback_site_from_the_ground_station_flies_to_the_site_checks_it_
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=clear)
     port = free_udp_port()
     site = f"{{name: lawn, north_m: {site_ne_m[0]}, east_m: {site_ne_m[1]}, radius_m: 3.0}}"
-    fly, log = fly_with_commands(tmp_path, instance, port, f"  fallback: {{sites: [{site}]}}")
     pilot = Gcs(port, vehicle_sysid=SitlConfig(instance=instance).system_id)
-    try:
+    with fly_with_commands(sitl, tmp_path, instance, port, f"  fallback: {{sites: [{site}]}}") as fly, pilot:
+        log = fly.log
         wait_until(lambda: any(d["phase"] == "approach" for d in decisions(log)), 180, "the first approach")
         pilot.command(NEXT_SITE)
         assert answered(pilot, NEXT_SITE) == AckResult.ACCEPTED, pilot.texts()
         pilot.command(NEXT_SITE)  # the only site is flown to: none left
         assert answered(pilot, NEXT_SITE, nth=2) == AckResult.DENIED
-        _, err = fly.communicate(timeout=300)
+        _, err = fly.finish(300)
         truth = sitl.state()
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        sitl.stop()
-        pilot.poll()
-        pilot.close()
     assert fly.returncode == 0, err[-3000:]
     assert [t for t in pilot.texts() if t.startswith("next_fallback denied: no fallback site left")]  # 50 characters
     commands = [r for r in read_log(log) if r["kind"] == "ground_command"]
@@ -211,9 +187,9 @@ def test_land_now_over_a_person_at_the_walker_gate_is_denied_unless_forced_and_t
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=scenario)
     port = free_udp_port()
     # The person is seen from 12 m down to the gate: no abort on the way (the gate waits, as for a walker).
-    fly, log = fly_with_commands(tmp_path, instance, port, "  unsafe_frames_to_abort: 100")
     pilot = Gcs(port, vehicle_sysid=SitlConfig(instance=instance).system_id)
-    try:
+    with fly_with_commands(sitl, tmp_path, instance, port, "  unsafe_frames_to_abort: 100") as fly, pilot:
+        log = fly.log
         wait_until(
             lambda: any(d["phase"] == "descent" for d in decisions(log)) and -sitl.state()["position_ned_m"][2] < 12.0,
             180,
@@ -231,14 +207,8 @@ def test_land_now_over_a_person_at_the_walker_gate_is_denied_unless_forced_and_t
         assert answered(pilot, LAND_NOW) == AckResult.DENIED
         pilot.command(LAND_NOW, param1=1.0)  # forced
         assert answered(pilot, LAND_NOW, nth=2) == AckResult.ACCEPTED
-        _, err = fly.communicate(timeout=300)
+        _, err = fly.finish(300)
         truth = sitl.state()
-    finally:
-        if fly.poll() is None:
-            fly.kill()
-        sitl.stop()
-        pilot.poll()
-        pilot.close()
     assert fly.returncode == 0, err[-3000:]
     assert [t for t in pilot.texts() if t.startswith("land_now denied: a person in the footprint")]
     commands = [r for r in read_log(log) if r["kind"] == "ground_command"]

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import importlib.util
 import math
-import subprocess
 import sys
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from companion.app.recorder import FlightRecorder
 from companion.geometry import Pose
 from sitl.config import SitlConfig
 from sitl.dynamics.base import VehicleState
+from sitl.testing.helpers import run_python
 
 pytestmark = pytest.mark.sitl
 
@@ -69,14 +69,7 @@ def record_yawing_flight(out: Path, instance: int, configured_s: float, true_s: 
 
 def test_the_frames_of_a_yawing_vehicle_show_the_cameras_latency(tmp_path: Path, instance: int) -> None:
     record_yawing_flight(tmp_path / "flight", instance, configured_s=0.05, true_s=0.17)
-    done = subprocess.run(
-        [sys.executable, "scripts/measure_latency.py", str(tmp_path / "flight")],
-        cwd=REPO_ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+    done = run_python("scripts/measure_latency.py", str(tmp_path / "flight"))
     assert done.returncode == 0, done.stderr
     first, *rest = done.stdout.splitlines()
     assert first.startswith("flown with camera.latency_s 0.050 s; the frames show +0.1")

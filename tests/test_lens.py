@@ -3,8 +3,6 @@ the pinhole image, and scripts/calibrate_camera.py recovers a lens from chessboa
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -20,6 +18,7 @@ from companion.perception.lens import LensDistortion
 from companion.perception.pipeline import SlzPipeline
 from sitl.config import SitlCameraConfig, SitlConfig
 from sitl.dynamics.base import VehicleState
+from sitl.testing.helpers import run_python
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CAMERA = PinholeCamera.from_hfov(640, 480, 90.0)
@@ -123,14 +122,8 @@ def test_the_calibration_script_recovers_a_lens_from_chessboard_photographs(tmp_
     truth = LensDistortion(CAMERA, BARREL)
     photos = chessboard_photographs(truth, 20, tmp_path)
     out = tmp_path / "camera.yaml"
-    command = [sys.executable, "scripts/calibrate_camera.py", *map(str, photos), "--pattern", "9x6"]
-    done = subprocess.run(
-        [*command, "--square-m", "0.025", "--out", str(out)],
-        cwd=REPO_ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
+    done = run_python(
+        "scripts/calibrate_camera.py", *map(str, photos), "--pattern", "9x6", "--square-m", "0.025", "--out", str(out)
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("# 20 views, RMS reprojection error")

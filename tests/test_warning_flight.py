@@ -7,18 +7,15 @@ docs/results/warning_walkers.md."""
 
 from __future__ import annotations
 
-import subprocess
 from pathlib import Path
 
 import pytest
 
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.app.replay import replay
-from sitl.testing.helpers import free_udp_port, sitl_mission_yaml, slz_fly_argv, start_camera_sitl
+from sitl.testing.helpers import fly_to_the_end, free_udp_port, start_camera_sitl, write_sitl_mission
 
 pytestmark = pytest.mark.sitl
-
-REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_the_warning_sounds_from_the_descents_start_to_the_touchdown_and_people_near_the_vehicle_react(
@@ -27,21 +24,8 @@ def test_the_warning_sounds_from_the_descents_start_to_the_touchdown_and_people_
     scenario = {"moving_fraction": 0.2, "reaction": {"enabled": True, "warning_actuator": 2}}
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True, scenario=scenario)
     warning = "  warning: {enabled: true, actuator: 2}"
-    text = sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=True, guidance=warning)
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(text)
-    try:
-        fly = subprocess.run(
-            slz_fly_argv(mission, tmp_path / "flight"),
-            cwd=REPO_ROOT,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            check=False,
-        )
-        truth = sitl.state()
-    finally:
-        sitl.stop()
+    mission = write_sitl_mission(tmp_path, instance, replayable=True, guidance=warning)
+    fly = fly_to_the_end(sitl, mission, tmp_path / "flight")
     assert fly.returncode == 0, fly.stderr[-3000:]
     assert "ended in done (landed)" in fly.stdout
     log = FlightLog.read(tmp_path / "flight")
@@ -54,8 +38,8 @@ def test_the_warning_sounds_from_the_descents_start_to_the_touchdown_and_people_
     assert not [r for r in log.of(RecordKind.ERROR) if r.get("where") == "warning"]  # the autopilot accepted both
     # The SITL's autopilot took both commands on output 2: its device sounded once and is silent after the touchdown;
     # people within 12 m of the point under the vehicle reacted to it.
-    assert truth["warning"]["times_on"] == 1
-    assert truth["warning"]["on"] is False
-    assert truth["warning"]["reactions"] > 0
+    assert fly.truth["warning"]["times_on"] == 1
+    assert fly.truth["warning"]["on"] is False
+    assert fly.truth["warning"]["reactions"] > 0
     report = replay(tmp_path / "flight")
     assert report.identical, report.differences

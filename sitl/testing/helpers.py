@@ -6,11 +6,14 @@ import asyncio
 import json
 import math
 import socket
+import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from types import TracebackType
 from typing import Any, TypeVar
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -21,7 +24,8 @@ from sitl.harness.process import SitlProcess
 
 T = TypeVar("T")
 
-SITL_MISSION_CONFIG = Path(__file__).resolve().parents[2] / "mission_configs" / "sitl.yaml"
+REPO_ROOT = Path(__file__).resolve().parents[2]
+SITL_MISSION_CONFIG = REPO_ROOT / "mission_configs" / "sitl.yaml"
 
 
 def sitl_mission_yaml(
@@ -52,6 +56,100 @@ def sitl_mission_yaml(
 def slz_fly_argv(mission: Path, out_dir: Path) -> list[str]:
     """The command line of ``slz fly --config MISSION --out OUT_DIR`` in this interpreter (a real companion process)."""
     return [sys.executable, "-m", "companion.cli", "fly", "--config", str(mission), "--out", str(out_dir)]
+
+
+def write_sitl_mission(
+    tmp_path: Path, instance: int, replayable: bool = False, guidance: str = "", extra: str = ""
+) -> Path:
+    """:func:`sitl_mission_yaml` written to ``tmp_path/mission.yaml``, its flights under ``tmp_path``, with ``extra``
+    (whole YAML sections) appended; the file's path."""
+    mission = tmp_path / "mission.yaml"
+    mission.write_text(
+        sitl_mission_yaml(instance, flights_dir=tmp_path, replayable=replayable, guidance=guidance) + extra
+    )
+    return mission
+
+
+class CompanionFlight:
+    """``slz fly`` as a real process against a SITL, the scaffold every SITL-flight test shares: started at once, its
+    output kept (``capture``) or dropped, and on leaving the ``with`` block killed if it still runs and the SITL
+    stopped, whatever the test's outcome.
+
+    Parameters
+    ----------
+    sitl : SitlProcess
+        The SITL it flies (stopped on leaving).
+    mission : Path
+        Its mission file (:func:`write_sitl_mission`).
+    out_dir : Path
+        Its flight folder (``--out``); the flight log is ``out_dir / "flight.jsonl"``.
+    *args : str
+        More of ``slz fly``'s options (``--replayable``, ``--dry-run``...).
+    """
+
+    def __init__(self, sitl: SitlProcess, mission: Path, out_dir: Path, *args: str, capture: bool = True) -> None:
+        self.sitl = sitl
+        self.log = out_dir / "flight.jsonl"
+        output = subprocess.PIPE if capture else subprocess.DEVNULL
+        self.process = subprocess.Popen(
+            [*slz_fly_argv(mission, out_dir), *args], cwd=REPO_ROOT, stdout=output, stderr=output, text=True
+        )
+
+    def __enter__(self) -> CompanionFlight:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None
+    ) -> None:
+        try:
+            if self.process.poll() is None:
+                self.process.kill()
+                self.process.communicate(timeout=30)
+        finally:
+            self.sitl.stop()
+
+    def logged(self, text: str) -> bool:
+        """Whether the flight log holds ``text`` yet (a condition for :func:`wait_until`)."""
+        return self.log.is_file() and text in self.log.read_text()
+
+    def finish(self, timeout_s: float) -> tuple[str, str]:
+        """Wait for the program's end (``timeout_s``): its standard output and error."""
+        out, err = self.process.communicate(timeout=timeout_s)
+        return out or "", err or ""
+
+    @property
+    def returncode(self) -> int | None:
+        """The program's exit status (None while it runs)."""
+        return self.process.returncode
+
+
+@dataclass(frozen=True)
+class FlownMission:
+    """A whole ``slz fly`` run (:func:`fly_to_the_end`): its exit status, output and the SITL's truth at its end."""
+
+    returncode: int | None
+    stdout: str
+    stderr: str
+    truth: dict[str, Any]
+
+
+def fly_to_the_end(
+    sitl: SitlProcess, mission: Path, out_dir: Path, *args: str, timeout_s: float = 300.0
+) -> FlownMission:
+    """Fly ``mission`` with ``slz fly`` against ``sitl`` until the program ends (``timeout_s``), read the SITL's state
+    then, and stop the SITL."""
+    with CompanionFlight(sitl, mission, out_dir, *args) as fly:
+        out, err = fly.finish(timeout_s)
+        truth = sitl.state()
+    return FlownMission(fly.returncode, out, err, truth)
+
+
+def run_python(*args: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """``python ARGS`` in this interpreter from the repository's root (a script, ``-m companion.cli ...``): a real
+    process, its output captured, its exit status left to the test."""
+    return subprocess.run(
+        [sys.executable, *args], cwd=REPO_ROOT, capture_output=True, text=True, timeout=timeout_s, check=False
+    )
 
 
 def free_udp_port() -> int:
