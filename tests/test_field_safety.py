@@ -59,7 +59,7 @@ class TripsInDescent:
         return time.monotonic() + (0.0 if self.tripped_at_s is None else 1e6)
 
 
-def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_programs_watch(
+async def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_programs_watch(
     tmp_path: Path, instance: int
 ) -> None:
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
@@ -68,41 +68,31 @@ def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under_the_p
     clock = TripsInDescent()
     recorder = FlightRecorder(tmp_path / "flight")
     link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz, config.vehicle.system_id)
+    assert config.simulator.lockstep_url is not None
+    lockstep = LockstepClient(config.simulator.lockstep_url, config.simulator.tick_timeout_s)
+    source = open_frame_source(config.camera.url, vehicle_time_s=link.clock.now_s)
+    app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=600.0, wall_clock=clock)
+    clock.app = app
+    loop = asyncio.get_running_loop()
 
-    async def flight() -> tuple[dict[str, Any], dict[str, Any], Any]:
-        assert config.simulator.lockstep_url is not None
-        lockstep = LockstepClient(config.simulator.lockstep_url, config.simulator.tick_timeout_s)
-        source = open_frame_source(config.camera.url, vehicle_time_s=link.clock.now_s)
-        app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=600.0, wall_clock=clock)
-        clock.app = app
-        loop = asyncio.get_running_loop()
-
-        async def sitl_state_when(predicate: Callable[[dict[str, Any]], bool], what: str) -> dict[str, Any]:
-            # In a thread: the flight's loop keeps acknowledging ticks meanwhile.
-            return await loop.run_in_executor(None, state_when, sitl, predicate, 120.0, what)
-
-        try:
-            run = asyncio.create_task(app.run())
-            await wait_until_async(
-                lambda: app.guidance.phase is LandingPhase.FAILSAFE or run.done(), 150, "the wall limit"
-            )
-            assert not run.done(), run.exception() if run.done() else None
-            held = await sitl_state_when(lambda s: s["mode"] == "AUTO.LOITER" and s["t_s"] >= 1.0, "the hold")
-            # Ten simulated seconds on: still holding, still watched.
-            later = await sitl_state_when(lambda s: s["t_s"] >= held["t_s"] + 10.0, "ten simulated seconds more")
-            assert not run.done()
-            assert (await loop.run_in_executor(None, sitl.request, {"cmd": "pilot_mode", "mode": "POSCTL"}))[
-                "result"
-            ] == 0
-            outcome = await asyncio.wait_for(run, 30.0)
-        finally:
-            await link.close()
-            recorder.close()
-        return held, later, outcome
+    async def sitl_state_when(predicate: Callable[[dict[str, Any]], bool], what: str) -> dict[str, Any]:
+        # In a thread: the flight's loop keeps acknowledging ticks meanwhile.
+        return await loop.run_in_executor(None, state_when, sitl, predicate, 120.0, what)
 
     try:
-        held, later, outcome = asyncio.run(flight())
+        run = asyncio.create_task(app.run())
+        await wait_until_async(lambda: app.guidance.phase is LandingPhase.FAILSAFE or run.done(), 150, "the wall limit")
+        assert not run.done(), run.exception() if run.done() else None
+        held = await sitl_state_when(lambda s: s["mode"] == "AUTO.LOITER" and s["t_s"] >= 1.0, "the hold")
+        # Ten simulated seconds on: still holding, still watched.
+        later = await sitl_state_when(lambda s: s["t_s"] >= held["t_s"] + 10.0, "ten simulated seconds more")
+        assert not run.done()
+        piloted = await loop.run_in_executor(None, sitl.request, {"cmd": "pilot_mode", "mode": "POSCTL"})
+        assert piloted["result"] == 0
+        outcome = await asyncio.wait_for(run, 30.0)
     finally:
+        await link.close()
+        recorder.close()
         sitl.stop()
     assert clock.tripped_at_s is not None
     # At the SITL: hold in the air (never the offboard-loss failsafe's landing), where the descent was stopped.

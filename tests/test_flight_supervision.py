@@ -159,21 +159,18 @@ async def tick(
     await app.on_tick(state)
 
 
-def test_the_pilot_switching_mode_ends_commanding_at_once_and_for_good(app_and_link: Any) -> None:
+async def test_the_pilot_switching_mode_ends_commanding_at_once_and_for_good(app_and_link: Any) -> None:
     app, link = app_and_link
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        link.status.mode = FlightMode.POSCTL  # the pilot's switch
-        sent = len(link.commands)
-        await tick(app, link, 1.1)
-        assert app.guidance.phase is LandingPhase.YIELDED
-        for k in range(20):  # whatever happens next, nothing more goes out
-            link.status.mode = FlightMode.HOLD if k % 2 else FlightMode.OFFBOARD
-            await tick(app, link, 1.2 + 0.1 * k)
-        assert len(link.commands) == sent
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    link.status.mode = FlightMode.POSCTL  # the pilot's switch
+    sent = len(link.commands)
+    await tick(app, link, 1.1)
+    assert app.guidance.phase is LandingPhase.YIELDED
+    for k in range(20):  # whatever happens next, nothing more goes out
+        link.status.mode = FlightMode.HOLD if k % 2 else FlightMode.OFFBOARD
+        await tick(app, link, 1.2 + 0.1 * k)
+    assert len(link.commands) == sent
     assert app.outcome.phase == "yielded"
     assert "pilot took over (mode POSCTL)" in app.outcome.reason
 
@@ -196,36 +193,33 @@ class PilotRightAfterOffboardLink(FakeLink):
         self.status.mode = FlightMode.POSCTL  # ... and the pilot's, read together
 
 
-def test_a_pilot_who_takes_over_while_offboard_starts_gets_the_vehicle_and_keeps_it(
+async def test_a_pilot_who_takes_over_while_offboard_starts_gets_the_vehicle_and_keeps_it(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
     link = PilotRightAfterOffboardLink()
     app = field_flight(tmp_path, config, link)
     silence_s = app.config.guidance.hold_after_silence_s
 
-    async def flight() -> None:
-        handover = asyncio.create_task(tick(app, link, 1.0))  # the search starts: OFFBOARD requested
-        await asyncio.wait_for(link.requested.wait(), 5.0)
-        # Meanwhile the other loop decides too (the camera is silent: hold on the spot, a setpoint). It must not ask
-        # for OFFBOARD a second time while the first request is still out.
-        second = asyncio.create_task(tick(app, link, 1.0 + silence_s + 0.2))
-        for _ in range(100):  # until it has decided to hold and waits for the first command to go out
-            if app.outcome.phase == LandingPhase.HOLD.value:
-                break
-            await asyncio.sleep(0)  # one turn of the event loop
-        assert app.outcome.phase == LandingPhase.HOLD.value
-        link.ack.set()
-        await asyncio.wait_for(asyncio.gather(handover, second), 5.0)
-        for k in range(10):  # the ticks that follow see the pilot's mode
-            await tick(app, link, 2.5 + 0.1 * k)
-
-    asyncio.run(flight())
+    handover = asyncio.create_task(tick(app, link, 1.0))  # the search starts: OFFBOARD requested
+    await asyncio.wait_for(link.requested.wait(), 5.0)
+    # Meanwhile the other loop decides too (the camera is silent: hold on the spot, a setpoint). It must not ask
+    # for OFFBOARD a second time while the first request is still out.
+    second = asyncio.create_task(tick(app, link, 1.0 + silence_s + 0.2))
+    for _ in range(100):  # until it has decided to hold and waits for the first command to go out
+        if app.outcome.phase == LandingPhase.HOLD.value:
+            break
+        await asyncio.sleep(0)  # one turn of the event loop
+    assert app.outcome.phase == LandingPhase.HOLD.value
+    link.ack.set()
+    await asyncio.wait_for(asyncio.gather(handover, second), 5.0)
+    for k in range(10):  # the ticks that follow see the pilot's mode
+        await tick(app, link, 2.5 + 0.1 * k)
     assert [kind for kind, _ in link.commands] == ["start_offboard"]  # no second OFFBOARD, no setpoint after
     assert app.outcome.phase == "yielded"
     assert "pilot took over (mode POSCTL)" in app.outcome.reason
 
 
-def test_a_silent_camera_holds_after_t1_and_lands_after_t2(app_and_link: Any, tmp_path: Path) -> None:
+async def test_a_silent_camera_holds_after_t1_and_lands_after_t2(app_and_link: Any, tmp_path: Path) -> None:
     app, link = app_and_link
     t1 = app.config.guidance.hold_after_silence_s
     t2 = app.config.guidance.failsafe_after_silence_s
@@ -243,7 +237,7 @@ def test_a_silent_camera_holds_after_t1_and_lands_after_t2(app_and_link: Any, tm
         assert hold is not None, "never held"
         return hold[0], hold[1], t_s
 
-    hold_at, hold_command, failsafe_at = asyncio.run(flight())
+    hold_at, hold_command, failsafe_at = await flight()
     # T1: hold where it is (a setpoint on the spot, still in OFFBOARD); T2: the configured failsafe, land.
     assert start_s + t1 <= hold_at <= start_s + t1 + period_s + 1e-9
     kind, setpoint = hold_command
@@ -256,24 +250,21 @@ def test_a_silent_camera_holds_after_t1_and_lands_after_t2(app_and_link: Any, tm
     assert phases[-2:] == ["hold", "failsafe"]
 
 
-def test_telemetry_silent_past_its_limit_is_a_lost_link_and_nothing_more_is_sent(app_and_link: Any) -> None:
+async def test_telemetry_silent_past_its_limit_is_a_lost_link_and_nothing_more_is_sent(app_and_link: Any) -> None:
     app, link = app_and_link
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        sent = len(link.commands)
-        link.status.last_telemetry_wall_s = time.monotonic() - 2 * app.config.vehicle.link_lost_after_s
-        await asyncio.wait_for(FreeRunningDriver(app).ticks(), 5.0)
-        assert len(link.commands) == sent
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    sent = len(link.commands)
+    link.status.last_telemetry_wall_s = time.monotonic() - 2 * app.config.vehicle.link_lost_after_s
+    await asyncio.wait_for(FreeRunningDriver(app).ticks(), 5.0)
+    assert len(link.commands) == sent
     assert app.outcome.link_lost
     assert app.done.is_set()
 
 
-def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and_link: Any) -> None:
+async def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and_link: Any) -> None:
     app, link = app_and_link
-    asyncio.run(hand_over(app, link))
+    await hand_over(app, link)
     assert app.commands.offboard
     app.watchdog.clock = lambda: time.monotonic() + 10.0  # the event loop has not beaten for 10 s
     app.watchdog.start()
@@ -316,30 +307,27 @@ def supervision(tmp_path: Path) -> list[tuple[str, str]]:
     return [(r["event"], r["reason"]) for r in read_log(tmp_path / "flight.jsonl") if r["kind"] == "supervision"]
 
 
-def test_a_wall_limit_in_flight_holds_and_the_program_stays_until_the_pilot_has_the_vehicle(
+async def test_a_wall_limit_in_flight_holds_and_the_program_stays_until_the_pilot_has_the_vehicle(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
     app, link, clock = limited_flight(tmp_path, config)
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        await tick(app, link, 1.1)
-        assert app.guidance.phase is LandingPhase.SEARCH
-        clock.now_s = 300.0  # the wall limit, mid-flight
-        await tick(app, link, 1.2)
-        assert link.commands[-1] == ("hold", None)  # the last resort, at once: never the offboard-loss failsafe
-        assert app.outcome.phase == LandingPhase.FAILSAFE.value
-        sent = len(link.commands)
-        for k in range(50):  # holding: the program stays, watches and sends nothing more
-            await tick(app, link, 1.3 + 0.1 * k)
-            assert not app.done.is_set()
-        assert len(link.commands) == sent
-        link.status.mode = FlightMode.POSCTL  # the pilot takes the vehicle
-        await tick(app, link, 7.0)
-        assert app.done.is_set()
-        assert len(link.commands) == sent
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    await tick(app, link, 1.1)
+    assert app.guidance.phase is LandingPhase.SEARCH
+    clock.now_s = 300.0  # the wall limit, mid-flight
+    await tick(app, link, 1.2)
+    assert link.commands[-1] == ("hold", None)  # the last resort, at once: never the offboard-loss failsafe
+    assert app.outcome.phase == LandingPhase.FAILSAFE.value
+    sent = len(link.commands)
+    for k in range(50):  # holding: the program stays, watches and sends nothing more
+        await tick(app, link, 1.3 + 0.1 * k)
+        assert not app.done.is_set()
+    assert len(link.commands) == sent
+    link.status.mode = FlightMode.POSCTL  # the pilot takes the vehicle
+    await tick(app, link, 7.0)
+    assert app.done.is_set()
+    assert len(link.commands) == sent
     assert app.outcome.phase == "failsafe"
     assert "wall limit of 300 s reached (slz fly --timeout): hold" in app.outcome.reason
     assert app.outcome.reason.endswith("the pilot has it (mode POSCTL)")
@@ -349,50 +337,44 @@ def test_a_wall_limit_in_flight_holds_and_the_program_stays_until_the_pilot_has_
     assert decisions[-1]["source"] == "limit"
 
 
-def test_a_wall_limit_with_return_as_last_resort_watches_the_return_down_to_the_ground(
+async def test_a_wall_limit_with_return_as_last_resort_watches_the_return_down_to_the_ground(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
     app, link, clock = limited_flight(tmp_path, config, last_resort="return")
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        clock.now_s = 1000.0
-        await tick(app, link, 1.1)
-        assert link.commands[-1] == ("return", None)
-        link.status.mode = FlightMode.RETURN_TO_LAUNCH
-        for k in range(20):
-            await tick(app, link, 1.2 + 0.1 * k, north_m=-0.5 * k)
-        link.status.mode = FlightMode.LAND  # PX4's return ends in its own landing: still the failsafe's
-        await tick(app, link, 3.5, north_m=-10.0, altitude_m=3.0)
-        assert not app.done.is_set()
-        link.status.in_air = False
-        await tick(app, link, 9.0, north_m=-10.0, altitude_m=0.0)
-        assert app.done.is_set()
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    clock.now_s = 1000.0
+    await tick(app, link, 1.1)
+    assert link.commands[-1] == ("return", None)
+    link.status.mode = FlightMode.RETURN_TO_LAUNCH
+    for k in range(20):
+        await tick(app, link, 1.2 + 0.1 * k, north_m=-0.5 * k)
+    link.status.mode = FlightMode.LAND  # PX4's return ends in its own landing: still the failsafe's
+    await tick(app, link, 3.5, north_m=-10.0, altitude_m=3.0)
+    assert not app.done.is_set()
+    link.status.in_air = False
+    await tick(app, link, 9.0, north_m=-10.0, altitude_m=0.0)
+    assert app.done.is_set()
     assert app.outcome.touchdown_ne_m == pytest.approx((-10.0, 0.0))
     assert app.outcome.reason.endswith("on the ground at north -10.0 m, east 0.0 m")
     assert [e for e, _ in supervision(tmp_path)] == ["watching", "on_ground"]
 
 
-def test_a_wall_limit_before_the_handover_ends_the_run_and_commands_nothing(
+async def test_a_wall_limit_before_the_handover_ends_the_run_and_commands_nothing(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
     app, link, clock = limited_flight(tmp_path, config)
     link.status.mode = FlightMode.POSCTL  # the pilot flies and has not handed over
 
-    async def flight() -> None:
-        await tick(app, link, 1.0)
-        clock.now_s = 301.0
-        await tick(app, link, 1.1)
-
-    asyncio.run(flight())
+    await tick(app, link, 1.0)
+    clock.now_s = 301.0
+    await tick(app, link, 1.1)
     assert app.done.is_set()
     assert link.commands == []
     assert app.outcome.reason == "wall limit of 300 s reached (slz fly --timeout): nothing commanded, the run ends"
 
 
-def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the_vehicle_is_down_and_disarmed(
+async def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the_vehicle_is_down_and_disarmed(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
     link = FakeLink()
@@ -408,33 +390,30 @@ def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the_vehic
     app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
     t2 = mission.guidance.failsafe_after_silence_s
 
-    async def flight() -> None:
-        for k in range(300):  # 30 s on the bench: no failsafe, no start
-            await tick(app, link, 0.1 * k, altitude_m=0.0)
-        assert app.guidance.phase is LandingPhase.IDLE
-        link.status.armed = link.status.in_air = True
-        await tick(app, link, 31.0, altitude_m=1.0)  # the head plane (1.7 m up) not yet below the camera
-        assert app.guidance.phase is LandingPhase.IDLE
-        t_s = 32.0
-        await tick(app, link, t_s)  # 20 m: deciding starts
-        assert app.outcome.phase == LandingPhase.SEARCH.value
-        while app.outcome.phase != LandingPhase.FAILSAFE.value:  # a silent camera: the failsafe it would take ...
-            assert t_s < 32.0 + t2 + 1.0
-            t_s = round(t_s + 0.1, 3)
-            await tick(app, link, t_s)
-        assert "perception silent" in " ".join(app.outcome.failsafes)
-        await tick(app, link, t_s + 0.1)  # ... is logged, and it decides again while the pilot flies on
-        await tick(app, link, t_s + 0.2)
-        assert app.outcome.phase == LandingPhase.SEARCH.value
-        assert not app.done.is_set()
-        link.status.in_air = False  # the pilot lands ...
-        await tick(app, link, t_s + 5.0, altitude_m=0.0)
-        assert not app.done.is_set()
-        link.status.armed = False  # ... and disarms: the flight is over
-        await tick(app, link, t_s + 7.0, altitude_m=0.0)
-        assert app.done.is_set()
-
-    asyncio.run(flight())
+    for k in range(300):  # 30 s on the bench: no failsafe, no start
+        await tick(app, link, 0.1 * k, altitude_m=0.0)
+    assert app.guidance.phase is LandingPhase.IDLE
+    link.status.armed = link.status.in_air = True
+    await tick(app, link, 31.0, altitude_m=1.0)  # the head plane (1.7 m up) not yet below the camera
+    assert app.guidance.phase is LandingPhase.IDLE
+    t_s = 32.0
+    await tick(app, link, t_s)  # 20 m: deciding starts
+    assert app.outcome.phase == LandingPhase.SEARCH.value
+    while app.outcome.phase != LandingPhase.FAILSAFE.value:  # a silent camera: the failsafe it would take ...
+        assert t_s < 32.0 + t2 + 1.0
+        t_s = round(t_s + 0.1, 3)
+        await tick(app, link, t_s)
+    assert "perception silent" in " ".join(app.outcome.failsafes)
+    await tick(app, link, t_s + 0.1)  # ... is logged, and it decides again while the pilot flies on
+    await tick(app, link, t_s + 0.2)
+    assert app.outcome.phase == LandingPhase.SEARCH.value
+    assert not app.done.is_set()
+    link.status.in_air = False  # the pilot lands ...
+    await tick(app, link, t_s + 5.0, altitude_m=0.0)
+    assert not app.done.is_set()
+    link.status.armed = False  # ... and disarms: the flight is over
+    await tick(app, link, t_s + 7.0, altitude_m=0.0)
+    assert app.done.is_set()
     assert link.commands == []
     records = read_log(tmp_path / "flight.jsonl")
     waits = [r["waiting_for"] for r in records if r["kind"] == "waiting"]
@@ -444,56 +423,47 @@ def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the_vehic
     assert app.outcome.reason.endswith("the flight is over: on the ground and disarmed")
 
 
-def test_a_pilot_who_takes_over_as_the_wall_limit_passes_keeps_the_vehicle(
+async def test_a_pilot_who_takes_over_as_the_wall_limit_passes_keeps_the_vehicle(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
     app, link, clock = limited_flight(tmp_path, config)
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        sent = len(link.commands)
-        link.status.mode = FlightMode.POSCTL  # the pilot's switch and the limit, seen at the same tick
-        clock.now_s = 1000.0
-        await tick(app, link, 1.1)
-        for k in range(10):
-            await tick(app, link, 1.2 + 0.1 * k)
-        assert len(link.commands) == sent  # no hold, no return: the vehicle is the pilot's
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    sent = len(link.commands)
+    link.status.mode = FlightMode.POSCTL  # the pilot's switch and the limit, seen at the same tick
+    clock.now_s = 1000.0
+    await tick(app, link, 1.1)
+    for k in range(10):
+        await tick(app, link, 1.2 + 0.1 * k)
+    assert len(link.commands) == sent  # no hold, no return: the vehicle is the pilot's
     assert app.outcome.phase == "yielded"
 
 
-def test_a_stop_in_flight_sends_the_last_resort_at_the_next_tick_and_ends(app_and_link: Any) -> None:
+async def test_a_stop_in_flight_sends_the_last_resort_at_the_next_tick_and_ends(app_and_link: Any) -> None:
     app, link = app_and_link
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        app.request_stop("SIGTERM received")
-        assert not app.done.is_set()  # the stop waits for a tick: the vehicle's state to decide at
-        await tick(app, link, 1.1)
-        assert link.commands[-1] == ("hold", None)  # the configured last resort, then the end (no watch)
-        assert app.done.is_set()
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    app.request_stop("SIGTERM received")
+    assert not app.done.is_set()  # the stop waits for a tick: the vehicle's state to decide at
+    await tick(app, link, 1.1)
+    assert link.commands[-1] == ("hold", None)  # the configured last resort, then the end (no watch)
+    assert app.done.is_set()
     assert app.outcome.phase == "failsafe"
     assert "SIGTERM received: stopping: hold" in app.outcome.reason
 
 
-def test_a_stop_that_no_tick_takes_ends_without_the_last_resort_within_its_bound(
+async def test_a_stop_that_no_tick_takes_ends_without_the_last_resort_within_its_bound(
     app_and_link: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # The SITL stopped with us (a campaign interrupted) or the link is gone: no tick will ever come to act at.
     app, link = app_and_link
     monkeypatch.setattr("companion.app.run_end.STOP_UNHEARD_S", 0.2)
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        sent = len(link.commands)
-        app.request_stop("SIGTERM received")
-        await asyncio.wait_for(app.done.wait(), timeout=10.0)
-        assert len(link.commands) == sent  # nothing sent without a state to decide it at
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    sent = len(link.commands)
+    app.request_stop("SIGTERM received")
+    await asyncio.wait_for(app.done.wait(), timeout=10.0)
+    assert len(link.commands) == sent  # nothing sent without a state to decide it at
     assert app.outcome.reason == "SIGTERM received: no vehicle tick within 0.2 s, ending without the last resort"
     events = [r for r in read_log(app.recorder.path) if r["kind"] == "supervision"]
     assert [(r["event"], r["reason"]) for r in events] == [("stopped", app.outcome.reason)]
@@ -517,7 +487,7 @@ class SilentLink(FakeLink):
         raise VehicleError(self.name, f"no autopilot answered within {timeout_s:g} s")
 
 
-def test_a_stop_while_the_vehicle_is_not_yet_found_ends_the_run_without_waiting_out_the_connect(
+async def test_a_stop_while_the_vehicle_is_not_yet_found_ends_the_run_without_waiting_out_the_connect(
     tmp_path: Path, config: PerceptionConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # A campaign interrupted as its companion starts: the SITL died with the worker, the connect would wait 20 s.
@@ -525,13 +495,10 @@ def test_a_stop_while_the_vehicle_is_not_yet_found_ends_the_run_without_waiting_
     app = field_flight(tmp_path, config, link)
     monkeypatch.setattr("companion.app.run_end.STOP_UNHEARD_S", 0.2)
 
-    async def flight() -> None:
-        run = asyncio.create_task(app.run())
-        await asyncio.wait_for(link.connecting.wait(), timeout=10.0)
-        app.request_stop("SIGTERM received")
-        await asyncio.wait_for(run, timeout=10.0)  # the connect's own timeout is 20 s
-
-    asyncio.run(flight())
+    run = asyncio.create_task(app.run())
+    await asyncio.wait_for(link.connecting.wait(), timeout=10.0)
+    app.request_stop("SIGTERM received")
+    await asyncio.wait_for(run, timeout=10.0)  # the connect's own timeout is 20 s
     assert link.connect_cancelled
     assert link.commands == []
     assert app.outcome.reason == "SIGTERM received: no vehicle tick within 0.2 s, ending without the last resort"
@@ -539,7 +506,7 @@ def test_a_stop_while_the_vehicle_is_not_yet_found_ends_the_run_without_waiting_
     assert kinds == ["start", "supervision", "end"]
 
 
-def test_every_fallback_site_chosen_is_said_to_the_ground_station_even_without_a_phase_change(
+async def test_every_fallback_site_chosen_is_said_to_the_ground_station_even_without_a_phase_change(
     tmp_path: Path, config: PerceptionConfig
 ) -> None:
     link = FakeLink()
@@ -556,65 +523,56 @@ def test_every_fallback_site_chosen_is_said_to_the_ground_station_even_without_a
     )
     app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        app.guidance.enter(LandingPhase.APPROACH, 2.0)  # approaching a zone when the time runs out
-        app.outcome.phase = LandingPhase.APPROACH.value
-        await tick(app, link, 31.5)
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    app.guidance.enter(LandingPhase.APPROACH, 2.0)  # approaching a zone when the time runs out
+    app.outcome.phase = LandingPhase.APPROACH.value
+    await tick(app, link, 31.5)
     assert app.guidance.phase is LandingPhase.APPROACH
     texts = [fields["text"] for name, fields in link.mavlink if name == "STATUSTEXT"]
     assert "fallback site north_lawn" in "".join(texts), texts  # (chunked at 50 characters)
 
 
-def test_a_stop_while_watching_after_a_failsafe_ends_at_once_and_says_so(
+async def test_a_stop_while_watching_after_a_failsafe_ends_at_once_and_says_so(
     tmp_path: Path, config: PerceptionConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # Issue 65: a stop while watching after a failsafe logged "no vehicle tick within 3 s" with ticks all along.
     monkeypatch.setattr("companion.app.run_end.STOP_UNHEARD_S", 0.2)
     app, link, clock = limited_flight(tmp_path, config)
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        await tick(app, link, 1.1)
-        clock.now_s = 300.0  # the wall limit: hold, then watch
-        await tick(app, link, 1.2)
-        assert app.supervision.watching is not None
-        sent = len(link.commands)
-        app.request_stop("SIGTERM received")
-        await tick(app, link, 1.3)
-        assert app.done.is_set()
-        assert len(link.commands) == sent  # the vehicle is the autopilot's: nothing sent
-        await asyncio.sleep(0.4)  # past the unheard stop's bound: it must not speak now
-
-    asyncio.run(flight())
+    await hand_over(app, link)
+    await tick(app, link, 1.1)
+    clock.now_s = 300.0  # the wall limit: hold, then watch
+    await tick(app, link, 1.2)
+    assert app.supervision.watching is not None
+    sent = len(link.commands)
+    app.request_stop("SIGTERM received")
+    await tick(app, link, 1.3)
+    assert app.done.is_set()
+    assert len(link.commands) == sent  # the vehicle is the autopilot's: nothing sent
+    await asyncio.sleep(0.4)  # past the unheard stop's bound: it must not speak now
     assert "SIGTERM received while watching after the failsafe" in app.outcome.reason
     assert "no vehicle tick" not in app.outcome.reason
     events = supervision(tmp_path)
     assert [e for e, _ in events] == ["watching", "stopped"]
 
 
-def test_a_frame_perceived_while_a_tick_ended_the_mission_is_not_decided_on(app_and_link: Any) -> None:
+async def test_a_frame_perceived_while_a_tick_ended_the_mission_is_not_decided_on(app_and_link: Any) -> None:
     # Issue 65: after Ctrl-C mid-descent a frame in flight was decided on in the failsafe phase: a second failsafe
     # record ("frame ignored in failsafe") and the outcome's reason overwritten.
     app, link = app_and_link
 
-    async def flight() -> None:
-        await hand_over(app, link)
-        perceive = app.intake.perceive
+    await hand_over(app, link)
+    perceive = app.intake.perceive
 
-        async def slow_perceive(*args: Any, **kwargs: Any) -> Any:
-            result = await perceive(*args, **kwargs)
-            app.request_stop("SIGINT received")
-            await tick(app, link, 1.15)  # the stop's last resort goes out while the frame is being perceived
-            return result
+    async def slow_perceive(*args: Any, **kwargs: Any) -> Any:
+        result = await perceive(*args, **kwargs)
+        app.request_stop("SIGINT received")
+        await tick(app, link, 1.15)  # the stop's last resort goes out while the frame is being perceived
+        return result
 
-        app.intake.perceive = slow_perceive
-        link.at(1.1)
-        await app.on_frame(Frame(1, 1.1, np.full((480, 640, 3), 90, np.uint8)))
-
-    asyncio.run(flight())
+    app.intake.perceive = slow_perceive
+    link.at(1.1)
+    await app.on_frame(Frame(1, 1.1, np.full((480, 640, 3), 90, np.uint8)))
     records = read_log(app.recorder.path)
     failsafes = [r for r in records if r["kind"] == "failsafe"]
     assert len(failsafes) == 1
@@ -636,7 +594,7 @@ class LateCamera(NoFrames):
             raise CameraError("sitl", "cannot connect: [Errno 111] Connection refused", CameraFault.CONNECT_FAILED)
 
 
-def test_a_camera_that_comes_up_after_the_companion_is_waited_for_within_its_bound(
+async def test_a_camera_that_comes_up_after_the_companion_is_waited_for_within_its_bound(
     tmp_path: Path, config: PerceptionConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # Issue 65: `slz fly` started before the camera failed at once; on a drone they start in any order.
@@ -644,32 +602,28 @@ def test_a_camera_that_comes_up_after_the_companion_is_waited_for_within_its_bou
     link = FakeLink()
     app = field_flight(tmp_path, config, link)
     app.source = late = LateCamera(failures=3)
-    asyncio.run(app._open())  # the camera first: no vehicle touched before it is up
+    await app._open()  # the camera first: no vehicle touched before it is up
     assert late.attempts == 4
     waits = [r["waiting_for"] for r in read_log(app.recorder.path) if r["kind"] == "waiting"]
     assert waits == ["the camera: sitl: cannot connect: [Errno 111] Connection refused"]  # said once, not per try
     app.config = app.config.model_copy(update={"camera": app.config.camera.model_copy(update={"wait_for_s": 0.05})})
     app.source = LateCamera(failures=1000)
     with pytest.raises(CameraError, match="cannot connect"):
-        asyncio.run(app._open())  # past the bound: the camera's own error
+        await app._open()  # past the bound: the camera's own error
 
 
-def test_the_console_says_how_the_flight_goes_every_few_seconds_and_while_watching(
+async def test_the_console_says_how_the_flight_goes_every_few_seconds_and_while_watching(
     tmp_path: Path, config: PerceptionConfig, caplog: pytest.LogCaptureFixture
 ) -> None:
     # Issue 65: nothing on the console for 4 minutes of watching after a failsafe, nor during take-off or descent.
     app, link, clock = limited_flight(tmp_path, config)
-
-    async def flight() -> None:
+    with caplog.at_level(logging.INFO, logger="companion.app.journal"):
         await hand_over(app, link)
         for k in range(1, 60):  # 6 s of searching at 10 Hz
             await tick(app, link, 1.0 + 0.1 * k)
         clock.now_s = 300.0  # the wall limit: hold, then watch
         for k in range(60, 180):  # 12 s of watching
             await tick(app, link, 1.0 + 0.1 * k)
-
-    with caplog.at_level(logging.INFO, logger="companion.app.journal"):
-        asyncio.run(flight())
     lines = [r.message for r in caplog.records if r.name == "companion.app.journal" and r.message.startswith("t ")]
     flying = [line for line in lines if line.startswith("t ") and "search" in line]
     watching = [line for line in lines if "watching after the failsafe" in line]

@@ -46,22 +46,22 @@ async def frames_then_fault(
     return got, raised.value
 
 
-def test_a_stream_the_camera_closes_is_a_lost_connection_after_its_whole_frames() -> None:
-    frames, error = asyncio.run(frames_then_fault(encode_frame(0, 0.1, IMAGE) + encode_frame(1, 0.2, IMAGE)))
+async def test_a_stream_the_camera_closes_is_a_lost_connection_after_its_whole_frames() -> None:
+    frames, error = await frames_then_fault(encode_frame(0, 0.1, IMAGE) + encode_frame(1, 0.2, IMAGE))
     assert [f.seq for f in frames] == [0, 1]
     assert error.fault is CameraFault.CONNECTION_LOST
     assert "closed the connection" in str(error)
 
 
-def test_a_stream_cut_mid_frame_is_a_lost_connection() -> None:
+async def test_a_stream_cut_mid_frame_is_a_lost_connection() -> None:
     whole = encode_frame(0, 0.1, IMAGE)
-    frames, error = asyncio.run(frames_then_fault(whole + encode_frame(1, 0.2, IMAGE)[:30]))
+    frames, error = await frames_then_fault(whole + encode_frame(1, 0.2, IMAGE)[:30])
     assert [f.seq for f in frames] == [0]
     assert error.fault is CameraFault.CONNECTION_LOST
 
 
-def test_a_silent_camera_is_named_silent() -> None:
-    frames, error = asyncio.run(frames_then_fault(encode_frame(0, 0.1, IMAGE), close=False, timeout_s=0.3))
+async def test_a_silent_camera_is_named_silent() -> None:
+    frames, error = await frames_then_fault(encode_frame(0, 0.1, IMAGE), close=False, timeout_s=0.3)
     assert len(frames) == 1
     assert error.fault is CameraFault.SILENT
 
@@ -77,7 +77,7 @@ def test_a_silent_camera_is_named_silent() -> None:
         encode_frame(0, 0.1, IMAGE)[: -4 - IMAGE.size] + struct.pack("<I", 0xFFFFFFFF),  # a 4 GiB payload announced
     ],
 )
-def test_a_stream_that_is_not_frames_is_a_bad_frame(stream: bytes) -> None:
-    frames, error = asyncio.run(frames_then_fault(stream))
+async def test_a_stream_that_is_not_frames_is_a_bad_frame(stream: bytes) -> None:
+    frames, error = await frames_then_fault(stream)
     assert frames == []
     assert error.fault is CameraFault.BAD_FRAME

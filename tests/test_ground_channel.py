@@ -137,22 +137,18 @@ def test_a_datagram_that_is_not_a_frame_it_reads_is_a_frame_error_naming_why(dat
         frames.unpack(datagram)
 
 
-def run_channel(port: int, key: bytes | None, script: Any) -> CommandChannel:
-    """Open a channel on ``port`` and run ``script(channel)`` (a coroutine function) beside it."""
+async def run_channel(port: int, key: bytes | None, script: Any) -> CommandChannel:
+    """Open a channel on ``port`` and run ``script(channel)`` (a coroutine function) beside it; closed after it."""
     channel = CommandChannel(f"udpin://127.0.0.1:{port}", VEHICLE_SYSID, key)
-
-    async def main() -> None:
-        await channel.open()
-        try:
-            await asyncio.wait_for(script(channel), timeout=20.0)
-        finally:
-            channel.close()
-
-    asyncio.run(main())
+    await channel.open()
+    try:
+        await asyncio.wait_for(script(channel), timeout=20.0)
+    finally:
+        channel.close()
     return channel
 
 
-def test_with_a_key_only_signed_fresh_commands_are_taken_the_rest_refused_with_the_reason(port: int) -> None:
+async def test_with_a_key_only_signed_fresh_commands_are_taken_the_rest_refused_with_the_reason(port: int) -> None:
     good = Gcs(port, KEY, link_id=1, reply_key=KEY)
     unsigned, wrong = Gcs(port, reply_key=KEY), Gcs(port, frames.key_from_passphrase("x"), reply_key=KEY)
     taken: list[GroundCommand] = []
@@ -177,7 +173,7 @@ def test_with_a_key_only_signed_fresh_commands_are_taken_the_rest_refused_with_t
         await wait_until_async(lambda: len(unsigned.acks()) and len(wrong.acks()), 10, "the refusals answered")
         await wait_until_async(lambda: len(good.acks()) == 3, 10, "the signed sender's answers")
 
-    channel = run_channel(port, KEY, script)
+    channel = await run_channel(port, KEY, script)
     assert [(c.command, c.signed, c.sender) for c in taken] == [(OperatorCommand.GO_AROUND, True, (255, 190))]
     assert channel.pending() == []  # nothing refused was taken
     # Issue 65: every refusal is handed out for the flight log (the command to the autopilot is not the channel's).
@@ -202,7 +198,7 @@ def test_with_a_key_only_signed_fresh_commands_are_taken_the_rest_refused_with_t
         gcs.close()
 
 
-def test_without_a_key_commands_are_taken_unsigned_and_a_land_now_with_param1_1_is_forced(port: int) -> None:
+async def test_without_a_key_commands_are_taken_unsigned_and_a_land_now_with_param1_1_is_forced(port: int) -> None:
     gcs = Gcs(port)
     taken: list[GroundCommand] = []
 
@@ -217,7 +213,7 @@ def test_without_a_key_commands_are_taken_unsigned_and_a_land_now_with_param1_1_
         await wait_until_async(lambda: len(gcs.acks()) == 4, 10, "four answers")
         taken.extend(channel.pending())
 
-    channel = run_channel(port, None, script)
+    channel = await run_channel(port, None, script)
     assert [(c.command, c.force, c.signed) for c in taken] == [
         (OperatorCommand.LAND_NOW, True, False),
         (OperatorCommand.REJECT_ZONE, False, False),
@@ -230,7 +226,7 @@ def test_without_a_key_commands_are_taken_unsigned_and_a_land_now_with_param1_1_
     gcs.close()
 
 
-def test_a_denial_longer_than_one_statustext_arrives_whole_in_chunks_sharing_an_id(port: int) -> None:
+async def test_a_denial_longer_than_one_statustext_arrives_whole_in_chunks_sharing_an_id(port: int) -> None:
     gcs = Gcs(port)
     reason = "land_now denied: a person seen inside the footprint at 12.4 m, 0.8 m from the target (zone 3)"
 
@@ -242,7 +238,7 @@ def test_a_denial_longer_than_one_statustext_arrives_whole_in_chunks_sharing_an_
             channel.answer(command, AckResult.DENIED, reason)
         await wait_until_async(lambda: len(gcs.texts()) == 4, 10, "two denials of two chunks each")
 
-    run_channel(port, None, script)
+    await run_channel(port, None, script)
     chunks = [m for m in gcs.poll() if m.get_type() == "STATUSTEXT"]
     gcs.close()
     assert len(reason) > 50
@@ -253,17 +249,17 @@ def test_a_denial_longer_than_one_statustext_arrives_whole_in_chunks_sharing_an_
     assert len(chunks[0].text) == 50
 
 
-def test_a_channel_on_a_port_in_use_names_its_url() -> None:
+async def test_a_channel_on_a_port_in_use_names_its_url() -> None:
     from companion.ground.command_channel import CommandChannelError
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
         busy.bind(("127.0.0.1", 0))
         url = f"udpin://127.0.0.1:{busy.getsockname()[1]}"
         with pytest.raises(CommandChannelError, match=url):
-            asyncio.run(CommandChannel(url, 1).open())
+            await CommandChannel(url, 1).open()
 
 
-def test_a_command_to_another_vehicles_companion_is_logged_and_handed_out_never_silently_dropped(
+async def test_a_command_to_another_vehicles_companion_is_logged_and_handed_out_never_silently_dropped(
     port: int, caplog: pytest.LogCaptureFixture
 ) -> None:
     # Issue 65: with `slz sitl --instance 5` the vehicle was system 6 and commands to it vanished without a word.
@@ -275,7 +271,7 @@ def test_a_command_to_another_vehicles_companion_is_logged_and_handed_out_never_
         await wait_until_async(lambda: channel.counts.not_for_us == 2, 10, "both seen")
 
     with caplog.at_level(logging.WARNING, logger="companion.ground.command_channel"):
-        channel = run_channel(port, None, script)
+        channel = await run_channel(port, None, script)
     refused = channel.refused()
     assert [(r.mav_cmd, r.result) for r in refused] == [(191, None)]  # not answered: another vehicle's
     assert f"addressed to system {VEHICLE_SYSID + 5}, this vehicle is system {VEHICLE_SYSID}" in refused[0].reason

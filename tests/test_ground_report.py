@@ -3,7 +3,6 @@ marked in a dry run, at a bounded rate, and never an exception into the flight l
 
 from __future__ import annotations
 
-import asyncio
 import math
 from typing import Any
 
@@ -60,64 +59,52 @@ def test_long_texts_come_in_chunks_short_ones_whole() -> None:
         (LandingPhase.APPROACH, 6),
     ],
 )
-def test_phases_go_out_at_px4_like_severities(phase: LandingPhase, severity: int) -> None:
-    async def scenario() -> None:
-        ground, link = report()
-        await ground.phase(phase, "because")
-        ((name, fields),) = link.sent
-        assert name == "STATUSTEXT"
-        assert fields["severity"] == severity
-        assert fields["text"] == f"SLZ {phase.value}: because"
-
-    asyncio.run(scenario())
+async def test_phases_go_out_at_px4_like_severities(phase: LandingPhase, severity: int) -> None:
+    ground, link = report()
+    await ground.phase(phase, "because")
+    ((name, fields),) = link.sent
+    assert name == "STATUSTEXT"
+    assert fields["severity"] == severity
+    assert fields["text"] == f"SLZ {phase.value}: because"
 
 
-def test_a_dry_run_is_marked_everywhere() -> None:
-    async def scenario() -> None:
-        ground, link = report(dry_run=True)
-        await ground.phase(LandingPhase.APPROACH, "zone 3")
-        state = VehicleState(10.0, 0.0, 0.0, -20.0, 0.0)
-        await ground.decision_values(10.0, 4, Target(3.0, 4.0, 2.5, 3), state)
-        texts = [f["text"] for n, f in link.sent if n == "STATUSTEXT"]
-        assert texts == ["[dry run] SLZ approach: zone 3"]
-        values = {f["name"]: f["value"] for n, f in link.sent if n == "NAMED_VALUE_FLOAT"}
-        assert values == {"SLZ_ZONES": 4.0, "SLZ_R_M": 2.5, "SLZ_DRY": 1.0}
-        (target,) = [f for n, f in link.sent if n == "LANDING_TARGET"]
-        assert target["position_valid"] == 0  # an autopilot doing precision landing never acts on a dry run's target
-
-    asyncio.run(scenario())
+async def test_a_dry_run_is_marked_everywhere() -> None:
+    ground, link = report(dry_run=True)
+    await ground.phase(LandingPhase.APPROACH, "zone 3")
+    state = VehicleState(10.0, 0.0, 0.0, -20.0, 0.0)
+    await ground.decision_values(10.0, 4, Target(3.0, 4.0, 2.5, 3), state)
+    texts = [f["text"] for n, f in link.sent if n == "STATUSTEXT"]
+    assert texts == ["[dry run] SLZ approach: zone 3"]
+    values = {f["name"]: f["value"] for n, f in link.sent if n == "NAMED_VALUE_FLOAT"}
+    assert values == {"SLZ_ZONES": 4.0, "SLZ_R_M": 2.5, "SLZ_DRY": 1.0}
+    (target,) = [f for n, f in link.sent if n == "LANDING_TARGET"]
+    assert target["position_valid"] == 0  # an autopilot doing precision landing never acts on a dry run's target
 
 
-def test_target_and_values_at_a_bounded_rate_of_vehicle_time() -> None:
-    async def scenario() -> None:
-        ground, link = report()
-        state = VehicleState(0.0, 1.0, 2.0, -20.0, 90.0)
-        for i in range(20):  # 20 frames over 2 s of vehicle time
-            await ground.decision_values(i * 0.1, 2, Target(4.0, 2.0, 3.0, 1), state)
-        targets = [f for n, f in link.sent if n == "LANDING_TARGET"]
-        assert len(targets) == 4  # 2 Hz
-        t = targets[0]
-        assert (t["x"], t["y"], t["z"], t["frame"], t["position_valid"]) == (4.0, 2.0, 0.0, 1, 1)
-        assert t["distance"] == pytest.approx(math.sqrt(9 + 400))
-        assert t["angle_y"] == pytest.approx(math.atan2(3.0, 20.0))
-        assert t["angle_x"] == pytest.approx(0.0)
-        assert t["size_x"] == pytest.approx(2 * math.atan2(3.0, math.sqrt(409)))
-        await ground.decision_values(5.0, 0, None, state)
-        assert link.sent[-1] == ("NAMED_VALUE_FLOAT", {"time_boot_ms": 5000, "name": "SLZ_DRY", "value": 0.0})
-        assert [f["value"] for n, f in link.sent[-3:] if f["name"] == "SLZ_R_M"] == [0.0]
-
-    asyncio.run(scenario())
+async def test_target_and_values_at_a_bounded_rate_of_vehicle_time() -> None:
+    ground, link = report()
+    state = VehicleState(0.0, 1.0, 2.0, -20.0, 90.0)
+    for i in range(20):  # 20 frames over 2 s of vehicle time
+        await ground.decision_values(i * 0.1, 2, Target(4.0, 2.0, 3.0, 1), state)
+    targets = [f for n, f in link.sent if n == "LANDING_TARGET"]
+    assert len(targets) == 4  # 2 Hz
+    t = targets[0]
+    assert (t["x"], t["y"], t["z"], t["frame"], t["position_valid"]) == (4.0, 2.0, 0.0, 1, 1)
+    assert t["distance"] == pytest.approx(math.sqrt(9 + 400))
+    assert t["angle_y"] == pytest.approx(math.atan2(3.0, 20.0))
+    assert t["angle_x"] == pytest.approx(0.0)
+    assert t["size_x"] == pytest.approx(2 * math.atan2(3.0, math.sqrt(409)))
+    await ground.decision_values(5.0, 0, None, state)
+    assert link.sent[-1] == ("NAMED_VALUE_FLOAT", {"time_boot_ms": 5000, "name": "SLZ_DRY", "value": 0.0})
+    assert [f["value"] for n, f in link.sent[-3:] if f["name"] == "SLZ_R_M"] == [0.0]
 
 
-def test_a_refused_send_is_counted_never_raised() -> None:
-    async def scenario() -> None:
-        ground, link = report(fail_after=1)
-        await ground.phase(LandingPhase.SEARCH, "start")
-        assert len(link.sent) == 1
-        await ground.phase(LandingPhase.FAILSAFE, "camera lost")  # refused by the link
-        assert (ground.sent, ground.failed) == (1, 1)
-
-    asyncio.run(scenario())
+async def test_a_refused_send_is_counted_never_raised() -> None:
+    ground, link = report(fail_after=1)
+    await ground.phase(LandingPhase.SEARCH, "start")
+    assert len(link.sent) == 1
+    await ground.phase(LandingPhase.FAILSAFE, "camera lost")  # refused by the link
+    assert (ground.sent, ground.failed) == (1, 1)
 
 
 def test_landing_target_names_its_frame_and_fields() -> None:

@@ -24,7 +24,7 @@ def _write_video(path: Path, frames: int, fps: float) -> None:
     writer.release()
 
 
-def test_a_video_file_yields_every_frame_stamped_on_the_vehicle_clock(tmp_path: Path) -> None:
+async def test_a_video_file_yields_every_frame_stamped_on_the_vehicle_clock(tmp_path: Path) -> None:
     video = tmp_path / "flight.avi"
     _write_video(video, 12, fps=10.0)
     source = open_frame_source(f"file://{video}", timeout_s=5.0, vehicle_time_s=lambda: 500.0)
@@ -32,7 +32,7 @@ def test_a_video_file_yields_every_frame_stamped_on_the_vehicle_clock(tmp_path: 
     async def read_all() -> list[Frame]:
         return [f async for f in source.frames()]
 
-    frames = asyncio.run(asyncio.wait_for(read_all(), 30.0))
+    frames = await asyncio.wait_for(read_all(), 30.0)
     assert [f.seq for f in frames] == list(range(12))
     assert frames[0].image_bgr.shape == (48, 64, 3)
     gaps = np.diff([f.t_capture_s for f in frames])
@@ -49,11 +49,11 @@ def test_missing_files_and_unknown_schemes_are_named(tmp_path: Path) -> None:
         open_frame_source("ftp://x/y", vehicle_time_s=lambda: 0.0)
 
 
-def test_a_missing_device_fails_when_opened() -> None:
+async def test_a_missing_device_fails_when_opened() -> None:
     source = open_frame_source("v4l2:///dev/video_does_not_exist", timeout_s=5.0, vehicle_time_s=lambda: 0.0)
 
     async def first() -> Frame:
         return await source.frames().__anext__()
 
     with pytest.raises(CameraError, match="cannot open"):
-        asyncio.run(asyncio.wait_for(first(), 30.0))
+        await asyncio.wait_for(first(), 30.0)

@@ -3,7 +3,6 @@ and the companion only saw "link lost"), and MAVSDK's own log lines, plain."""
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import socket
 from pathlib import Path
@@ -61,7 +60,7 @@ def test_a_port_another_program_holds_is_named_before_the_companion_binds_it_and
 
 
 @pytest.mark.integration
-def test_the_link_refuses_a_port_another_program_holds_and_mavsdks_lines_come_plain(
+async def test_the_link_refuses_a_port_another_program_holds_and_mavsdks_lines_come_plain(
     caplog: pytest.LogCaptureFixture, capfd: pytest.CaptureFixture[str]
 ) -> None:
     port = free_udp_port()
@@ -70,19 +69,16 @@ def test_the_link_refuses_a_port_another_program_holds_and_mavsdks_lines_come_pl
     squatter.bind(("0.0.0.0", port))
     try:
         with pytest.raises(VehicleError, match=f"UDP port {port} is already bound by another program"):
-            asyncio.run(MavsdkVehicleLink(f"udpin://0.0.0.0:{port}").connect(2.0))
+            await MavsdkVehicleLink(f"udpin://0.0.0.0:{port}").connect(2.0)
     finally:
         squatter.close()
 
-    async def nobody_answers() -> None:
+    with caplog.at_level(logging.INFO, logger="mavsdk"):
         link = MavsdkVehicleLink(f"udpin://0.0.0.0:{free_udp_port()}")
         try:
             with pytest.raises(VehicleError, match="no autopilot answered"):
                 await link.connect(1.0)
         finally:
             await link.close()
-
-    with caplog.at_level(logging.INFO, logger="mavsdk"):
-        asyncio.run(nobody_answers())
     assert any(r.name == "mavsdk" for r in caplog.records)  # MAVSDK's own lines, through Python's logging
     assert "\x1b[" not in capfd.readouterr().err  # and none of its colour codes printed by itself

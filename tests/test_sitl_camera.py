@@ -68,7 +68,7 @@ def _ask_people(sitl: SitlProcess, into: dict[str, Any]) -> None:
     into.update(sitl.request({"cmd": "people"}))
 
 
-def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(
+async def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(
     tmp_path: Path, instances: Callable[[], int]
 ) -> None:
     runs: list[Any] = []
@@ -86,7 +86,7 @@ def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(
             # sees that the frame client left, sooner or later with the machine's load.
             people: dict[str, Any] = {}
             ask = functools.partial(_ask_people, sitl, people)
-            frames = asyncio.run(lockstep_frames(instance, 30, take_off=True, before_last_ack=ask))
+            frames = await lockstep_frames(instance, 30, take_off=True, before_last_ack=ask)
             assert people["t_s"] == pytest.approx(2.9, abs=1e-9)
             runs.append((frames, people["positions_ne_m"]))
         finally:
@@ -98,7 +98,7 @@ def test_lockstep_frames_are_seeded_and_timed_on_the_vehicle_clock(
     assert len({h for _, _, h in frames_a}) > 20  # the camera rises over walking people: frames differ
 
 
-def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, instance: int) -> None:
+async def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, instance: int) -> None:
     sitl = start(tmp_path, instance, seed=1, args=["--speed", "1"])
     try:
 
@@ -111,7 +111,7 @@ def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, instance: 
                     break
             return times
 
-        times = asyncio.run(read(8))
+        times = await read(8)
         gaps = [b - a for a, b in itertools.pairwise(times)]
         assert gaps == pytest.approx([0.1] * 7, abs=1e-9)  # 10 Hz of simulated time
         # The client has gone: the SITL goes on (and counts the frames nobody took).
@@ -122,22 +122,19 @@ def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, instance: 
         sitl.stop()
 
 
-def test_in_lockstep_a_frame_client_that_leaves_stops_the_sitl_loudly(tmp_path: Path, instance: int) -> None:
+async def test_in_lockstep_a_frame_client_that_leaves_stops_the_sitl_loudly(tmp_path: Path, instance: int) -> None:
     sitl = start(tmp_path, instance, seed=1, args=["--lockstep", "--speed", "0"], extra="  lockstep_timeout_s: 2.0\n")
-    asyncio.run(lockstep_frames(instance, 3))  # then the client disconnects without acknowledging more
+    await lockstep_frames(instance, 3)  # then the client disconnects without acknowledging more
     assert sitl.wait(timeout_s=15) == 3
     assert "frame client" in sitl.log_tail() or "no acknowledgement" in sitl.log_tail()
     sitl.stop()
 
 
-def test_frame_source_errors() -> None:
+async def test_frame_source_errors() -> None:
     with pytest.raises(CameraError, match="unsupported frame source scheme 'gopher'"):
         open_frame_source("gopher://camera/stream")
     with pytest.raises(CameraError, match="needs the vehicle clock"):
         open_frame_source("rtsp://camera/stream")
 
-    async def connect() -> None:
-        await SitlFrameSource("127.0.0.1", 5699, timeout_s=1).frames().__anext__()
-
     with pytest.raises(CameraError, match="cannot connect"):
-        asyncio.run(connect())
+        await SitlFrameSource("127.0.0.1", 5699, timeout_s=1).frames().__anext__()

@@ -58,23 +58,20 @@ def test_beats_keep_it_quiet_and_a_disengaged_watchdog_never_acts() -> None:
     assert stalls == []
 
 
-def test_the_heartbeat_task_beats_until_the_flight_is_done() -> None:
+async def test_the_heartbeat_task_beats_until_the_flight_is_done() -> None:
     clock, engaged, stalls = Clock(), [True], list[float]()
     dog = watchdog(clock, engaged, stalls)
 
-    async def flight() -> None:
-        done = asyncio.Event()
-        task = asyncio.create_task(dog.heartbeat(done))
-        clock.now_s += 10.0
-        for _ in range(100):  # event-loop turns until the heartbeat has beaten at the new time
-            if dog.stalled_for_s() is None:
-                break
-            await asyncio.sleep(0)
-        assert dog.stalled_for_s() is None
-        done.set()
-        await asyncio.wait_for(task, 5.0)
-
-    asyncio.run(flight())
+    done = asyncio.Event()
+    task = asyncio.create_task(dog.heartbeat(done))
+    clock.now_s += 10.0
+    for _ in range(100):  # event-loop turns until the heartbeat has beaten at the new time
+        if dog.stalled_for_s() is None:
+            break
+        await asyncio.sleep(0)
+    assert dog.stalled_for_s() is None
+    done.set()
+    await asyncio.wait_for(task, 5.0)
 
 
 def test_the_thread_acts_while_the_event_loop_is_blocked() -> None:

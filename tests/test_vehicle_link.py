@@ -44,10 +44,9 @@ def test_the_link_takes_off_flies_offboard_and_lands(tmp_path: Path, instance: i
     assert events[4]["dropped"] == 0
 
 
-def test_the_link_takes_the_autopilots_system_id_or_refuses_one_that_differs(tmp_path: Path) -> None:
+async def test_the_link_takes_the_autopilots_system_id_or_refuses_one_that_differs(tmp_path: Path) -> None:
     # Issue 65: with `slz sitl --instance 5` the vehicle is system 6 and the companion stayed 1: ground-station
     # commands to system 6 never reached it. An instance above 0, so that the autopilot is not system 1.
-    import asyncio
 
     from companion.vehicle.link import VehicleError
     from companion.vehicle.mavsdk_link import MavsdkVehicleLink
@@ -70,10 +69,10 @@ def test_the_link_takes_the_autopilots_system_id_or_refuses_one_that_differs(tmp
                 await link.close()
 
         try:
-            assert asyncio.run(link_with(None)) == sysid  # taken from the heartbeat, telemetry flowing
+            assert await link_with(None) == sysid  # taken from the heartbeat, telemetry flowing
             with pytest.raises(VehicleError, match=f"the autopilot is system {sysid}, vehicle.system_id says 1"):
-                asyncio.run(link_with(1))
-            assert asyncio.run(link_with(sysid)) == sysid  # the right one, given
+                await link_with(1)
+            assert await link_with(sysid) == sysid  # the right one, given
         finally:
             sitl.stop()
     assert sysid != 1

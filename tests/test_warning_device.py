@@ -4,7 +4,6 @@ people who step away: tests/test_warning_flight.py and docs/results/warning_walk
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 from typing import Any, cast
 
@@ -55,17 +54,13 @@ class ActuatorLink:
         self.calls.append((index, value))
 
 
-def fly(tmp_path: Path, config: dict[str, Any], dry_run: bool = False, refuse: bool = False) -> ActuatorLink:
+async def fly(tmp_path: Path, config: dict[str, Any], dry_run: bool = False, refuse: bool = False) -> ActuatorLink:
     link = ActuatorLink(refuse)
     recorder = FlightRecorder(tmp_path)
     commands = VehicleCommands(cast(VehicleLink, link), recorder, FlightOutcome(), dry_run)
     device = WarningDevice(validate_config(WarningConfig, config), commands, recorder)
-
-    async def run() -> None:
-        for d in LANDING:
-            await device.follow(d)
-
-    asyncio.run(run())
+    for d in LANDING:
+        await device.follow(d)
     recorder.close()
     return link
 
@@ -74,8 +69,8 @@ def warnings(tmp_path: Path) -> list[dict[str, Any]]:
     return FlightLog.read(tmp_path).of(RecordKind.WARNING)
 
 
-def test_it_sounds_from_the_descents_start_to_the_touchdown_on_its_output(tmp_path: Path) -> None:
-    link = fly(tmp_path, {"enabled": True, "actuator": 3, "on_value": 0.8, "off_value": -1.0})
+async def test_it_sounds_from_the_descents_start_to_the_touchdown_on_its_output(tmp_path: Path) -> None:
+    link = await fly(tmp_path, {"enabled": True, "actuator": 3, "on_value": 0.8, "off_value": -1.0})
     assert link.calls == [(3, 0.8), (3, -1.0)]
     records = warnings(tmp_path)
     assert [(r["t_s"], r["on"], r["sent"], r["event"]) for r in records] == [
@@ -84,27 +79,27 @@ def test_it_sounds_from_the_descents_start_to_the_touchdown_on_its_output(tmp_pa
     ]
 
 
-def test_at_the_walker_gate_only_it_sounds_while_the_descent_waits(tmp_path: Path) -> None:
-    link = fly(tmp_path, {"enabled": True, "when": "walker_gate"})
+async def test_at_the_walker_gate_only_it_sounds_while_the_descent_waits(tmp_path: Path) -> None:
+    link = await fly(tmp_path, {"enabled": True, "when": "walker_gate"})
     assert link.calls == [(1, 1.0), (1, -1.0)]
     assert [(r["t_s"], r["on"]) for r in warnings(tmp_path)] == [(4.0, True), (6.0, False)]
 
 
-def test_off_by_default_nothing_is_sent_or_recorded(tmp_path: Path) -> None:
-    link = fly(tmp_path, {})
+async def test_off_by_default_nothing_is_sent_or_recorded(tmp_path: Path) -> None:
+    link = await fly(tmp_path, {})
     assert link.calls == []
     assert warnings(tmp_path) == []
     assert not any(warning_wanted(WarningConfig(), d) for d in LANDING)
 
 
-def test_a_dry_run_records_when_it_would_sound_and_sends_nothing(tmp_path: Path) -> None:
-    link = fly(tmp_path, {"enabled": True}, dry_run=True)
+async def test_a_dry_run_records_when_it_would_sound_and_sends_nothing(tmp_path: Path) -> None:
+    link = await fly(tmp_path, {"enabled": True}, dry_run=True)
     assert link.calls == []
     assert [(r["on"], r["sent"]) for r in warnings(tmp_path)] == [(True, False), (False, False)]
 
 
-def test_a_refused_switch_is_recorded_and_the_landing_goes_on(tmp_path: Path) -> None:
-    fly(tmp_path, {"enabled": True}, refuse=True)  # follow() raised nothing: every decision was taken
+async def test_a_refused_switch_is_recorded_and_the_landing_goes_on(tmp_path: Path) -> None:
+    await fly(tmp_path, {"enabled": True}, refuse=True)  # follow() raised nothing: every decision was taken
     log = FlightLog.read(tmp_path)
     errors = [r for r in log.of(RecordKind.ERROR) if r.get("where") == "warning"]
     assert len(errors) == 2
