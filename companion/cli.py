@@ -58,6 +58,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     from companion.app.recorder import FlightRecorder, prune_flights
     from companion.camera.frames import CameraError
     from companion.camera.sources import open_frame_source
+    from companion.guidance.landing import LandingPhase
     from companion.perception.model_validation import validation_of
     from companion.vehicle.link import VehicleError
     from companion.vehicle.lockstep import LockstepClient, LockstepError
@@ -112,9 +113,9 @@ def _cmd_fly(args: argparse.Namespace) -> int:
             if view is not None:
                 view.close()
         ended.append(f"ended in {outcome.phase} ({outcome.reason})")
-        if outcome.phase in ("done", "yielded") or config.mode is OperatingMode.DRY_RUN:
+        if outcome.phase in (LandingPhase.DONE, LandingPhase.YIELDED) or config.mode is OperatingMode.DRY_RUN:
             return 0
-        return EXIT_FAILSAFE if outcome.phase == "failsafe" else 1
+        return EXIT_FAILSAFE if outcome.phase == LandingPhase.FAILSAFE else 1
 
     ended: list[str] = []  # the flight's own words, for the last line
     view = None

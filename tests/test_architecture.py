@@ -29,6 +29,7 @@ FLOORS: dict[str, int] = {
     "companion.vehicle": 1,
     "companion.ground": 1,
     "companion.perception": 1,
+    "companion.guidance.vocabulary": 1,  # the landing logic's words, which the ground channel speaks too
     "companion.guidance": 2,
     "companion.app": 3,
     "companion.cli": 4,

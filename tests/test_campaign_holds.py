@@ -8,7 +8,8 @@ from typing import Any
 import pytest
 
 from companion.app.flight_log import DecisionRecord
-from companion.guidance.vocabulary import DecisionEvent, RefusalCause, ZoneChange
+from companion.guidance.landing import CommandKind, LandingPhase
+from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause, ZoneChange
 from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, hold_cause, zones_chosen
 from sitl.campaign.record import FlownMission, flown_missions, parse_results
 from sitl.campaign.report import against_previous, build_report, hold_kind
@@ -61,8 +62,9 @@ def test_each_hold_is_explained_by_kind_from_an_old_flight_logs_words() -> None:
 def test_each_hold_is_explained_by_its_events_whatever_the_words() -> None:
     def typed(t_s: float, phase: str, event: DecisionEvent, cause: RefusalCause | None = None) -> DecisionRecord:
         target = {"track_id": 1} if phase in ("approach", "descent") else None
-        source = "time" if event is DecisionEvent.TIME_LIMIT else "frame"
-        return DecisionRecord(t_s, "setpoint", phase, target, None, "words", source, None, event, cause)
+        source = DecisionSource.TIME if event is DecisionEvent.TIME_LIMIT else DecisionSource.FRAME
+        kind, at = CommandKind.SETPOINT, LandingPhase(phase)
+        return DecisionRecord(t_s, kind, at, target, None, "words", source, None, event, cause)
 
     searching = [typed(float(t), "search", DecisionEvent.SEARCH_PATTERN) for t in range(300)]
     limit = typed(300.0, "failsafe", DecisionEvent.TIME_LIMIT)

@@ -8,11 +8,10 @@ import math
 
 import pytest
 
-from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import DecisionEvent, RefusalCause
+from companion.guidance.vocabulary import DecisionEvent, OperatorCommand, RefusalCause
 from companion.perception.projection import HeadPlaneOccupancy
 from tests.test_landing_logic import _frame, _guidance, _map
 

@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.ground import mavlink_frames as frames
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand
-from companion.ground.operator_commands import OperatorCommand
+from companion.guidance.vocabulary import OperatorCommand
 from sitl.testing.helpers import free_udp_port, wait_until_async
 
 pytestmark = pytest.mark.unit

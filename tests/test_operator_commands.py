@@ -13,11 +13,10 @@ import pytest
 from companion.app.operator_desk import OperatorDesk
 from companion.app.recorder import FlightRecorder, read_log
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand, RefusedCommand
-from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import DecisionEvent, RefusalCause
+from companion.guidance.vocabulary import DecisionEvent, OperatorCommand, RefusalCause
 from companion.perception.selection import Target
 from tests.test_landing_logic import _descending_over, _frame, _guidance, _map, _track
 

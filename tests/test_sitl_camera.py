@@ -105,10 +105,14 @@ async def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, inst
         async def read(n: int) -> list[float]:
             source = open_frame_source(f"sitl://127.0.0.1:{5600 + instance}")
             times = []
-            async for frame in source.frames():
-                times.append(frame.t_capture_s)
-                if len(times) == n:
-                    break
+            frames = source.frames()
+            try:
+                async for frame in frames:
+                    times.append(frame.t_capture_s)
+                    if len(times) == n:
+                        break
+            finally:
+                await frames.aclose()  # the client leaves now, not when the loop ends
             return times
 
         times = await read(8)

@@ -171,12 +171,13 @@ def merged_timeline(flight: FlightLog, log: AutopilotLog) -> list[tuple[float, s
     """The companion's decisions, failsafes and commands and the autopilot's mode changes, failsafe flag,
     acknowledged commands and its warnings (and worse), in time order: (t_s, who, what)."""
     from companion.app.flight_log import RecordKind
+    from companion.guidance.landing import ENDING_KINDS
 
     rows: list[tuple[float, str, str]] = []
     previous = None
     for d in flight.decisions():  # each change of what the decisions do (a setpoint every tick is not news)
-        what = d.event.value if d.event is not None else d.phase
-        if what != previous or d.kind in ("land", "hold", "return"):
+        what = d.event.value if d.event is not None else d.phase.value
+        if what != previous or d.kind in ENDING_KINDS:
             rows.append((d.t_s, "companion", f"{what}: {d.reason}" if d.reason else what))
         previous = what
     for r in flight.of(RecordKind.COMMAND):

@@ -62,7 +62,7 @@ from companion.guidance.footprint import nearest_occupied_m
 from companion.guidance.geofence import Geofence, latlon_to_ne_m
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import DecisionEvent
+from companion.guidance.vocabulary import DecisionEvent, DecisionSource
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.selection import SelectionPolicy
 from companion.perception.zones import ZoneFinder
@@ -197,7 +197,7 @@ class FlightApp:
     async def apply(
         self,
         decision: Decision,
-        source: str,
+        source: DecisionSource,
         state: VehicleState | None,
         observed: dict[str, Any] | None = None,
         **inputs: Any,
@@ -247,7 +247,7 @@ class FlightApp:
             return
         decision = self.guidance.on_frame(result, state)
         observed = observed_at_target(result, decision, state, self.config.guidance.perception_min_altitude_m)
-        await self.apply(decision, "frame", state, observed, seq=frame.seq)
+        await self.apply(decision, DecisionSource.FRAME, state, observed, seq=frame.seq)
         await self.report.decision_values(result.t_s, len(result.tracks), decision.target, state)
         if self.commands.commanding and decision.kind is not CommandKind.NONE and math.isfinite(frame.arrival_wall_s):
             latency_ms = 1000.0 * (time.monotonic() - frame.arrival_wall_s)
@@ -276,7 +276,7 @@ class FlightApp:
         if self.commands.pilot_has_it():
             self.commands.stop()  # never take control back in this flight
             mode = status.mode.value
-            await self.apply(self.guidance.pilot_took_over(state.t_s, mode), "takeover", state, mode=mode)
+            await self.apply(self.guidance.pilot_took_over(state.t_s, mode), DecisionSource.TAKEOVER, state, mode=mode)
             return
         if self.supervision.stop_requested is not None:  # after the pilot's word too
             await self._stop(state)
@@ -286,7 +286,7 @@ class FlightApp:
             await self._wall_limit(state, limit)
             return
         for taken in self.desk.take(self.guidance, state, self.intake.last_result):
-            await self.apply(taken.decision, "operator", state, **taken.inputs)
+            await self.apply(taken.decision, DecisionSource.OPERATOR, state, **taken.inputs)
         if not self.start_sequence.started:
             pose = self.link.poses.pose_at(state.t_s) if self.dry_run else None
             visible = not self.dry_run or (pose is not None and self.pipeline.sees_head_plane(pose))
@@ -295,19 +295,19 @@ class FlightApp:
         if self.guidance.phase is LandingPhase.LAND and not status.in_air:
             self.outcome.touchdown_ne_m = (state.north_m, state.east_m)
             self.outcome.touchdown_t_s = state.t_s
-            await self.apply(self.guidance.landed(state.t_s), "landed", state)
+            await self.apply(self.guidance.landed(state.t_s), DecisionSource.LANDED, state)
             return
         low = self.energy.check(state, status) if self.energy is not None else None
         reason = None if low is None else low.reason()
         used_up = self.guidance.time_used_up(state, reason, None if low is None else low.home_m)
         if used_up is not None:
             inputs: dict[str, Any] = {} if low is None else low.inputs()
-            await self.apply(used_up, "time" if low is None else "energy", state, **inputs)
+            await self.apply(used_up, DecisionSource.TIME if low is None else DecisionSource.ENERGY, state, **inputs)
             return
         silent_s = state.t_s - self._last_frame_t_s
         decision = self.guidance.perception_silent(state, silent_s)
         if decision is not None:
-            await self.apply(decision, "silence", state, silent_s=silent_s)
+            await self.apply(decision, DecisionSource.SILENCE, state, silent_s=silent_s)
 
     def _rearm(self, state: VehicleState) -> None:
         """A dry run whose decisions ended (a failsafe, a landing) while the pilot flies on: a fresh state machine,
@@ -323,7 +323,7 @@ class FlightApp:
         resort (hold or return) and the run stays until it is safe; a run that commands nothing (a dry run, a wait
         for the pilot's handover) just ends."""
         if self._flying_it():
-            await self.apply(self.guidance.give_up(state, limit), "limit", state, reason=limit)
+            await self.apply(self.guidance.give_up(state, limit), DecisionSource.LIMIT, state, reason=limit)
         else:
             self.ending.end(state.t_s, "wall_limit", f"{limit}: nothing commanded, the run ends", warn=True)
 
@@ -340,7 +340,7 @@ class FlightApp:
         why = self.supervision.take_stop(last_resort)
         reason = f"{why}: stopping"
         if last_resort:
-            await self.apply(self.guidance.give_up(state, reason), "stop", state, reason=reason)
+            await self.apply(self.guidance.give_up(state, reason), DecisionSource.STOP, state, reason=reason)
             return
         self.ending.end(state.t_s, "stopped", f"{reason}, nothing commanded")
 
@@ -383,7 +383,7 @@ class FlightApp:
             await self.commands.send(transit)
         elif step.action is StartAction.START:
             self._last_frame_t_s = state.t_s  # perception silence counts from here
-            await self.apply(self.guidance.start(state), "start", state)
+            await self.apply(self.guidance.start(state), DecisionSource.START, state)
 
     # -- what the drivers see (companion.app.drivers.FlightLoop) ----------------------------------------------------
     @property

@@ -19,10 +19,12 @@ from typing import Any
 from companion.app.legacy_decisions import vocabulary_of
 from companion.app.recorder import RecorderError, read_log
 from companion.errors import SlzError
+from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import (
     ZONE_CHOICES,
     CommitmentEvent,
     DecisionEvent,
+    DecisionSource,
     RefusalCause,
     ZoneChange,
 )
@@ -131,12 +133,12 @@ class DecisionRecord:
     (``north_m``, ``east_m``, ``down_m``, ``yaw_deg``)."""
 
     t_s: float
-    kind: str
-    phase: str
+    kind: CommandKind
+    phase: LandingPhase
     target: dict[str, Any] | None
     setpoint: dict[str, Any] | None
     reason: str
-    source: str
+    source: DecisionSource
     state: dict[str, Any] | None
     event: DecisionEvent | None = None
     cause: RefusalCause | None = None
@@ -149,7 +151,7 @@ class DecisionRecord:
         of their words (:func:`companion.app.legacy_decisions.vocabulary_of`)."""
         decision = record["decision"]
         reason = str(decision.get("reason", ""))
-        phase = str(decision["phase"])
+        phase = LandingPhase(decision["phase"])
         if "event" in decision:
             event: DecisionEvent | None = DecisionEvent(decision["event"])
             cause = None if decision.get("cause") is None else RefusalCause(decision["cause"])
@@ -163,12 +165,12 @@ class DecisionRecord:
             event, cause, changes = vocabulary_of(reason, phase)
         return cls(
             float(record["t_s"]),
-            str(decision["kind"]),
+            CommandKind(decision["kind"]),
             phase,
             decision.get("target"),
             decision.get("setpoint"),
             reason,
-            str(record["source"]),
+            DecisionSource(record["source"]),
             record["state"],
             event,
             cause,

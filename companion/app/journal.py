@@ -12,6 +12,7 @@ from companion.app.recorder import FlightRecorder
 from companion.app.start_sequence import StartStep
 from companion.guidance.landing import Decision, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
+from companion.guidance.vocabulary import DecisionSource
 from companion.vehicle.link import VehicleStatus
 
 logger = logging.getLogger(__name__)
@@ -47,7 +48,7 @@ class FlightJournal:
         self,
         decision: Decision,
         previous_phase: str,
-        source: str,
+        source: DecisionSource,
         state: VehicleState | None,
         observed: dict[str, Any] | None,
         inputs: dict[str, Any],

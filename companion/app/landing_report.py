@@ -22,7 +22,8 @@ from typing import Any
 
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.timeline import flight_events
-from companion.guidance.vocabulary import DecisionEvent
+from companion.guidance.landing import ENDING_KINDS, CommandKind, LandingPhase
+from companion.guidance.vocabulary import DecisionEvent, DecisionSource
 
 logger = logging.getLogger(__name__)
 
@@ -85,25 +86,34 @@ def flight_ending(log: FlightLog) -> FlightEnding:
     decisions = log.decisions()
     supervision = [str(r.get("event")) for r in log.of(RecordKind.SUPERVISION)]
     if (
-        outcome.get("phase") == "yielded"
+        outcome.get("phase") == LandingPhase.YIELDED
         or "pilot_has_it" in supervision
         or any(d.event is DecisionEvent.PILOT_TOOK_OVER for d in decisions)
     ):
         return FlightEnding.PILOT_TOOK_OVER
-    if any(d.source == "stop" for d in decisions) or "stopped" in supervision:
+    if any(d.source is DecisionSource.STOP for d in decisions) or "stopped" in supervision:
         return FlightEnding.STOPPED
-    active = [d for d in decisions if d.kind in ("land", "hold", "return")]
+    active = [d for d in decisions if d.kind in ENDING_KINDS]
     last = active[-1] if active else None
     if outcome.get("touchdown_ne_m"):
-        if outcome.get("phase") == "done" and last is not None and last.kind == "land" and last.phase == "land":
+        if (
+            outcome.get("phase") == LandingPhase.DONE
+            and last is not None
+            and last.kind is CommandKind.LAND
+            and last.phase is LandingPhase.LAND
+        ):
             return FlightEnding.LANDED
-        return FlightEnding.RETURNED if last is not None and last.kind == "return" else FlightEnding.LANDED_BY_FAILSAFE
+        return (
+            FlightEnding.RETURNED
+            if last is not None and last.kind is CommandKind.RETURN
+            else FlightEnding.LANDED_BY_FAILSAFE
+        )
     if last is None:
         return FlightEnding.NOTHING_FLOWN
-    if last.kind == "return":
+    if last.kind is CommandKind.RETURN:
         return FlightEnding.RETURNED
-    if last.kind == "land":  # commanded, not seen down: the failsafe's or the companion's landing
-        return FlightEnding.LANDED_BY_FAILSAFE if last.phase == "failsafe" else FlightEnding.LANDED
+    if last.kind is CommandKind.LAND:  # commanded, not seen down: the failsafe's or the companion's landing
+        return FlightEnding.LANDED_BY_FAILSAFE if last.phase is LandingPhase.FAILSAFE else FlightEnding.LANDED
     return FlightEnding.HELD
 
 
@@ -136,19 +146,21 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
     end = log.first(RecordKind.END)
     outcome = end["outcome"] if end else {}
     records = log.of(RecordKind.DECISION)
-    land_index = next((i for i in range(len(records) - 1, -1, -1) if records[i]["decision"]["kind"] == "land"), None)
+    land_index = next(
+        (i for i in range(len(records) - 1, -1, -1) if records[i]["decision"]["kind"] == CommandKind.LAND), None
+    )
     land = records[land_index] if land_index is not None else None
     descent = None  # the decision that began the last descent before the landing (or before the end)
     last = land_index if land_index is not None else len(records) - 1
     for i in range(last, -1, -1):
-        if records[i]["decision"]["phase"] == "descent" and (
-            i == 0 or records[i - 1]["decision"]["phase"] != "descent"
+        if records[i]["decision"]["phase"] == LandingPhase.DESCENT and (
+            i == 0 or records[i - 1]["decision"]["phase"] != LandingPhase.DESCENT
         ):
             descent = records[i]
             break
     observed = None  # the nearest occupied ground seen around the landing point, by the last frame that decided
     for record in records[: (land_index + 1) if land_index is not None else len(records)]:
-        if record.get("observed") and record["source"] == "frame":
+        if record.get("observed") and record["source"] == DecisionSource.FRAME:
             observed = record["observed"]
     config = header.get("config") or {}
     mode = config.get("mode")

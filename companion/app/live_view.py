@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import cv2
 
+from companion.app.flight_log import RecordKind, kind_of
 from companion.app.foxglove_topics import (
     SCHEMAS,
     TOPICS,
@@ -132,7 +133,7 @@ class LiveView:
         """A flight-log record as it is written: decisions, phases, commands, events."""
 
         def send() -> None:
-            if record.get("kind") == "frame_result" and record.get("t_s") is not None:
+            if kind_of(record) is RecordKind.FRAME_RESULT and record.get("t_s") is not None:
                 # With every processed frame: a client may join at any time.
                 self._send("/tf", float(record["t_s"]), world_ned_transform(float(record["t_s"])))
             for topic, t_s, message in messages_of(record, None):

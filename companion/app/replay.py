@@ -26,10 +26,10 @@ from companion.app.mission import MissionConfig, with_fallback_sites, with_fence
 from companion.app.recorder import plain
 from companion.errors import SlzError
 from companion.geometry import GeometryError, Pose
-from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.landing import Decision, LandingGuidance, LandingPhase
 from companion.guidance.operator import operator_decision
 from companion.guidance.vehicle_state import VehicleState
+from companion.guidance.vocabulary import DecisionSource, OperatorCommand
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.visualize import draw_camera_overlay
@@ -193,7 +193,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
                     shown = image if pipeline.lens is None else pipeline.lens.undistort(image)  # the pinhole view
                     video.add(draw_camera_overlay(shown, result, pipeline.projector), caption)
             else:
-                if record.get("source") == "start" and guidance.phase is not LandingPhase.IDLE:
+                if record.get("source") == DecisionSource.START and guidance.phase is not LandingPhase.IDLE:
                     guidance = new_guidance()  # a dry run that decides again after its decisions ended
                 decision = _decide(guidance, record, results)
                 report.decisions += 1
@@ -213,27 +213,27 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
 
 def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int, FrameResult]) -> Decision | None:
     """Call the state machine as the flight did for this decision record."""
-    source = record.get("source")
+    try:
+        source = DecisionSource(record.get("source"))
+    except ValueError:
+        raise ReplayError(f"decision at t = {record['t_s']} s has no known source ({record.get('source')!r})") from None
     state = VehicleState(**record["state"])
     inputs = record.get("inputs") or {}
-    calls: dict[str, Callable[[], Decision | None]] = {
-        "start": lambda: guidance.start(state),
-        "silence": lambda: guidance.perception_silent(state, float(inputs["silent_s"])),
-        "landed": lambda: guidance.landed(state.t_s),
-        "time": lambda: guidance.time_used_up(state),
-        "energy": lambda: guidance.time_used_up(state, str(inputs["reason"]), inputs.get("reach_m")),
-        "takeover": lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
-        "limit": lambda: guidance.give_up(state, str(inputs["reason"])),
-        "stop": lambda: guidance.give_up(state, str(inputs["reason"])),
-        "operator": lambda: _operator(guidance, state, inputs),
+    calls: dict[DecisionSource, Callable[[], Decision | None]] = {
+        DecisionSource.START: lambda: guidance.start(state),
+        DecisionSource.SILENCE: lambda: guidance.perception_silent(state, float(inputs["silent_s"])),
+        DecisionSource.LANDED: lambda: guidance.landed(state.t_s),
+        DecisionSource.TIME: lambda: guidance.time_used_up(state),
+        DecisionSource.ENERGY: lambda: guidance.time_used_up(state, str(inputs["reason"]), inputs.get("reach_m")),
+        DecisionSource.TAKEOVER: lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
+        DecisionSource.LIMIT: lambda: guidance.give_up(state, str(inputs["reason"])),
+        DecisionSource.STOP: lambda: guidance.give_up(state, str(inputs["reason"])),
+        DecisionSource.OPERATOR: lambda: _operator(guidance, state, inputs),
     }
-    if source == "frame":
+    if source is DecisionSource.FRAME:
         result = results.get(int(inputs["seq"]))
         return None if result is None else guidance.on_frame(result, state)
-    call = calls.get(str(source))
-    if call is None:
-        raise ReplayError(f"decision at t = {record['t_s']} s has no known source ({source!r})")
-    return call()
+    return calls[source]()
 
 
 def _operator(guidance: LandingGuidance, state: VehicleState, inputs: dict[str, Any]) -> Decision:

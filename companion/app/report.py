@@ -36,6 +36,7 @@ from companion.app.replay import VideoWriter, flight_config
 from companion.app.timeline import flight_events
 from companion.errors import SlzError
 from companion.geometry import Pose
+from companion.guidance.landing import CommandKind, LandingPhase
 from companion.perception.pipeline import camera_from_config
 from companion.perception.projection import HeadPlaneProjector
 from companion.perception.visualize import draw_circles_overlay
@@ -90,7 +91,7 @@ def summarize(log: FlightLog) -> dict[str, Any]:
     end = log.first(RecordKind.END)
     decisions = log.decisions()
     latencies = [float(r["frame_to_command_ms"]) for r in log.of(RecordKind.LATENCY)]
-    land = next((d for d in decisions if d.kind == "land" and d.state), None)
+    land = next((d for d in decisions if d.kind is CommandKind.LAND and d.state), None)
     events = flight_events(log)
     outcome = end["outcome"] if end else None
     return {
@@ -136,10 +137,10 @@ def tracks_at_landing(log: FlightLog) -> tuple[list[dict[str, Any]], dict[str, A
             decision = DecisionRecord.from_record(record)
             if decision.target is not None:
                 target = decision.target
-            if decision.phase == "descent" and previous_phase != "descent":
+            if decision.phase is LandingPhase.DESCENT and previous_phase is not LandingPhase.DESCENT:
                 at_descent = tracks
             previous_phase = decision.phase
-            if decision.kind == "land":
+            if decision.kind is CommandKind.LAND:
                 break
     return (at_descent if at_descent is not None else tracks), target
 
@@ -185,14 +186,14 @@ def _plot_top_view(log: FlightLog, config: MissionConfig, path: Path) -> None:
         )
     targets: dict[Any, dict[str, Any]] = {}  # each target zone where it was last chosen
     for d in decisions:  # the targets acted on: approached, descended over or landed on
-        if (t := d.target) is not None and d.phase in ("approach", "descent", "land"):
+        if (t := d.target) is not None and d.phase in (LandingPhase.APPROACH, LandingPhase.DESCENT, LandingPhase.LAND):
             targets[t["track_id"] if t["track_id"] is not None else (t["north_m"], t["east_m"])] = t
     for i, t in enumerate(targets.values()):
         ax.add_patch(
             Circle((t["east_m"], t["north_m"]), max(t["radius_m"], 0.3), fill=False, edgecolor="gold", lw=1.5,
                    label="targets acted on (last estimate)" if i == 0 else None)
         )  # fmt: skip
-    land = next((d.state for d in decisions if d.kind == "land" and d.state), None)
+    land = next((d.state for d in decisions if d.kind is CommandKind.LAND and d.state), None)
     if land is not None:
         ax.plot(land["east_m"], land["north_m"], "x", color="green", ms=14, mew=3, label="land")
     extent = float(np.abs(fence).max()) + 3.0

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from companion.app.flight_log import FlightLog, RecordKind
+from companion.guidance.landing import LandingPhase
 
 
 def flight_events(log: FlightLog) -> list[dict[str, Any]]:
@@ -32,7 +33,7 @@ def flight_events(log: FlightLog) -> list[dict[str, Any]]:
                 event = f"target {was} -> zone {target.get('track_id')} (r = {float(target['radius_m']):.2f} m)"
                 events.append({"t_s": r["t_s"], "event": event, "reason": r["decision"].get("reason", "")})
                 target_id = target.get("track_id")
-            elif r["decision"]["phase"] == "search" and target is None and target_id is not None:
+            elif r["decision"]["phase"] == LandingPhase.SEARCH and target is None and target_id is not None:
                 target_id = None  # back to searching: the next zone is a new choice, not a switch
         elif kind is RecordKind.SUPERVISION:
             events.append({"t_s": r["t_s"], "event": f"supervision: {r['event']}", "reason": r["reason"]})

@@ -3,26 +3,13 @@
 
 from __future__ import annotations
 
-import enum
+from companion.guidance.vocabulary import OperatorCommand as OperatorCommand  # the landing logic's word for them
 
 MAV_COMP_ID_ONBOARD_COMPUTER = 191
 MAV_CMD_DO_GO_AROUND = 191
 MAV_CMD_USER_1 = 31010
 MAV_CMD_USER_2 = 31011
 MAV_CMD_USER_3 = 31012
-
-
-class OperatorCommand(str, enum.Enum):
-    """A landing command from the ground station."""
-
-    GO_AROUND = "go_around"
-    """Climb back and search again."""
-    REJECT_ZONE = "reject_zone"
-    """Refuse the zone flown to; choose another."""
-    LAND_NOW = "land_now"
-    """Land on the current target now."""
-    NEXT_FALLBACK = "next_fallback"
-    """Go to the next fallback site."""
 
 
 COMMAND_OF_MAV_CMD = {

@@ -94,6 +94,9 @@ class CommandKind(str, enum.Enum):
     RETURN = "return"
 
 
+ENDING_KINDS = (CommandKind.LAND, CommandKind.HOLD, CommandKind.RETURN)
+"""The commands that hand the vehicle's end to the autopilot: a landing or a last resort."""
+
 COMMAND_OF_ACTION = {
     FailsafeAction.HOLD: CommandKind.HOLD,
     FailsafeAction.LAND: CommandKind.LAND,

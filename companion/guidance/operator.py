@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import math
 
-from companion.ground.operator_commands import OperatorCommand
 from companion.guidance.fallback import BudgetEnd
 from companion.guidance.landing import ACTIVE_PHASES, CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import DecisionEvent, RefusalCause
+from companion.guidance.vocabulary import DecisionEvent, OperatorCommand, RefusalCause
 
 OPERATOR_EVENTS: dict[OperatorCommand, tuple[DecisionEvent, str]] = {
     OperatorCommand.GO_AROUND: (DecisionEvent.OPERATOR_GO_AROUND, "go-around from the ground station"),

@@ -64,6 +64,45 @@ class DecisionEvent(str, enum.Enum):
     """The ground station's land-now: the landing command at once."""
 
 
+class DecisionSource(str, enum.Enum):
+    """What made the landing logic decide: the stimulus a ``decision`` record names (``source``) and replay hands back
+    to the same entry point."""
+
+    START = "start"
+    """The mission started (the start sequence's last step)."""
+    FRAME = "frame"
+    """A perceived camera frame (its ``seq`` in the inputs)."""
+    SILENCE = "silence"
+    """No perceived frame for a while (``silent_s``)."""
+    LANDED = "landed"
+    """The vehicle reported itself on the ground in the landing phase."""
+    TIME = "time"
+    """The mission's time limit."""
+    ENERGY = "energy"
+    """The battery no longer covers the way home and down (``reason``, ``reach_m``)."""
+    TAKEOVER = "takeover"
+    """The pilot took the vehicle (``mode``)."""
+    LIMIT = "limit"
+    """The wall limit of ``slz fly --timeout`` (``reason``)."""
+    STOP = "stop"
+    """A stop asked of the program: SIGINT, SIGTERM (``reason``)."""
+    OPERATOR = "operator"
+    """An accepted ground-station command (``command``, ``person_seen``, ``force``)."""
+
+
+class OperatorCommand(str, enum.Enum):
+    """A landing command from the ground station (its MAVLink numbers: :mod:`companion.ground.operator_commands`)."""
+
+    GO_AROUND = "go_around"
+    """Climb back and search again."""
+    REJECT_ZONE = "reject_zone"
+    """Refuse the zone flown to; choose another."""
+    LAND_NOW = "land_now"
+    """Land on the current target now."""
+    NEXT_FALLBACK = "next_fallback"
+    """Go to the next fallback site."""
+
+
 class RefusalCause(str, enum.Enum):
     """Why a landing point or a committed zone was given up (or, at the walker gate, waited on)."""
 

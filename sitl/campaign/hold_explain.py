@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from companion.app.flight_log import DecisionRecord, FlightLog
 from companion.geometry import inside_polygon
-from companion.guidance.vocabulary import DecisionEvent, RefusalCause, ZoneChange
+from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause, ZoneChange
 from sitl.vehicle.truth import TruthHeader, TruthRecord, body_edges_m, clearance_m, people_at, read_truth
 
 FREE_SAMPLE_S = 5.0
@@ -289,7 +289,7 @@ def explain_hold(
             refuse(d.t_s, "gate")
         if d.target is not None:
             target = d.target
-    flying = [d.t_s for d in decisions if d.source == "frame"]
+    flying = [d.t_s for d in decisions if d.source is DecisionSource.FRAME]
     if area_ne_m is not None and flying:
         for t_s in np.arange(flying[0], flying[-1] + 1e-9, FREE_SAMPLE_S):
             out.free_radii_m.append(truth.largest_free_radius_m(float(t_s), area_ne_m))

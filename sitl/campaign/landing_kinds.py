@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion.app.flight_log import DecisionRecord, FlightLog
+from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent
 
 
@@ -46,19 +47,27 @@ class LandingOutcome:
 def landing_outcome(decisions: list[DecisionRecord]) -> LandingOutcome:
     """The ending of a flight from its decisions (in order)."""
     to_sites = [d for d in decisions if d.event is DecisionEvent.FALLBACK_SITE]
-    landing = next((d for d in reversed(decisions) if d.kind == "land"), None)
+    landing = next((d for d in reversed(decisions) if d.kind is CommandKind.LAND), None)
     ending = decisions[-1] if decisions else None
     if ending is not None and ending.event is DecisionEvent.LANDED:
         ending = next((d for d in reversed(decisions) if d.event is not DecisionEvent.LANDED), None)
-    if landing is not None and landing.phase == "land":
+    if landing is not None and landing.phase is LandingPhase.LAND:
         before = [d for d in to_sites if d.t_s <= landing.t_s]
         if before and before[-1].target is not None:
             target = before[-1].target
             site = (float(target["north_m"]), float(target["east_m"]))
             return LandingOutcome(LandingKind.FALLBACK_SITE, site, len(before))
         return LandingOutcome(LandingKind.ZONE, None, 0)
-    kinds = {"hold": LandingKind.HOLD, "return": LandingKind.RETURN, "land": LandingKind.FAILSAFE_LAND}
-    kind = kinds.get(ending.kind, LandingKind.OTHER) if ending is not None and ending.phase == "failsafe" else None
+    kinds = {
+        CommandKind.HOLD: LandingKind.HOLD,
+        CommandKind.RETURN: LandingKind.RETURN,
+        CommandKind.LAND: LandingKind.FAILSAFE_LAND,
+    }
+    kind = (
+        kinds.get(ending.kind, LandingKind.OTHER)
+        if ending is not None and ending.phase is LandingPhase.FAILSAFE
+        else None
+    )
     return LandingOutcome(kind or LandingKind.OTHER, None, len(to_sites))
 
 

@@ -27,7 +27,8 @@ import numpy as np
 
 from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
-from companion.guidance.vocabulary import DecisionEvent, RefusalCause
+from companion.guidance.landing import CommandKind, LandingPhase
+from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause
 from sitl.campaign.landing_kinds import landing_outcome
 from sitl.campaign.metric_fields import Summary, result_field
 from sitl.config import SitlConfig
@@ -170,23 +171,23 @@ def _final_descent(flight: FlightLog) -> tuple[float | None, float | None, dict[
     release: float | None = None
     waiting = False
     target: dict[str, Any] | None = None
-    previous = ""
+    previous: LandingPhase | None = None
     last_command_t: float | None = None
     for kind, record in flight.tagged(RecordKind.COMMAND, RecordKind.DECISION):
         if kind is RecordKind.COMMAND:
             last_command_t = float(record["t_s"])
             continue
         decision = DecisionRecord.from_record(record)
-        if decision.phase == "descent" and previous != "descent":
+        if decision.phase is LandingPhase.DESCENT and previous is not LandingPhase.DESCENT:
             start = release = decision.t_s
             target = decision.target
             waiting = False
         previous = decision.phase
-        at_gate = decision.phase == "descent" and decision.event is DecisionEvent.WAIT_AT_GATE
+        at_gate = decision.phase is LandingPhase.DESCENT and decision.event is DecisionEvent.WAIT_AT_GATE
         if waiting and not at_gate:
             release = decision.t_s
         waiting = at_gate
-        if decision.kind == "land":
+        if decision.kind is CommandKind.LAND:
             return start, release, target
     return last_command_t, last_command_t, None
 
@@ -240,7 +241,13 @@ def hold_cause(decisions: list[DecisionRecord]) -> str:
     final = decisions[-1] if decisions else None
     event = None if final is None else final.event
     after_sites = any(d.event is DecisionEvent.FALLBACK_SITE for d in decisions[:-1])
-    if final is not None and final.phase == "failsafe" and event in SITE_ENDS and after_sites and final.cause:
+    if (
+        final is not None
+        and final.phase is LandingPhase.FAILSAFE
+        and event in SITE_ENDS
+        and after_sites
+        and final.cause
+    ):
         return "fallback site timed out" if final.cause is RefusalCause.SITE_TIMED_OUT else "fallback sites refused"
     if event is DecisionEvent.RESELECTIONS_USED_UP:
         assert final is not None
@@ -253,7 +260,7 @@ def hold_cause(decisions: list[DecisionRecord]) -> str:
         return "energy budget"
     if event is not DecisionEvent.TIME_LIMIT:
         return "other"
-    flying = [d for d in decisions if d.source == "frame"]
+    flying = [d for d in decisions if d.source is DecisionSource.FRAME]
     if not flying:
         return "nothing free"
     end_s = flying[-1].t_s
@@ -262,10 +269,11 @@ def hold_cause(decisions: list[DecisionRecord]) -> str:
     recent = [d for d in flying if d.t_s >= end_s - NOTHING_FREE_WINDOW_S]
     if not any(d.target is not None for d in recent):
         return "nothing free"
-    phase = flying[-1].phase
-    return {"approach": "time limit while approaching", "descent": "time limit while descending"}.get(
-        phase, "time limit while searching"
-    )
+    during = {
+        LandingPhase.APPROACH: "time limit while approaching",
+        LandingPhase.DESCENT: "time limit while descending",
+    }
+    return during.get(flying[-1].phase, "time limit while searching")
 
 
 def zones_chosen(decisions: list[DecisionRecord]) -> int:
@@ -285,7 +293,7 @@ def mission_metrics(
     end = flight.outcome
     decisions = flight.decisions()
     ending = landing_outcome(decisions)
-    started = next((d.t_s for d in decisions if d.source == "start"), math.nan)
+    started = next((d.t_s for d in decisions if d.source is DecisionSource.START), math.nan)
     down = touchdown(truth)
     # Without a touchdown the mission ends where the companion's log does (a hold, a yield, its time limit): an instant
     # of the lockstep, unlike the end of the ground truth, which depends on how soon the SITL was stopped.

@@ -27,6 +27,7 @@ from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MISSION_PATH_FIELDS, MissionConfig, camera_mismatches
 from companion.config import paths_from, read_yaml_file, validate_config
 from companion.errors import SlzError
+from companion.guidance.landing import CommandKind, LandingPhase
 from sitl.config import SitlConfig
 from sitl.harness.process import REPO_ROOT, SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill
 from sitl.vehicle.truth import TruthError, body_edges_m, read_truth, touchdown
@@ -213,7 +214,7 @@ def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
         raise MissionError(str(exc)) from None
     flight = _flight_log(spec.run_dir / "flight")
     outcome = flight.outcome
-    land = next((d for d in reversed(flight.decisions()) if d.kind == "land"), None)
+    land = next((d for d in reversed(flight.decisions()) if d.kind is CommandKind.LAND), None)
     target = land.target if land else None
     down = touchdown(records)
     nearest, within_1, within_15 = math.nan, 0, 0
@@ -259,9 +260,9 @@ def _autopilot_lands(spec: MissionSpec) -> bool:
         return True
     flight = _flight_log(path)
     commands = flight.of(RecordKind.COMMAND)
-    if any(r["phase"] == "yielded" for r in flight.of(RecordKind.PHASE)):
+    if any(r["phase"] == LandingPhase.YIELDED for r in flight.of(RecordKind.PHASE)):
         return False
-    return not commands or commands[-1]["command"] != "hold"
+    return not commands or commands[-1]["command"] != CommandKind.HOLD
 
 
 class SitlHandle(Protocol):
