@@ -120,7 +120,9 @@ async def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, inst
         assert gaps == pytest.approx([0.1] * 7, abs=1e-9)  # 10 Hz of simulated time
         # The client has gone: the SITL goes on (and counts the frames nobody took).
         t0 = sitl.state()["t_s"]
-        later = state_when(sitl, lambda s: s["t_s"] > t0 + 1.0, 5, "time to go on")
+        # Waited for in a thread: the event loop runs meanwhile and closes the client's socket.
+        went_on = functools.partial(state_when, sitl, lambda s: s["t_s"] > t0 + 1.0, 5, "time to go on")
+        later = await asyncio.get_running_loop().run_in_executor(None, went_on)
         assert later["frames"]["dropped"] >= 5
     finally:
         sitl.stop()
