@@ -36,8 +36,7 @@ FLOORS: dict[str, int] = {
     "companion": 4,
     # the simulated world's and vehicle's parts (no I/O of a process)
     "sitl.geodesy": 10,
-    "sitl.vehicle.clock": 10,
-    "sitl.vehicle.lockstep_gate": 10,
+    "sitl.timing": 10,
     "sitl.vehicle.frame_server": 10,
     "sitl.vehicle.control_channel": 10,
     "sitl.world": 10,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from companion.vehicle.sim_control import SetpointNedYaw
-from sitl.vehicle.lockstep_gate import LockstepGate
+from sitl.timing.lockstep_gate import LockstepGate
 
 pytestmark = pytest.mark.unit
 

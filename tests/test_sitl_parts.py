@@ -10,8 +10,8 @@ import pytest
 
 from companion.vehicle.sim_control import SetpointNedYaw
 from sitl.config import FaultConfig, FaultKind
+from sitl.timing.lockstep_gate import LockstepGate
 from sitl.vehicle.fault_schedule import FaultSchedule
-from sitl.vehicle.lockstep_gate import LockstepGate
 from sitl.vehicle.run_end import RunEnd
 from sitl.vehicle.trajectory_log import HEADER, TrajectoryLog
 from sitl.vehicle.truth import TruthRecord, TruthWriter, read_truth

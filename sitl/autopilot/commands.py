@@ -30,8 +30,8 @@ from sitl.autopilot.telemetry import MESSAGE_IDS, NAMES_BY_ID, ONE_SHOT, StreamS
 from sitl.config import SitlConfig
 from sitl.dynamics.base import Dynamics
 from sitl.geodesy import geodetic_to_ned
-from sitl.vehicle.clock import SimClock
-from sitl.vehicle.lockstep_gate import LockstepGate
+from sitl.timing.clock import SimClock
+from sitl.timing.lockstep_gate import LockstepGate
 
 MAV_CMD_REQUEST_PROTOCOL_VERSION = 519
 REPOSITION_CHANGE_MODE = 1  # DO_REPOSITION param2 bit: switch to the go-to mode

@@ -20,9 +20,9 @@ from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.status import ControlSource
 from sitl.config import MAX_WIND_MPS, SitlConfig
 from sitl.dynamics.base import Dynamics
-from sitl.vehicle.clock import SimClock
+from sitl.timing.clock import SimClock
+from sitl.timing.lockstep_gate import LockstepGate
 from sitl.vehicle.control_channel import ControlChannel
-from sitl.vehicle.lockstep_gate import LockstepGate
 from sitl.world.crowd import CrowdError
 
 if TYPE_CHECKING:  # the camera module needs the renderer, which a SITL without a camera never loads

@@ -36,12 +36,12 @@ from sitl.autopilot.telemetry import Origin, TelemetryBuilder
 from sitl.config import FaultKind, LinkName, SitlConfig
 from sitl.dynamics.base import DynamicsError
 from sitl.dynamics.factory import make_dynamics
-from sitl.vehicle.clock import SimClock
+from sitl.timing.clock import SimClock
+from sitl.timing.lockstep_gate import LockstepGate
 from sitl.vehicle.control_channel import ControlChannel
 from sitl.vehicle.control_requests import ControlRequests
 from sitl.vehicle.fault_schedule import FaultSchedule
 from sitl.vehicle.live_truth import LiveTruth, LiveTruthError
-from sitl.vehicle.lockstep_gate import LockstepGate
 from sitl.vehicle.run_end import RunEnd
 from sitl.vehicle.trajectory_log import TrajectoryLog
 from sitl.vehicle.truth import TruthRecord, TruthWriter
