@@ -7,7 +7,7 @@ import functools
 import hashlib
 import itertools
 import math
-from collections.abc import Callable
+from collections.abc import AsyncGenerator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +106,7 @@ async def test_free_running_frames_and_a_client_that_leaves(tmp_path: Path, inst
             source = open_frame_source(f"sitl://127.0.0.1:{5600 + instance}")
             times = []
             frames = source.frames()
+            assert isinstance(frames, AsyncGenerator)  # a stream that closes when asked (its finally runs)
             try:
                 async for frame in frames:
                     times.append(frame.t_capture_s)
