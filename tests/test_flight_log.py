@@ -63,7 +63,7 @@ def test_every_kind_the_recorder_writes_itself_is_in_the_schema() -> None:
 def test_decisions_read_typed_and_kinds_in_log_order_from_the_recorders_own_records(tmp_path: Path) -> None:
     from companion.guidance.landing import CommandKind, Decision, LandingPhase
     from companion.guidance.vehicle_state import VehicleState
-    from companion.guidance.vocabulary import DecisionEvent
+    from companion.guidance.vocabulary import DecisionEvent, DecisionSource
     from companion.perception.selection import Target
     from companion.vehicle.link import Setpoint
 
@@ -83,14 +83,27 @@ def test_decisions_read_typed_and_kinds_in_log_order_from_the_recorders_own_reco
     recorder.close()
     log = FlightLog.read(tmp_path)
     first, landing = log.decisions()
-    assert (first.t_s, first.kind, first.phase, first.source) == (3.0, "setpoint", "approach", "frame")
+    assert (first.t_s, first.kind, first.phase) == (3.0, CommandKind.SETPOINT, LandingPhase.APPROACH)
+    assert first.source is DecisionSource.FRAME
     assert first.target == {"north_m": 4.0, "east_m": 5.0, "radius_m": 2.5, "track_id": 7}
     assert first.setpoint == {"north_m": 4.0, "east_m": 5.0, "down_m": -20.0, "yaw_deg": 90.0}
     assert first.state is not None
     assert first.state["north_m"] == 1.0
-    assert (landing.kind, landing.setpoint, landing.reason) == ("land", None, "land on zone 7")
+    assert (landing.kind, landing.setpoint, landing.reason) == (CommandKind.LAND, None, "land on zone 7")
     assert (first.event, landing.event) == (DecisionEvent.APPROACH, DecisionEvent.LAND)
     kinds = [kind for kind, _ in log.tagged()]
     assert kinds == [RecordKind.HEADER, RecordKind.DECISION, RecordKind.COMMAND, RecordKind.DECISION]  # not the new one
     assert [kind for kind, _ in log.tagged(RecordKind.COMMAND, RecordKind.DECISION)] == kinds[1:]
     assert len(log.records) == 5
+
+
+def test_a_decision_naming_an_unknown_source_is_named_with_its_time(tmp_path: Path) -> None:
+    write_flight(tmp_path, {"schema_version": SCHEMA_VERSION})
+    decision = {"kind": "hold", "phase": "failsafe", "reason": "why"}
+    with (tmp_path / "flight.jsonl").open("a") as f:
+        f.write(
+            json.dumps({"t_s": 13.0, "kind": "decision", "decision": decision, "source": "x", "state": None}) + "\n"
+        )
+    log = FlightLog.read(tmp_path)
+    with pytest.raises(FlightLogError, match=r"decision at t = 13.0 s: 'x' is not a valid DecisionSource"):
+        log.decisions()

@@ -260,8 +260,20 @@ class FlightLog:
                 yield kind, record
 
     def decisions(self) -> list[DecisionRecord]:
-        """Every decision, typed, in order."""
-        return [DecisionRecord.from_record(r) for r in self.of(RecordKind.DECISION)]
+        """Every decision, typed, in order.
+
+        Raises
+        ------
+        FlightLogError
+            A decision names a command, phase, source or event this reader does not know (the line's time says which).
+        """
+        typed = []
+        for record in self.of(RecordKind.DECISION):
+            try:
+                typed.append(DecisionRecord.from_record(record))
+            except ValueError as exc:
+                raise FlightLogError(f"{self.path}: the decision at t = {record.get('t_s')} s: {exc}") from None
+        return typed
 
     @property
     def config(self) -> dict[str, Any]:
