@@ -21,6 +21,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from companion.app.height_pair import (
     ground_homography,
@@ -30,16 +31,50 @@ from companion.app.height_pair import (
     photo_meta,
     read_frame,
 )
-from companion.perception.config import MotionHeightConfig
+from companion.perception.config import MotionHeightConfig, OccupancyConfig, load_perception_config
+from companion.perception.density import OnnxDensityModel
 from companion.perception.motion_height import CELL_PX, HeightState
+from models.eval.real import occupied_cells, tiled_density
 
 FLAT = ("lawn", "asphalt")
 STANDING = ("tree", "car", "building")
+DENSITY_GSD_M_PER_PX = 0.045
+"""The finer of the two scales the real-ground checks run at (models/eval/real.py), the search's ground sampling."""
 COLOURS = {"lawn": (0, 255, 0), "asphalt": (255, 255, 0), "tree": (0, 128, 255), "car": (255, 0, 255)}
 
 
-def score_pair(source: Path, pair: dict[str, Any], width_px: int, overlays: Path | None) -> dict[str, dict[str, int]]:
-    """Cells per class of one pair: labelled and seen by both, flagged, flat, unknown."""
+def density_occupied(
+    model: OnnxDensityModel,
+    occupancy: OccupancyConfig,
+    frame_bgr: npt.NDArray[np.uint8],
+    gsd_m_per_px: float,
+    cells: tuple[int, int],
+) -> npt.NDArray[np.bool_]:
+    """The density map's occupied cells of a frame (no dilation), on the height map's grid ``cells`` (rows, cols):
+    the frame run at the finest ground sampling distance the models are checked at (:data:`DENSITY_GSD_M_PER_PX`), in
+    tiles of the model's input size (:func:`models.eval.real.tiled_density`)."""
+    scale = min(1.0, gsd_m_per_px / DENSITY_GSD_M_PER_PX)
+    h, w = frame_bgr.shape[:2]
+    small = np.asarray(
+        cv2.resize(frame_bgr, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA),
+        np.uint8,
+    )
+    occupied = occupied_cells(tiled_density(model, small), occupancy).astype(np.uint8)
+    rows, cols = cells
+    return np.asarray(cv2.resize(occupied, (cols, rows), interpolation=cv2.INTER_NEAREST) > 0, np.bool_)
+
+
+def score_pair(
+    source: Path,
+    pair: dict[str, Any],
+    width_px: int,
+    overlays: Path | None,
+    models: dict[str, OnnxDensityModel] | None = None,
+    occupancy: OccupancyConfig | None = None,
+) -> dict[str, dict[str, int]]:
+    """Cells per class of one pair: labelled and seen by both, flagged, flat, unknown; with ``models``, per model the
+    cells its density map calls occupied (``density:NAME``) and those the fused map does (``fused:NAME``: occupied or
+    above the ground, as ``perception.motion_height.fuse`` makes them)."""
     a_bgr, b_bgr = read_frame(source / pair["a"], width_px), read_frame(source / pair["b"], width_px)
     a = np.asarray(cv2.cvtColor(a_bgr, cv2.COLOR_BGR2GRAY), np.uint8)
     b = np.asarray(cv2.cvtColor(b_bgr, cv2.COLOR_BGR2GRAY), np.uint8)
@@ -56,6 +91,12 @@ def score_pair(source: Path, pair: dict[str, Any], width_px: int, overlays: Path
         None,
     )
     height = pair_height_map(a, b, geometry, H, MotionHeightConfig(enabled=True))
+    occupied = {
+        name: density_occupied(
+            model, occupancy or OccupancyConfig(), a_bgr, geometry.altitude_m / geometry.focal_px, height.state.shape
+        )
+        for name, model in (models or {}).items()
+    }
     h, w = a.shape
     seen = cv2.warpPerspective(np.full_like(b, 255), H, (w, h), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
     rows, cols = height.state.shape
@@ -72,6 +113,9 @@ def score_pair(source: Path, pair: dict[str, Any], width_px: int, overlays: Path
         c["flagged"] += int((height.not_ground & cells).sum())
         c["flat"] += int(((height.state == HeightState.GROUND) & cells).sum())
         c["unknown"] += int(((height.state == HeightState.UNKNOWN) & cells).sum())
+        for name, by_density in occupied.items():
+            c[f"density:{name}"] = c.get(f"density:{name}", 0) + int((by_density & cells).sum())
+            c[f"fused:{name}"] = c.get(f"fused:{name}", 0) + int(((by_density | height.not_ground) & cells).sum())
         cv2.rectangle(picture, (x0, y0), (x1, y1), COLOURS.get(region["class"], (255, 255, 255)), 2)
         cv2.putText(picture, region["class"], (x0 + 3, y0 + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
     if overlays is not None:
@@ -87,7 +131,16 @@ def main() -> int:
     parser.add_argument("--labels", type=Path, default=Path("models/eval/data/height_pairs.json"))
     parser.add_argument("--out", type=Path, default=Path("models/eval/results/height_pairs"))
     parser.add_argument("--overlays", type=Path, default=Path("docs/images/height"))
+    parser.add_argument(
+        "--density",
+        nargs="*",
+        default=[],
+        metavar="NAME=MODEL.onnx",
+        help="density models whose occupied cells are counted on the labels, alone and fused with the height map",
+    )
     args = parser.parse_args()
+    models = {spec.split("=", 1)[0]: OnnxDensityModel(spec.split("=", 1)[1]) for spec in args.density}
+    occupancy = load_perception_config(Path("mission_configs/perception.yaml")).occupancy
     labels = json.loads(args.labels.read_text(encoding="utf-8"))
     source = (args.labels.parent / labels["source"]).resolve()
     if not source.is_dir():
@@ -96,9 +149,9 @@ def main() -> int:
         sys.stderr.write(f"error: {labels['source']} is not here (the photographs are not in the repository)\n")
         return 2
     per_pair = {}
-    total: dict[str, dict[str, int]] = defaultdict(lambda: {"cells": 0, "flagged": 0, "flat": 0, "unknown": 0})
+    total: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     for pair in labels["pairs"]:
-        counts = score_pair(source, pair, int(labels["width_px"]), args.overlays)
+        counts = score_pair(source, pair, int(labels["width_px"]), args.overlays, models, occupancy)
         per_pair[pair["a"]] = counts
         for name, c in counts.items():
             for key, value in c.items():
@@ -116,6 +169,22 @@ def main() -> int:
             f"| {name} | {kind} | {c['cells']} | {100 * c['flagged'] / n:.1f} % | {100 * c['flat'] / n:.1f} % "
             f"| {100 * c['unknown'] / n:.1f} % |"
         )
+    if models:
+        lines += [
+            "",
+            "Occupied by the density map alone and fused with the height map (occupied or above the ground), on the "
+            f"same cells, the frame run at {DENSITY_GSD_M_PER_PX} m/px or coarser:",
+            "",
+            "| class | kind | " + " | ".join(f"{m}: density alone | {m}: fused" for m in models) + " |",
+            "|---|---|" + "---|---|" * len(models),
+        ]
+        for name, c in sorted(total.items()):
+            kind = "flat" if name in FLAT else "standing" if name in STANDING else "other"
+            n = max(c["cells"], 1)
+            shares = " | ".join(
+                f"{100 * c[f'density:{m}'] / n:.1f} % | {100 * c[f'fused:{m}'] / n:.1f} %" for m in models
+            )
+            lines.append(f"| {name} | {kind} | {shares} |")
     lines.append("")
     for pair_name, counts in per_pair.items():
         shares = ", ".join(f"{k} {100 * c['flagged'] / max(c['cells'], 1):.0f} %" for k, c in sorted(counts.items()))
