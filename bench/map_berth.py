@@ -94,10 +94,10 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
         suns[str(folder)] = round(sun_deg, 1)
         sun_band = f"sun below {LOW_SUN_DEG:g} deg" if sun_deg < LOW_SUN_DEG else f"sun {LOW_SUN_DEG:g} deg or higher"
         flight = FlightLog.read(folder / "flight")
-        header = flight.first(RecordKind.HEADER)
+        header = flight.header
         if header is None:
             raise SystemExit(f"{folder}: no flight log header")
-        config = config_from_header(header["config"])
+        config = config_from_header(header.config)
         pipeline = SlzPipeline.from_config(config.perception, fence_ne_m=config.geofence.polygon_ne_m)
         area = np.asarray(config.perception.zones.landing_area_ne_m or config.geofence.polygon_ne_m, np.float64)
         truth_header, records = read_truth(folder / "truth.jsonl")

@@ -53,7 +53,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     import hashlib
 
     from companion.app.flight import FlightApp
-    from companion.app.flight_log import SCHEMA_VERSION, RecordKind
+    from companion.app.flight_log import SCHEMA_VERSION, FlightHeader, RecordKind
     from companion.app.mission import FrameFormat, OperatingMode, validate_for_flight
     from companion.app.recorder import FlightRecorder, prune_flights
     from companion.camera.frames import CameraError
@@ -138,16 +138,15 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     try:
         model_path = config.perception.model.path
         model_sha256 = hashlib.sha256(model_path.read_bytes()).hexdigest() if model_path.is_file() else None
-        recorder.write(
-            RecordKind.HEADER,
-            None,
-            schema_version=SCHEMA_VERSION,
+        header = FlightHeader(
             config=config.model_dump(mode="json"),
+            schema_version=SCHEMA_VERSION,
             model=str(model_path),
             model_sha256=model_sha256,
             model_validated_real_imagery=validation is not None and validation.real_imagery,
             version=__version__,
         )
+        recorder.write(RecordKind.HEADER, None, **header.fields())
         return asyncio.run(fly())
     except (VehicleError, CameraError, LockstepError) as exc:
         recorder.write(RecordKind.ERROR, None, where="fly", error=str(exc))

@@ -118,8 +118,8 @@ def estimate(flight_dir: Path) -> LatencyEstimate:
         log = FlightLog.read(flight_dir)
     except FlightLogError as exc:
         raise LatencyError(str(exc)) from None
-    header = log.first(RecordKind.HEADER)
-    configured_s = float(header["config"]["camera"]["latency_s"]) if header else 0.0
+    header = log.header
+    configured_s = float(header.config["camera"]["latency_s"]) if header else 0.0
     paths = {int(r["seq"]): flight_dir / str(r["path"]) for r in log.of(RecordKind.FRAME)}
     results = sorted((r for r in log.of(RecordKind.FRAME_RESULT) if int(r["seq"]) in paths), key=lambda r: r["t_s"])
     if len(results) < MIN_PAIRS + 1:

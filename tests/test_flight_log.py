@@ -107,3 +107,26 @@ def test_a_decision_naming_an_unknown_source_is_named_with_its_time(tmp_path: Pa
     log = FlightLog.read(tmp_path)
     with pytest.raises(FlightLogError, match=r"decision at t = 13.0 s: 'x' is not a valid DecisionSource"):
         log.decisions()
+
+
+def test_the_header_is_written_and_read_typed_and_an_older_one_reads_with_defaults(tmp_path: Path) -> None:
+    from companion.app.flight_log import FlightHeader
+
+    written = FlightHeader(
+        {"mode": "dry_run"}, SCHEMA_VERSION, "models/density/slz_yolox.onnx", "ab" * 32, True, "9.9.9"
+    )
+    recorder = FlightRecorder(tmp_path / "new")
+    recorder.write(RecordKind.HEADER, None, **written.fields())
+    recorder.close()
+    assert FlightLog.read(tmp_path / "new").header == written
+    assert written.mode == "dry_run"
+    write_flight(tmp_path / "old", {})  # a header of config alone, as the first writers wrote it
+    old = FlightLog.read(tmp_path / "old")
+    assert old.header == FlightHeader({"mode": "fly"})
+    assert (old.header.model, old.header.version, old.header.model_validated_real_imagery) == (None, None, False)
+    (tmp_path / "none").mkdir()
+    (tmp_path / "none" / "flight.jsonl").write_text(json.dumps({"t_s": None, "kind": "start", "mode": "fly"}) + "\n")
+    headless = FlightLog.read(tmp_path / "none")
+    assert headless.header is None
+    with pytest.raises(FlightLogError, match="no header record"):
+        headless.require_header()

@@ -182,6 +182,49 @@ class DecisionRecord:
         return sum(1 for c in self.zone_changes if c.change in ZONE_CHOICES)
 
 
+@dataclass(frozen=True)
+class FlightHeader:
+    """A flight log's first record, typed: the schema version, the mission config the flight ran with (as JSON), the
+    density model file and its SHA-256, whether that model carries a real-imagery validation record, and the
+    software's version. Written by ``slz fly`` (:meth:`write`) and read in one place (:attr:`FlightLog.header`)."""
+
+    config: dict[str, Any]
+    schema_version: int = 1
+    model: str | None = None
+    model_sha256: str | None = None
+    model_validated_real_imagery: bool = False
+    version: str | None = None
+
+    @classmethod
+    def from_record(cls, record: dict[str, Any]) -> FlightHeader:
+        """From a checked ``header`` record; fields an older writer did not write take their defaults."""
+        return cls(
+            dict(record["config"]),
+            int(record.get("schema_version", 1)),
+            None if record.get("model") is None else str(record["model"]),
+            None if record.get("model_sha256") is None else str(record["model_sha256"]),
+            bool(record.get("model_validated_real_imagery", False)),
+            None if record.get("version") is None else str(record["version"]),
+        )
+
+    def fields(self) -> dict[str, Any]:
+        """The record's fields, as the recorder writes them (``recorder.write(RecordKind.HEADER, None, **fields)``)."""
+        return {
+            "schema_version": self.schema_version,
+            "config": self.config,
+            "model": self.model,
+            "model_sha256": self.model_sha256,
+            "model_validated_real_imagery": self.model_validated_real_imagery,
+            "version": self.version,
+        }
+
+    @property
+    def mode(self) -> str | None:
+        """The operating mode the flight ran in (fly, dry_run; None in a log from before modes)."""
+        mode = self.config.get("mode")
+        return None if mode is None else str(mode)
+
+
 class FlightLogError(SlzError):
     """A flight log does not follow its schema (which file, which line, which field)."""
 
@@ -276,13 +319,22 @@ class FlightLog:
         return typed
 
     @property
+    def header(self) -> FlightHeader | None:
+        """The header, typed (None in a log without one: a flight that never started)."""
+        record = self.first(RecordKind.HEADER)
+        return None if record is None else FlightHeader.from_record(record)
+
+    def require_header(self) -> FlightHeader:
+        """The header, typed (raises :class:`FlightLogError` naming the log when there is none)."""
+        header = self.header
+        if header is None:
+            raise FlightLogError(f"{self.path}: no header record (the config the flight ran with)")
+        return header
+
+    @property
     def config(self) -> dict[str, Any]:
         """The header's full mission config (raises :class:`FlightLogError` when there is no header)."""
-        header = self.first(RecordKind.HEADER)
-        if header is None:
-            raise FlightLogError(f"{self.path}: no header record (config)")
-        config: dict[str, Any] = header["config"]
-        return config
+        return self.require_header().config
 
     @property
     def outcome(self) -> dict[str, Any]:

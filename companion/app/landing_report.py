@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
+from companion.app.mission import OperatingMode
 from companion.app.timeline import flight_events
 from companion.guidance.landing import ENDING_KINDS, CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource
@@ -80,8 +81,8 @@ def flight_ending(log: FlightLog) -> FlightEnding:
     outcome = end["outcome"]
     if outcome.get("link_lost"):
         return FlightEnding.LINK_LOST
-    header = log.first(RecordKind.HEADER) or {}
-    if (header.get("config") or {}).get("mode") == "dry_run":
+    header = log.header
+    if header is not None and header.mode == OperatingMode.DRY_RUN:
         return FlightEnding.DRY_RUN
     decisions = log.decisions()
     supervision = [str(r.get("event")) for r in log.of(RecordKind.SUPERVISION)]
@@ -142,7 +143,7 @@ def _fallback_site(log: FlightLog, config: dict[str, Any], target: dict[str, Any
 
 def landing_report(log: FlightLog) -> dict[str, Any]:
     """The flight's landing report (see the module docstring), a JSON-able mapping."""
-    header = log.first(RecordKind.HEADER) or {}
+    header = log.header
     end = log.first(RecordKind.END)
     outcome = end["outcome"] if end else {}
     records = log.of(RecordKind.DECISION)
@@ -162,17 +163,17 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
     for record in records[: (land_index + 1) if land_index is not None else len(records)]:
         if record.get("observed") and record["source"] == DecisionSource.FRAME:
             observed = record["observed"]
-    config = header.get("config") or {}
-    mode = config.get("mode")
+    config = header.config if header is not None else {}
+    mode = header.mode if header is not None else None
     ending = flight_ending(log)
     return {
         "version": VERSION,
         "outcome": ending.value,
         "outcome_says": ENDING_WORDS[ending],
         "mode": mode,
-        "software": header.get("version"),
-        "model": header.get("model"),
-        "model_sha256": header.get("model_sha256"),
+        "software": header.version if header is not None else None,
+        "model": header.model if header is not None else None,
+        "model_sha256": header.model_sha256 if header is not None else None,
         "ended_in": outcome.get("phase"),
         "reason": outcome.get("reason"),
         "failsafes": outcome.get("failsafes", []),
@@ -182,7 +183,7 @@ def landing_report(log: FlightLog) -> dict[str, Any]:
             "t_s": land["t_s"],
             "north_m": land["state"]["north_m"] if land.get("state") else None,
             "east_m": land["state"]["east_m"] if land.get("state") else None,
-            "sent": mode != "dry_run",
+            "sent": mode != OperatingMode.DRY_RUN,
         },
         "touchdown": None
         if not outcome.get("touchdown_ne_m")

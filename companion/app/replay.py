@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from companion.app.flight import landing_guidance
-from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
+from companion.app.flight_log import FlightHeader, FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MissionConfig, with_fallback_sites, with_fence_ne_m
 from companion.app.recorder import plain
 from companion.errors import SlzError
@@ -118,11 +118,11 @@ def config_from_header(raw: object) -> MissionConfig:
     return config
 
 
-def flight_config(flight: FlightLog, header: dict[str, Any]) -> MissionConfig:
+def flight_config(flight: FlightLog, header: FlightHeader) -> MissionConfig:
     """The config the flight ran with: its header's (:func:`config_from_header`), with a fence given in latitude and
     longitude as the flight projected it (its ``fence`` record) and the fallback sites it used, the autopilot's rally
     points among them (its ``fallback_sites`` record)."""
-    config = config_from_header(header["config"])
+    config = config_from_header(header.config)
     fence = flight.first(RecordKind.FENCE)
     if fence is not None:
         config = with_fence_ne_m(config, [(float(n), float(e)) for n, e in fence["polygon_ne_m"]])
@@ -144,7 +144,7 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
         flight = FlightLog.read(log_dir)
     except FlightLogError as exc:
         raise ReplayError(str(exc)) from None
-    header = flight.first(RecordKind.HEADER)
+    header = flight.header
     if header is None:
         raise ReplayError(f"{log_dir / 'flight.jsonl'}: no header record (config)")
     config = flight_config(flight, header)

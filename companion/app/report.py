@@ -86,7 +86,7 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
 
 def summarize(log: FlightLog) -> dict[str, Any]:
     """The outcome, counters, latency and the decision timeline (phase changes, failsafes, commands) of a log."""
-    header = log.first(RecordKind.HEADER)
+    header = log.header
     start = log.first(RecordKind.START) or {}
     end = log.first(RecordKind.END)
     decisions = log.decisions()
@@ -95,9 +95,9 @@ def summarize(log: FlightLog) -> dict[str, Any]:
     events = flight_events(log)
     outcome = end["outcome"] if end else None
     return {
-        "version": header.get("version") if header else None,
-        "model": header.get("model") if header else None,
-        "model_sha256": header.get("model_sha256") if header else None,
+        "version": header.version if header else None,
+        "model": header.model if header else None,
+        "model_sha256": header.model_sha256 if header else None,
         "mode": start.get("mode"),
         "vehicle": start.get("vehicle"),
         "camera": start.get("camera"),
@@ -429,7 +429,7 @@ def build_flight_report(
         flight = FlightLog.read(log)
     except FlightLogError as exc:
         raise ReportError(str(exc)) from None
-    header = flight.first(RecordKind.HEADER)
+    header = flight.header
     if header is None:
         raise ReportError(f"{log}: no header record (the config the flight ran with)")
     config = flight_config(flight, header)

@@ -19,7 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.app.flight_log import FlightLog, RecordKind
+from companion.app.flight_log import FlightLog
 from companion.app.landing_report import landing_report
 from companion.app.replay import flight_config, replay
 from companion.app.report import camera_views, tracks_at_landing
@@ -92,7 +92,7 @@ def descent_figure(run_dir: Path, log: FlightLog, top_view_path: Path, descent_t
     ``descent_t_s``; ``log``: the flight's log), with the zones tracked then (cyan, with their ids) and the target
     (yellow), beside the top view; None without a saved frame."""
     flight_dir = run_dir / "flight"
-    header = log.first(RecordKind.HEADER)
+    header = log.header
     top = cv2.imread(str(top_view_path), cv2.IMREAD_COLOR)
     if header is None or top is None:
         return None
