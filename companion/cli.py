@@ -94,7 +94,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     async def fly() -> int:
         try:
             source = open_frame_source(
-                config.camera.url, vehicle_time_s=link.clock.now_s, latency_s=config.camera.latency_s
+                config.camera.url, vehicle_time_s=link.telemetry.clock.now_s, latency_s=config.camera.latency_s
             )
             app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=args.timeout)
             if view is not None:

@@ -70,7 +70,7 @@ async def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under
     link = MavsdkVehicleLink(config.vehicle.url, config.vehicle.telemetry_rate_hz, config.vehicle.system_id)
     assert config.simulator.lockstep_url is not None
     lockstep = LockstepClient(config.simulator.lockstep_url, config.simulator.tick_timeout_s)
-    source = open_frame_source(config.camera.url, vehicle_time_s=link.clock.now_s)
+    source = open_frame_source(config.camera.url, vehicle_time_s=link.telemetry.clock.now_s)
     app = FlightApp(config, link, source, pipeline, recorder, lockstep, wall_limit_s=600.0, wall_clock=clock)
     clock.app = app
     loop = asyncio.get_running_loop()

@@ -24,7 +24,8 @@ from companion.guidance.landing import LandingPhase
 from companion.perception.config import PerceptionConfig
 from companion.perception.pipeline import SlzPipeline
 from companion.vehicle.clock import VehicleClock
-from companion.vehicle.link import FlightMode, Setpoint, VehicleError, VehicleStatus
+from companion.vehicle.ground_messages import GroundMessage
+from companion.vehicle.link import FlightMode, LinkResult, Setpoint, VehicleError, VehicleStatus
 from companion.vehicle.pose_buffer import PoseBuffer
 
 pytestmark = pytest.mark.unit
@@ -32,8 +33,39 @@ pytestmark = pytest.mark.unit
 ALTITUDE_M = 20.0
 
 
+class FakeOffboard:
+    """The fake's offboard part: each call recorded on the link, OFFBOARD accepted at once."""
+
+    def __init__(self, link: FakeLink) -> None:
+        self.link = link
+
+    async def start(self, setpoint: Setpoint) -> None:
+        self.link.commands.append(("start_offboard", setpoint))
+        self.link.status.mode = FlightMode.OFFBOARD  # the autopilot accepts
+
+    async def set_setpoint(self, setpoint: Setpoint) -> None:
+        self.link.commands.append(("setpoint", setpoint))
+
+    async def stop(self) -> None:
+        self.link.commands.append(("stop_offboard", None))
+
+    def stop_blocking(self) -> None:
+        self.link.stopped_from_thread.set()
+
+
+class FakeGround:
+    """The fake's ground part: each message kept as a ground station would see it (its name and fields)."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, dict[str, Any]]] = []
+
+    async def send(self, message: GroundMessage) -> None:
+        self.sent.append((message.message_name, dict(message.fields())))
+
+
 class FakeLink:
-    """A VehicleLink that records every command; the test moves the vehicle and sets its mode."""
+    """A VehicleLink that records every command; the test moves the vehicle and sets its mode. It is its own
+    telemetry, action, mission and params parts; its offboard and ground parts record on it."""
 
     name = "fake"
     system_id = 1
@@ -43,8 +75,10 @@ class FakeLink:
         self.clock = VehicleClock()
         self.status = VehicleStatus(mode=FlightMode.HOLD, armed=True, in_air=True, last_telemetry_wall_s=None)
         self.commands: list[tuple[str, Any]] = []
-        self.mavlink: list[tuple[str, dict[str, Any]]] = []
         self.stopped_from_thread = threading.Event()
+        self.telemetry = self.action = self.mission = self.params = self
+        self.offboard = FakeOffboard(self)
+        self.ground = FakeGround()
 
     def at(self, t_s: float, north_m: float = 0.0, east_m: float = 0.0, altitude_m: float = ALTITUDE_M) -> None:
         """A pose sample at vehicle time ``t_s`` (level, facing north) and fresh telemetry."""
@@ -58,26 +92,13 @@ class FakeLink:
 
     async def wait_for(self, condition: Callable[[], bool], deadline: float, what: str) -> None:
         if not condition():
-            raise VehicleError(self.name, f"{what} did not happen")
+            raise VehicleError(self.name, f"{what} did not happen", LinkResult.TIMEOUT)
 
     async def arm_and_takeoff(self, altitude_m: float, timeout_s: float) -> None:
         self.commands.append(("arm_and_takeoff", altitude_m))
 
     async def take_off(self, altitude_m: float) -> None:
         self.commands.append(("take_off", altitude_m))
-
-    async def start_offboard(self, setpoint: Setpoint) -> None:
-        self.commands.append(("start_offboard", setpoint))
-        self.status.mode = FlightMode.OFFBOARD  # the autopilot accepts
-
-    async def set_setpoint(self, setpoint: Setpoint) -> None:
-        self.commands.append(("setpoint", setpoint))
-
-    async def stop_offboard(self) -> None:
-        self.commands.append(("stop_offboard", None))
-
-    def stop_offboard_blocking(self) -> None:
-        self.stopped_from_thread.set()
 
     async def land(self) -> None:
         self.commands.append(("land", None))
@@ -101,9 +122,9 @@ class FakeLink:
         """None uploaded."""
         return []
 
-    async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
-        """Kept, as a ground station would see them."""
-        self.mavlink.append((name, fields))
+    async def read_all(self, timeout_s: float = 15.0) -> dict[str, float] | None:
+        """No parameters."""
+        return None
 
     async def close(self) -> None:
         """Nothing to release."""
@@ -184,13 +205,21 @@ class PilotRightAfterOffboardLink(FakeLink):
         super().__init__()
         self.requested = asyncio.Event()
         self.ack = asyncio.Event()
+        self.offboard = PilotRightAfterOffboard(self)
 
-    async def start_offboard(self, setpoint: Setpoint) -> None:
-        self.commands.append(("start_offboard", setpoint))
-        self.requested.set()
-        await self.ack.wait()
-        self.status.offboard_entries += 1  # the report of OFFBOARD ...
-        self.status.mode = FlightMode.POSCTL  # ... and the pilot's, read together
+
+class PilotRightAfterOffboard(FakeOffboard):
+    """OFFBOARD acknowledged when the test says, reported together with the pilot's mode."""
+
+    link: PilotRightAfterOffboardLink
+
+    async def start(self, setpoint: Setpoint) -> None:
+        link = self.link
+        link.commands.append(("start_offboard", setpoint))
+        link.requested.set()
+        await link.ack.wait()
+        link.status.offboard_entries += 1  # the report of OFFBOARD ...
+        link.status.mode = FlightMode.POSCTL  # ... and the pilot's, read together
 
 
 async def test_a_pilot_who_takes_over_while_offboard_starts_gets_the_vehicle_and_keeps_it(
@@ -265,14 +294,14 @@ async def test_telemetry_silent_past_its_limit_is_a_lost_link_and_nothing_more_i
 async def test_a_stalled_decision_loop_stops_offboard_from_the_watchdog_thread(app_and_link: Any) -> None:
     app, link = app_and_link
     await hand_over(app, link)
-    assert app.commands.offboard
+    assert app.commands.in_offboard
     app.watchdog.clock = lambda: time.monotonic() + 10.0  # the event loop has not beaten for 10 s
     app.watchdog.start()
     try:
         assert link.stopped_from_thread.wait(timeout=5.0)  # within a quarter of the limit, on a free machine
     finally:
         app.watchdog.stop()
-    assert not app.commands.offboard
+    assert not app.commands.in_offboard
     assert not app.commands.commanding
     assert not app.watchdog.check()  # disengaged: once is enough
 
@@ -484,7 +513,7 @@ class SilentLink(FakeLink):
         except asyncio.CancelledError:
             self.connect_cancelled = True
             raise
-        raise VehicleError(self.name, f"no autopilot answered within {timeout_s:g} s")
+        raise VehicleError(self.name, f"no autopilot answered within {timeout_s:g} s", LinkResult.TIMEOUT)
 
 
 async def test_a_stop_while_the_vehicle_is_not_yet_found_ends_the_run_without_waiting_out_the_connect(
@@ -528,7 +557,7 @@ async def test_every_fallback_site_chosen_is_said_to_the_ground_station_even_wit
     app.outcome.phase = LandingPhase.APPROACH.value
     await tick(app, link, 31.5)
     assert app.guidance.phase is LandingPhase.APPROACH
-    texts = [fields["text"] for name, fields in link.mavlink if name == "STATUSTEXT"]
+    texts = [fields["text"] for name, fields in link.ground.sent if name == "STATUSTEXT"]
     assert "fallback site north_lawn" in "".join(texts), texts  # (chunked at 50 characters)
 
 

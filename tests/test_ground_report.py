@@ -3,49 +3,52 @@ marked in a dry run, at a bounded rate, and never an exception into the flight l
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
 import pytest
 
-from companion.app.ground_report import GroundReport, landing_target_fields
+from companion.app.ground_report import GroundReport, landing_target
 from companion.guidance.landing import LandingPhase
 from companion.guidance.vehicle_state import VehicleState
 from companion.perception.selection import Target
-from companion.vehicle.link import VehicleError
+from companion.vehicle.ground_messages import GroundMessage, StatusText
+from companion.vehicle.link import LinkResult, VehicleError
 from companion.vehicle.statustext import statustext_chunks
 
 pytestmark = pytest.mark.unit
 
 
-class RecordingLink:
-    """Only what GroundReport uses of a vehicle link: ``send_mavlink``; refuses after ``fail_after`` messages."""
+class RecordingGround:
+    """The vehicle link's ground part, recording each message as its name and its fields as they travel (JSON);
+    refuses after ``fail_after`` messages."""
 
     def __init__(self, fail_after: int | None = None) -> None:
         self.sent: list[tuple[str, dict[str, Any]]] = []
         self.fail_after = fail_after
 
-    async def send_mavlink(self, name: str, fields: dict[str, Any]) -> None:
+    async def send(self, message: GroundMessage) -> None:
         if self.fail_after is not None and len(self.sent) >= self.fail_after:
-            raise VehicleError("fake", "link down")
-        self.sent.append((name, fields))
+            raise VehicleError("fake", "link down", LinkResult.REFUSED)
+        self.sent.append((message.message_name, json.loads(json.dumps(message.fields()))))
 
 
-def report(dry_run: bool = False, fail_after: int | None = None) -> tuple[GroundReport, RecordingLink]:
-    link = RecordingLink(fail_after)
-    return GroundReport(link, dry_run), link  # type: ignore[arg-type]
+def report(dry_run: bool = False, fail_after: int | None = None) -> tuple[GroundReport, RecordingGround]:
+    link = RecordingGround(fail_after)
+    return GroundReport(link, dry_run), link
 
 
 def test_long_texts_come_in_chunks_short_ones_whole() -> None:
-    assert statustext_chunks("short", 6, 9) == [{"severity": 6, "text": "short", "id": 0, "chunk_seq": 0}]
+    assert statustext_chunks("short", 6, 9) == [StatusText(severity=6, text="short", id=0, chunk_seq=0)]
     text = "x" * 120
     chunks = statustext_chunks(text, 2, 9)
-    assert [len(c["text"]) for c in chunks] == [50, 50, 20]
-    assert {c["id"] for c in chunks} == {9}
-    assert [c["chunk_seq"] for c in chunks] == [0, 1, 2]
-    assert [len(c["text"]) for c in statustext_chunks("y" * 100, 2, 9)] == [50, 50, 0]  # the empty terminator
-    assert statustext_chunks("héllo", 6, 1)[0]["text"] == "h?llo"
-    assert sum(len(c["text"]) for c in statustext_chunks("z" * 1000, 6, 1)) == 200
+    assert [len(c.text) for c in chunks] == [50, 50, 20]
+    assert {c.id for c in chunks} == {9}
+    assert [c.chunk_seq for c in chunks] == [0, 1, 2]
+    assert [len(c.text) for c in statustext_chunks("y" * 100, 2, 9)] == [50, 50, 0]  # the empty terminator
+    assert statustext_chunks("héllo", 6, 1)[0].text == "h?llo"
+    assert sum(len(c.text) for c in statustext_chunks("z" * 1000, 6, 1)) == 200
 
 
 @pytest.mark.parametrize(
@@ -108,7 +111,9 @@ async def test_a_refused_send_is_counted_never_raised() -> None:
 
 
 def test_landing_target_names_its_frame_and_fields() -> None:
-    fields = landing_target_fields(1.5, Target(0.0, 0.0, 1.0, None), VehicleState(1.5, 0.0, 0.0, -10.0, 0.0), False)
+    message = landing_target(1.5, Target(0.0, 0.0, 1.0, None), VehicleState(1.5, 0.0, 0.0, -10.0, 0.0), False)
+    fields = json.loads(json.dumps(message.fields()))  # as it travels
+    assert message.message_name == "LANDING_TARGET"
     assert fields["time_usec"] == 1_500_000
     assert fields["type"] == 3
     assert fields["q"] == [1.0, 0.0, 0.0, 0.0]

@@ -63,7 +63,9 @@ async def test_the_link_takes_the_autopilots_system_id_or_refuses_one_that_diffe
             try:
                 await link.connect(20.0)
                 deadline = time.monotonic() + 20.0
-                await link.wait_for(lambda: bool(link.received.get("LOCAL_POSITION_NED")), deadline, "positions")
+                await link.telemetry.wait_for(
+                    lambda: bool(link.telemetry.received.get("LOCAL_POSITION_NED")), deadline, "positions"
+                )
                 return link.system_id
             finally:
                 await link.close()

@@ -18,7 +18,7 @@ from companion.config import ConfigError, validate_config
 from companion.guidance.config import WarningConfig
 from companion.guidance.landing import CommandKind, Decision, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent
-from companion.vehicle.link import VehicleError, VehicleLink
+from companion.vehicle.link import Action, LinkResult, VehicleError
 
 pytestmark = pytest.mark.unit
 
@@ -42,7 +42,7 @@ LANDING = [
 
 
 class ActuatorLink:
-    """The one call the warning makes of a vehicle link; refuses when told to."""
+    """The one call the warning makes of a vehicle link's action part; refuses when told to."""
 
     def __init__(self, refuse: bool = False) -> None:
         self.calls: list[tuple[int, float]] = []
@@ -50,14 +50,15 @@ class ActuatorLink:
 
     async def set_actuator(self, index: int, value: float) -> None:
         if self.refuse:
-            raise VehicleError("udp://test", "actuator 3 to 1 refused: DENIED")
+            raise VehicleError("udp://test", "actuator 3 to 1 refused: DENIED", LinkResult.REFUSED)
         self.calls.append((index, value))
 
 
 async def fly(tmp_path: Path, config: dict[str, Any], dry_run: bool = False, refuse: bool = False) -> ActuatorLink:
     link = ActuatorLink(refuse)
     recorder = FlightRecorder(tmp_path)
-    commands = VehicleCommands(cast(VehicleLink, link), recorder, FlightOutcome(), dry_run)
+    unused = cast(Any, None)  # the warning sends nothing through telemetry or offboard
+    commands = VehicleCommands(unused, cast(Action, link), unused, recorder, FlightOutcome(), dry_run)
     device = WarningDevice(validate_config(WarningConfig, config), commands, recorder)
     for d in LANDING:
         await device.follow(d)

@@ -44,7 +44,8 @@ from companion.camera.sources import open_frame_source
 from companion.perception.density import OnnxDensityModel
 from companion.perception.errors import PerceptionError
 from companion.perception.model_validation import validation_of
-from companion.vehicle.link import FlightMode, VehicleError
+from companion.vehicle.clock import VehicleClock
+from companion.vehicle.link import Action, FlightMode, Params, VehicleError
 from companion.vehicle.mavsdk_link import MavsdkVehicleLink
 
 logger = logging.getLogger(__name__)
@@ -179,31 +180,32 @@ async def check_link(link: MavsdkVehicleLink, config: MissionConfig, limits: Doc
             CheckResult("link", Status.FAIL, str(exc)),
             CheckResult("clock", Status.SKIP, "no link: no vehicle clock"),
         ]
+    telemetry = link.telemetry
     # The streams start a moment after the connection: count from the first sample of each.
     with contextlib.suppress(VehicleError):
-        await link.wait_for(
-            lambda: all(link.received.get(s) for s in (*POSE_STREAMS, *STATE_STREAMS)),
+        await telemetry.wait_for(
+            lambda: all(telemetry.received.get(s) for s in (*POSE_STREAMS, *STATE_STREAMS)),
             time.monotonic() + max(5.0, limits.window_s),
             "the telemetry streams",
         )
-    before = dict(link.received)
+    before = dict(telemetry.received)
     t0 = time.monotonic()
     await asyncio.sleep(limits.window_s)  # a rate is measured over a window of wall time, not waited for
     elapsed = time.monotonic() - t0
-    rates = {s: (link.received.get(s, 0) - before.get(s, 0)) / elapsed for s in POSE_STREAMS}
-    missing_state = [s for s in STATE_STREAMS if not link.received.get(s)]
+    rates = {s: (telemetry.received.get(s, 0) - before.get(s, 0)) / elapsed for s in POSE_STREAMS}
+    missing_state = [s for s in STATE_STREAMS if not telemetry.received.get(s)]
     slow = [s for s, r in rates.items() if r < limits.min_pose_rate_hz]
     rate_text = ", ".join(f"{s} {r:.0f} Hz" for s, r in rates.items())
-    status = link.status
-    detail = f"{link.url}: {rate_text}; mode {status.mode.value}, armed {status.armed}, in air {status.in_air}"
+    status = telemetry.status
+    detail = f"{link.name}: {rate_text}; mode {status.mode.value}, armed {status.armed}, in air {status.in_air}"
     if slow or missing_state or status.mode is FlightMode.UNKNOWN:
         problems = [f"{s} below {limits.min_pose_rate_hz:g} Hz" for s in slow]
         problems += [f"no {s} (heartbeat / extended state)" for s in missing_state]
         results = [CheckResult("link", Status.FAIL, f"{detail}; " + "; ".join(problems))]
     else:
         results = [CheckResult("link", Status.PASS, detail)]
-    spread = link.clock.delay_spread_s(limits.clock_spread_fraction)
-    worst = link.clock.offset_spread_s
+    spread = telemetry.clock.delay_spread_s(limits.clock_spread_fraction)
+    worst = telemetry.clock.offset_spread_s
     if spread is None or worst is None:
         results.append(CheckResult("clock", Status.FAIL, "no stamped telemetry: the vehicle clock is not synchronised"))
     else:
@@ -216,10 +218,11 @@ async def check_link(link: MavsdkVehicleLink, config: MissionConfig, limits: Doc
     return results
 
 
-async def check_camera(config: MissionConfig, link: MavsdkVehicleLink | None, limits: DoctorLimits) -> CheckResult:
-    """Open the camera, read ``limits.frames`` frames within a deadline, check their stamps and their age."""
+async def check_camera(config: MissionConfig, clock: VehicleClock | None, limits: DoctorLimits) -> CheckResult:
+    """Open the camera, read ``limits.frames`` frames within a deadline, check their stamps (on the vehicle's
+    ``clock`` when it is synchronised, else on this computer's) and their age."""
     cam = config.camera
-    clock = link.clock if link is not None and link.clock.synced else None
+    clock = clock if clock is not None and clock.synced else None
     try:
         source = open_frame_source(
             cam.url, vehicle_time_s=clock.now_s if clock else time.monotonic, latency_s=cam.latency_s
@@ -293,12 +296,12 @@ ARDUPILOT_FS_GCS = {  # ArduCopter's GCS failsafe (the companion's heartbeat, wh
 }
 
 
-async def check_failsafe(link: MavsdkVehicleLink) -> CheckResult:
+async def check_failsafe(params_part: Params) -> CheckResult:
     """Read the autopilot's offboard-loss parameters and say what it does if the companion dies in flight.
 
     WARN when the configured action lands (or drops) the vehicle where it is; FAIL when no known parameter answers.
     """
-    params = await link.read_parameters()
+    params = await params_part.read_all()
     if params is None:
         return CheckResult("failsafe", Status.FAIL, "the autopilot's parameter list did not arrive")
     loss_s = params.get("COM_OF_LOSS_T")
@@ -341,7 +344,7 @@ ACTUATOR_ON_S = 2.0
 """How long the bench test keeps the warning device on (wall seconds)."""
 
 
-async def check_actuator(link: MavsdkVehicleLink, config: MissionConfig, on_s: float = ACTUATOR_ON_S) -> CheckResult:
+async def check_actuator(action: Action, config: MissionConfig, on_s: float = ACTUATOR_ON_S) -> CheckResult:
     """The warning device on the bench (``--actuator-test``): its output switched to ``on_value``, held ``on_s``,
     then back to ``off_value``, each through the autopilot (MAV_CMD_DO_SET_ACTUATOR, acknowledged). Whether a siren
     sounded or a strobe flashed is for the person at the bench to say: the check says what the autopilot answered."""
@@ -349,14 +352,14 @@ async def check_actuator(link: MavsdkVehicleLink, config: MissionConfig, on_s: f
     if not w.enabled:
         return CheckResult("actuator", Status.SKIP, "guidance.warning is not enabled in this config")
     try:
-        await link.set_actuator(w.actuator, w.on_value)
+        await action.set_actuator(w.actuator, w.on_value)
     except VehicleError as exc:
         return CheckResult("actuator", Status.FAIL, f"output {w.actuator} to {w.on_value:g} refused: {exc}")
     try:
         await asyncio.sleep(on_s)
     finally:
         try:
-            await link.set_actuator(w.actuator, w.off_value)
+            await action.set_actuator(w.actuator, w.off_value)
         except VehicleError as exc:
             return CheckResult("actuator", Status.FAIL, f"switched on, but off ({w.off_value:g}) refused: {exc}")
     return CheckResult(
@@ -382,15 +385,15 @@ async def diagnose(
     try:
         link_results = await check_link(link, config, limits)
         results += link_results
-        linked = link_results[0].ok or link.clock.synced
-        results.append(await check_camera(config, link if linked else None, limits))
+        linked = link_results[0].ok or link.telemetry.clock.synced
+        results.append(await check_camera(config, link.telemetry.clock if linked else None, limits))
         if link_results[0].ok:
-            results.append(await check_failsafe(link))
+            results.append(await check_failsafe(link.params))
         else:
             results.append(CheckResult("failsafe", Status.SKIP, "no link: the autopilot's parameters are unknown"))
         if actuator_test:
             no_link = CheckResult("actuator", Status.SKIP, "no link: nothing to switch")
-            results.append(await check_actuator(link, config) if link_results[0].ok else no_link)
+            results.append(await check_actuator(link.action, config) if link_results[0].ok else no_link)
     finally:
         await link.close()
     return results

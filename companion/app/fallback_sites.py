@@ -17,20 +17,20 @@ from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig, with_fallback_sites
 from companion.app.recorder import FlightRecorder
 from companion.guidance.geofence import Geofence, latlon_to_ne_m
-from companion.vehicle.link import VehicleLink
+from companion.vehicle.link import MissionStore
 
 logger = logging.getLogger(__name__)
 
 
-async def with_rally_sites(config: MissionConfig, link: VehicleLink, recorder: FlightRecorder) -> MissionConfig:
+async def with_rally_sites(config: MissionConfig, mission: MissionStore, recorder: FlightRecorder) -> MissionConfig:
     """The config with the autopilot's rally points among its fallback sites (see the module docstring); its fence
     must be in local NED already."""
     timeout_s = config.vehicle.connect_timeout_s
     fallback = config.guidance.fallback
     sites: list[dict[str, Any]] = [site.model_dump() for site in fallback.sites]
-    points = await link.rally_points(timeout_s)
+    points = await mission.rally_points(timeout_s)
     if points:
-        lat0, lon0 = await link.global_origin(timeout_s)
+        lat0, lon0 = await mission.global_origin(timeout_s)
         fence = Geofence(config.geofence)
         footprint_m = config.perception.zones.min_radius_m
         for k, (lat, lon) in enumerate(points, start=1):

@@ -66,7 +66,7 @@ from companion.guidance.vocabulary import DecisionEvent, DecisionSource
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.selection import SelectionPolicy
 from companion.perception.zones import ZoneFinder
-from companion.vehicle.link import VehicleError, VehicleLink
+from companion.vehicle.link import LinkResult, MissionStore, VehicleError, VehicleLink
 from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.sim_control import SetpointNedYaw
 
@@ -91,11 +91,11 @@ def state_of(t_s: float, pose: Pose) -> VehicleState:
     return VehicleState(t_s, n, e, d, yaw_deg_of(pose))
 
 
-async def fence_in_local_ned(config: MissionConfig, link: VehicleLink, recorder: FlightRecorder) -> MissionConfig:
+async def fence_in_local_ned(config: MissionConfig, mission: MissionStore, recorder: FlightRecorder) -> MissionConfig:
     """The config with its fence in latitude and longitude projected into local NED from the autopilot's EKF origin,
     as PX4 does, then every cross-check of the config again (ConfigError before anything is commanded)."""
     assert config.geofence.polygon_latlon_deg is not None
-    lat0, lon0 = await link.global_origin(config.vehicle.connect_timeout_s)
+    lat0, lon0 = await mission.global_origin(config.vehicle.connect_timeout_s)
     polygon_ne_m = [latlon_to_ne_m(lat, lon, lat0, lon0) for lat, lon in config.geofence.polygon_latlon_deg]
     recorder.write(RecordKind.FENCE, None, polygon_ne_m=polygon_ne_m, origin_lat_deg=lat0, origin_lon_deg=lon0)
     logger.info("geofence: %d vertices from latitude and longitude around the EKF origin", len(polygon_ne_m))
@@ -168,14 +168,15 @@ class FlightApp:
         self.recorder = recorder
         self.lockstep = lockstep
         self.dry_run = config.mode is OperatingMode.DRY_RUN
-        self.report = GroundReport(link, self.dry_run)
+        self.report = GroundReport(link.ground, self.dry_run)
         self.guidance = landing_guidance(self.config, self.pipeline.policy)
         # The search area's centre for the blind random baseline (the paper's ROI): the geofence's centroid.
         self._area_centre_ne_m = polygon_centroid_ne_m(config.geofence.polygon_ne_m)
         self.outcome = FlightOutcome()
-        self.commands = VehicleCommands(link, recorder, self.outcome, self.dry_run)
+        parts = link.telemetry, link.action, link.offboard
+        self.commands = VehicleCommands(*parts, recorder, self.outcome, self.dry_run)
         self.journal = FlightJournal(recorder, self.dry_run)
-        self.intake = FrameIntake(link, pipeline, recorder, self.outcome, config.camera.max_frame_age_s)
+        self.intake = FrameIntake(link.telemetry, pipeline, recorder, self.outcome, config.camera.max_frame_age_s)
         self.watchdog = StallWatchdog(
             config.vehicle.decision_watchdog_s, lambda: self.commands.flying_offboard, self.commands.stalled
         )
@@ -190,8 +191,8 @@ class FlightApp:
 
     def vehicle_state(self) -> VehicleState | None:
         """The vehicle at its newest stamped pose."""
-        t = self.link.poses.latest_t_s
-        pose = self.link.poses.pose_at(t) if t is not None else None
+        t = self.link.telemetry.poses.latest_t_s
+        pose = self.link.telemetry.poses.pose_at(t) if t is not None else None
         return None if t is None or pose is None else state_of(t, pose)
 
     async def apply(
@@ -257,7 +258,7 @@ class FlightApp:
     async def on_tick(self, state: VehicleState) -> None:
         """The start sequence, then pilot takeover, touchdown and perception silence, at vehicle time ``state.t_s``."""
         self.outcome.ticks += 1
-        status = self.link.status
+        status = self.link.telemetry.status
         self.supervision.saw(status)
         self.journal.pose(state, status)
         if self.start_sequence.started or self.supervision.watching is not None:
@@ -288,7 +289,7 @@ class FlightApp:
         for taken in self.desk.take(self.guidance, state, self.intake.last_result):
             await self.apply(taken.decision, DecisionSource.OPERATOR, state, **taken.inputs)
         if not self.start_sequence.started:
-            pose = self.link.poses.pose_at(state.t_s) if self.dry_run else None
+            pose = self.link.telemetry.poses.pose_at(state.t_s) if self.dry_run else None
             visible = not self.dry_run or (pose is not None and self.pipeline.sees_head_plane(pose))
             await self._start_step(state, self.start_sequence.step(state, status, visible))
             return
@@ -349,16 +350,16 @@ class FlightApp:
         if not self.commands.commanding:
             return False
         took_off = self.start_sequence.takes_off and self.start_sequence.stage is not StartStage.WAITING
-        return self.commands.offboard or took_off
+        return self.commands.in_offboard or took_off
 
     async def _localize(self) -> None:
         """The fence in latitude and longitude in local NED (:func:`fence_in_local_ned`), the autopilot's rally points
         as fallback sites (:func:`~companion.app.fallback_sites.with_rally_sites`), and what follows them."""
         before = self.config
         if self.config.geofence.polygon_latlon_deg is not None:
-            self.config = await fence_in_local_ned(self.config, self.link, self.recorder)
+            self.config = await fence_in_local_ned(self.config, self.link.mission, self.recorder)
         if self.config.guidance.fallback.rally_points:
-            self.config = await with_rally_sites(self.config, self.link, self.recorder)
+            self.config = await with_rally_sites(self.config, self.link.mission, self.recorder)
         if self.config is before:
             return
         polygon_ne_m = self.config.geofence.polygon_ne_m
@@ -369,7 +370,7 @@ class FlightApp:
     async def _start_step(self, state: VehicleState, step: StartStep) -> None:
         """Do what the start sequence asks at this tick: record, take off, send a transit setpoint, or start."""
         if step.action is StartAction.TIMED_OUT:
-            raise VehicleError(self.link.name, step.reason)
+            raise VehicleError(self.link.name, step.reason, LinkResult.TIMEOUT)
         self.journal.start_step(state, step)
         if step.action is StartAction.TAKE_OFF:
             if await self.commands.take_off(state.t_s, step.altitude_m):
@@ -408,7 +409,7 @@ class FlightApp:
         await self.intake.wait_for_pose(t_s, timeout_s, "the tick's pose")
 
     def telemetry_age_s(self) -> float | None:
-        last_telemetry = self.link.status.last_telemetry_wall_s
+        last_telemetry = self.link.telemetry.status.last_telemetry_wall_s
         return None if last_telemetry is None else time.monotonic() - last_telemetry
 
     def take_tick_setpoint(self) -> SetpointNedYaw | None:
@@ -416,13 +417,13 @@ class FlightApp:
 
     def camera_lost(self, exc: CameraError) -> None:
         self.outcome.camera_lost, self.outcome.camera_fault = True, exc.fault.value
-        self.journal.camera_fault(self.link.poses.latest_t_s, exc.fault.value, str(exc))
+        self.journal.camera_fault(self.link.telemetry.poses.latest_t_s, exc.fault.value, str(exc))
 
     def link_lost(self, silent_s: float) -> None:
         self.outcome.link_lost = True
         self.commands.stop()
         state = self.vehicle_state()
-        self.journal.link_lost(state.t_s if state else None, silent_s, self.link.status.port_shared)
+        self.journal.link_lost(state.t_s if state else None, silent_s, self.link.telemetry.status.port_shared)
         if self.lockstep is not None:
             self.lockstep.release()  # the simulator runs on without us, so its own failsafe can act
         self.done.set()

@@ -18,7 +18,7 @@ from companion.camera.frames import Frame
 from companion.geometry import GeometryError, Pose
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
-from companion.vehicle.link import VehicleError, VehicleLink
+from companion.vehicle.link import Telemetry, VehicleError
 
 CLOCK_RESOLUTION_S = 1e-3  # MAVLink time_boot_ms
 
@@ -28,8 +28,8 @@ class FrameIntake:
 
     Parameters
     ----------
-    link : VehicleLink
-        Its pose buffer (vehicle-clock stamps).
+    telemetry : Telemetry
+        The vehicle's telemetry: its pose buffer (vehicle-clock stamps).
     pipeline : SlzPipeline
         Perception.
     recorder : FlightRecorder
@@ -42,13 +42,13 @@ class FrameIntake:
 
     def __init__(
         self,
-        link: VehicleLink,
+        telemetry: Telemetry,
         pipeline: SlzPipeline,
         recorder: FlightRecorder,
         outcome: FlightOutcome,
         max_frame_age_s: float,
     ) -> None:
-        self.link = link
+        self.telemetry = telemetry
         self.pipeline = pipeline
         self.recorder = recorder
         self.outcome = outcome
@@ -61,12 +61,12 @@ class FrameIntake:
 
     def pose_reaches(self, t_s: float) -> bool:
         """The pose buffer holds a pose stamped at ``t_s`` or later (to the vehicle clock's resolution)."""
-        latest = self.link.poses.latest_t_s
+        latest = self.telemetry.poses.latest_t_s
         return latest is not None and latest >= t_s - CLOCK_RESOLUTION_S
 
     async def wait_for_pose(self, t_s: float, timeout_s: float, what: str) -> None:
         """Until a pose stamped at ``t_s`` or later has arrived; VehicleError after ``timeout_s`` wall seconds."""
-        await self.link.wait_for(functools.partial(self.pose_reaches, t_s), time.monotonic() + timeout_s, what)
+        await self.telemetry.wait_for(functools.partial(self.pose_reaches, t_s), time.monotonic() + timeout_s, what)
 
     async def pose_for(self, frame: Frame) -> tuple[float, Pose] | None:
         """The pose at the frame's capture time and the vehicle time it is stamped with; None drops the frame
@@ -77,13 +77,13 @@ class FrameIntake:
         except VehicleError:
             self.outcome.frames_dropped_no_pose += 1
             return None
-        latest = self.link.poses.latest_t_s
+        latest = self.telemetry.poses.latest_t_s
         assert latest is not None
         if latest - t_s > self.max_frame_age_s:
             self.outcome.frames_dropped_old += 1
             return None
         t_s = min(t_s, latest)  # within the vehicle clock's resolution of the newest sample
-        pose = self.link.poses.pose_at(t_s)
+        pose = self.telemetry.poses.pose_at(t_s)
         if pose is None:
             self.outcome.frames_dropped_no_pose += 1
             return None

@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
 
 from companion.guidance.landing import LandingPhase
 from companion.guidance.vehicle_state import VehicleState
 from companion.perception.selection import Target
-from companion.vehicle.link import VehicleLink
+from companion.vehicle.ground_messages import GroundMessage, LandingTarget, NamedValueFloat
+from companion.vehicle.link import Ground
 from companion.vehicle.statustext import statustext_chunks
 
 logger = logging.getLogger(__name__)
@@ -47,28 +47,28 @@ PHASE_SEVERITY = {
 }
 
 
-def landing_target_fields(t_s: float, target: Target, state: VehicleState, dry_run: bool) -> dict[str, Any]:
+def landing_target(t_s: float, target: Target, state: VehicleState, dry_run: bool) -> LandingTarget:
     """LANDING_TARGET for ``target`` seen from ``state`` (local NED; the head plane is taken as the ground, z = 0)."""
     dn, de = target.north_m - state.north_m, target.east_m - state.east_m
     height = max(state.altitude_m, 0.01)
     distance = math.sqrt(dn * dn + de * de + height * height)
     size = 2.0 * math.atan2(target.radius_m, distance)
-    return {
-        "time_usec": round(t_s * 1e6),
-        "target_num": 0,
-        "frame": MAV_FRAME_LOCAL_NED,
-        "angle_x": math.atan2(de, height),
-        "angle_y": math.atan2(dn, height),
-        "distance": distance,
-        "size_x": size,
-        "size_y": size,
-        "x": target.north_m,
-        "y": target.east_m,
-        "z": 0.0,
-        "q": [1.0, 0.0, 0.0, 0.0],
-        "type": LANDING_TARGET_TYPE_VISION_OTHER,
-        "position_valid": 0 if dry_run else 1,
-    }
+    return LandingTarget(
+        time_usec=round(t_s * 1e6),
+        target_num=0,
+        frame=MAV_FRAME_LOCAL_NED,
+        angle_x=math.atan2(de, height),
+        angle_y=math.atan2(dn, height),
+        distance=distance,
+        size_x=size,
+        size_y=size,
+        x=target.north_m,
+        y=target.east_m,
+        z=0.0,
+        q=(1.0, 0.0, 0.0, 0.0),
+        type=LANDING_TARGET_TYPE_VISION_OTHER,
+        position_valid=0 if dry_run else 1,
+    )
 
 
 class GroundReport:
@@ -76,36 +76,36 @@ class GroundReport:
 
     Parameters
     ----------
-    link : VehicleLink
-        The vehicle link; its ``send_mavlink`` carries the messages.
+    ground : Ground
+        The vehicle link's ground part, which carries the messages.
     dry_run : bool
         Mark everything as a dry run's.
     """
 
-    def __init__(self, link: VehicleLink, dry_run: bool) -> None:
-        self.link = link
+    def __init__(self, ground: Ground, dry_run: bool) -> None:
+        self.ground = ground
         self.dry_run = dry_run
         self.sent = 0
         self.failed = 0
         self._text_id = 0
         self._last_values_t_s = -math.inf
 
-    async def _send(self, name: str, fields: dict[str, Any]) -> None:
+    async def _send(self, message: GroundMessage) -> None:
         try:
-            await self.link.send_mavlink(name, fields)
+            await self.ground.send(message)
             self.sent += 1
         except Exception as exc:  # the ground station's view is informative; flying goes on without it
             self.failed += 1
             if self.failed in (1, 10, 100) or self.failed % 1000 == 0:
-                logger.warning("ground report %s not sent (%d so far): %s", name, self.failed, exc)
+                logger.warning("ground report %s not sent (%d so far): %s", message.message_name, self.failed, exc)
 
     async def text(self, text: str, severity: int) -> None:
         """One status text (chunked when long), marked in a dry run."""
         if self.dry_run:
             text = DRY_RUN_PREFIX + text
         self._text_id = self._text_id % 65535 + 1
-        for fields in statustext_chunks(text, severity, self._text_id):
-            await self._send("STATUSTEXT", fields)
+        for chunk in statustext_chunks(text, severity, self._text_id):
+            await self._send(chunk)
 
     async def phase(self, phase: LandingPhase, reason: str) -> None:
         """A phase change, at its severity."""
@@ -119,6 +119,6 @@ class GroundReport:
         boot_ms = round(t_s * 1000.0) & 0xFFFFFFFF
         radius = target.radius_m if target is not None else 0.0
         for name, value in (("SLZ_ZONES", float(zones)), ("SLZ_R_M", radius), ("SLZ_DRY", float(self.dry_run))):
-            await self._send("NAMED_VALUE_FLOAT", {"time_boot_ms": boot_ms, "name": name, "value": value})
+            await self._send(NamedValueFloat(time_boot_ms=boot_ms, name=name, value=value))
         if target is not None and state is not None:
-            await self._send("LANDING_TARGET", landing_target_fields(t_s, target, state, self.dry_run))
+            await self._send(landing_target(t_s, target, state, self.dry_run))

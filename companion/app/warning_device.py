@@ -44,7 +44,7 @@ class WarningDevice:
     config : WarningConfig
         Which output, its values, when it sounds.
     commands : VehicleCommands
-        The flight's command channel: its link sends, its ``commanding`` says whether anything may go out.
+        The flight's command channel: its action part sends, its ``commanding`` says whether anything may go out.
     recorder : FlightRecorder
         Every switch is recorded (``warning``: ``on``, ``sent``, the decision's phase and event).
     """
@@ -85,7 +85,7 @@ class WarningDevice:
             return
         value = self.config.on_value if wanted else self.config.off_value
         try:
-            await self.commands.link.set_actuator(self.config.actuator, value)
+            await self.commands.action.set_actuator(self.config.actuator, value)
         except VehicleError as exc:  # the landing goes on without it
             logger.warning("warning device %s not switched: %s", "on" if wanted else "off", exc)
             self.recorder.write(RecordKind.ERROR, decision.t_s, where="warning", error=str(exc))

@@ -288,7 +288,11 @@ class CommandChannel:
         if text:
             self._text_id = self._text_id % 0xFFFF + 1
             for chunk in statustext_chunks(text, MAV_SEVERITY_WARNING, self._text_id):
-                status: dict[str, int | float | bytes] = {**chunk, "text": chunk["text"].encode("ascii")}
+                status: dict[str, int | float | bytes] = {
+                    "severity": chunk.severity,
+                    "text": chunk.text.encode("ascii"),
+                }
+                status.update(id=chunk.id, chunk_seq=chunk.chunk_seq)
                 self._send(address, pack(STATUSTEXT, status, **self._header()))
 
     async def _beat(self) -> None:

@@ -7,18 +7,18 @@ chunks), so a reader knows where it ends. At most :data:`STATUSTEXT_MAX_CHARS` c
 
 from __future__ import annotations
 
-from typing import Any
+from companion.vehicle.ground_messages import StatusText
 
 STATUSTEXT_CHUNK_CHARS = 50
 STATUSTEXT_MAX_CHARS = 200  # four chunks
 
 
-def statustext_chunks(text: str, severity: int, text_id: int) -> list[dict[str, Any]]:
-    """The STATUSTEXT fields (``severity``, ``text``, ``id``, ``chunk_seq``) of each message carrying ``text``."""
+def statustext_chunks(text: str, severity: int, text_id: int) -> list[StatusText]:
+    """Each STATUSTEXT message carrying ``text``."""
     data = text.encode("ascii", "replace").decode("ascii")[:STATUSTEXT_MAX_CHARS]
     if len(data) <= STATUSTEXT_CHUNK_CHARS:
-        return [{"severity": severity, "text": data, "id": 0, "chunk_seq": 0}]
+        return [StatusText(severity, data, 0, 0)]
     chunks = [data[i : i + STATUSTEXT_CHUNK_CHARS] for i in range(0, len(data), STATUSTEXT_CHUNK_CHARS)]
     if len(chunks[-1]) == STATUSTEXT_CHUNK_CHARS:
         chunks.append("")
-    return [{"severity": severity, "text": c, "id": text_id, "chunk_seq": i} for i, c in enumerate(chunks)]
+    return [StatusText(severity, c, text_id, i) for i, c in enumerate(chunks)]

@@ -141,8 +141,8 @@ class ProtocolVersionMessage(mavlink.MAVLink_message):  # type: ignore[misc]
 def statustext_messages(mav: Any, text: str, severity: int, text_id: int) -> list[Any]:
     """STATUSTEXT messages for ``text``, chunked by :func:`companion.vehicle.statustext.statustext_chunks`."""
     return [
-        mav.statustext_encode(f["severity"], f["text"].encode("ascii"), f["id"], f["chunk_seq"])
-        for f in statustext_chunks(text, severity, text_id)
+        mav.statustext_encode(m.severity, m.text.encode("ascii"), m.id, m.chunk_seq)
+        for m in statustext_chunks(text, severity, text_id)
     ]
 
 

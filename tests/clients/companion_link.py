@@ -23,7 +23,7 @@ def emit(event: str, **fields: Any) -> None:
 
 
 async def until(link: MavsdkVehicleLink, condition: Any, timeout_s: float, what: str) -> None:
-    await link.wait_for(condition, time.monotonic() + timeout_s, what)
+    await link.telemetry.wait_for(condition, time.monotonic() + timeout_s, what)
 
 
 async def main() -> int:
@@ -34,37 +34,40 @@ async def main() -> int:
     try:
         await link.connect(timeout_s=15.0)
         emit("connected")
-        await until(link, lambda: link.poses.latest_t_s is not None, 10.0, "stamped poses")
-        t0 = link.poses.latest_t_s
-        await until(link, lambda: (link.poses.latest_t_s or 0.0) > (t0 or 0.0) + 1.0, 10.0, "a second of poses")
-        emit("poses", latest_t_s=link.poses.latest_t_s, clock_now_s=link.clock.now_s())
-        await link.arm_and_takeoff(5.0, timeout_s=40.0)
-        emit("took_off", mode=link.status.mode.value, armed=link.status.armed)
+        await until(link, lambda: link.telemetry.poses.latest_t_s is not None, 10.0, "stamped poses")
+        t0 = link.telemetry.poses.latest_t_s
+        await until(
+            link, lambda: (link.telemetry.poses.latest_t_s or 0.0) > (t0 or 0.0) + 1.0, 10.0, "a second of poses"
+        )
+        emit("poses", latest_t_s=link.telemetry.poses.latest_t_s, clock_now_s=link.telemetry.clock.now_s())
+        await link.action.arm_and_takeoff(5.0, timeout_s=40.0)
+        emit("took_off", mode=link.telemetry.status.mode.value, armed=link.telemetry.status.armed)
         target = Setpoint(3.0, 0.0, -5.0, 0.0)
-        await link.start_offboard(target)
-        await until(link, lambda: link.status.mode is FlightMode.OFFBOARD, 10.0, "OFFBOARD")
+        await link.offboard.start(target)
+        await until(link, lambda: link.telemetry.status.mode is FlightMode.OFFBOARD, 10.0, "OFFBOARD")
 
         def near() -> bool:
-            t = link.poses.latest_t_s
-            pose = link.poses.pose_at(t) if t is not None else None
+            t = link.telemetry.poses.latest_t_s
+            pose = link.telemetry.poses.pose_at(t) if t is not None else None
             return pose is not None and abs(pose.position_ned_m[0] - 3.0) < 0.3 and abs(pose.altitude_m - 5.0) < 0.3
 
         await until(link, near, 30.0, "the setpoint")
-        t = link.poses.latest_t_s
+        t = link.telemetry.poses.latest_t_s
         assert t is not None
-        latest, between = link.poses.pose_at(t), link.poses.pose_at(t - 0.005)  # the second one is interpolated
+        poses = link.telemetry.poses
+        latest, between = poses.pose_at(t), poses.pose_at(t - 0.005)  # the second one is interpolated
         assert latest is not None
         assert between is not None
         emit(
             "reached",
             north_m=float(latest.position_ned_m[0]),
             altitude_m=latest.altitude_m,
-            mode=link.status.mode.value,
+            mode=link.telemetry.status.mode.value,
             interpolation_step_m=float(abs(latest.position_ned_m - between.position_ned_m).max()),
         )
-        await link.land()
-        await until(link, lambda: not link.status.in_air, 40.0, "on the ground")
-        emit("landed", dropped=link.dropped_samples)
+        await link.action.land()
+        await until(link, lambda: not link.telemetry.status.in_air, 40.0, "on the ground")
+        emit("landed", dropped=link.telemetry.dropped_samples)
     except Exception as exc:
         emit("error", error=f"{type(exc).__name__}: {exc}")
         return 1
