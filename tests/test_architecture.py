@@ -228,7 +228,6 @@ OVER_ATTRIBUTE_BUDGET = {
     "companion.guidance.config.GuidanceConfig": 28,
     "sitl.world.scenario.ScenarioConfig": 28,
     "sitl.autopilot.commander.Commander": 24,
-    "companion.app.flight.FlightApp": 23,
     "sitl.render.camera.WorldRenderer": 21,
     "companion.app.outcome.FlightOutcome": 21,
 }

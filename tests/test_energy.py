@@ -13,6 +13,7 @@ from companion.guidance.config import EnergyConfig, FailsafeAction, GuidanceConf
 from companion.guidance.energy import EnergyBudget
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import CommandKind, LandingGuidance, LandingPhase
+from companion.guidance.stimulus import EnergyLow, Started
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent
 from companion.perception.selection import BiggestPolicy
@@ -101,9 +102,9 @@ def test_the_budgets_end_returns_the_vehicle_while_searching_but_never_interrupt
     config = GuidanceConfig.model_validate({"energy": PACK.model_dump()})
     guidance = LandingGuidance(config, fence, 1.0, min_zone_radius_m=1.0, policy=BiggestPolicy())
     state = _at(0.0, 0.0, 15.0, t_s=0.0)
-    assert guidance.time_used_up(state, "energy budget used up") is None  # not started
-    guidance.start(state)
-    decision = guidance.time_used_up(_at(0.0, 0.0, 20.0, t_s=30.0), "energy budget used up: 26 % left")
+    assert guidance.on(EnergyLow(state, "energy budget used up")) is None  # not started
+    guidance.on(Started(state))
+    decision = guidance.on(EnergyLow(_at(0.0, 0.0, 20.0, t_s=30.0), "energy budget used up: 26 % left"))
     assert decision is not None
     assert (decision.phase, decision.kind, decision.event) == (
         LandingPhase.FAILSAFE,
@@ -112,7 +113,7 @@ def test_the_budgets_end_returns_the_vehicle_while_searching_but_never_interrupt
     )
     assert decision.reason == "energy budget used up: 26 % left: return"
     assert config.energy.action is FailsafeAction.RETURN
-    assert guidance.time_used_up(_at(0.0, 0.0, 20.0, t_s=31.0), "again") is None  # once
+    assert guidance.on(EnergyLow(_at(0.0, 0.0, 20.0, t_s=31.0), "again")) is None  # once
 
 
 # -- the SITL's battery and PX4's battery failsafe ----------------------------------------------------------------

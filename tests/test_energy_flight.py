@@ -17,6 +17,7 @@ from sitl.campaign.spec import load_campaign_spec
 from sitl.campaign.worker import mission_spec
 from sitl.harness.instances import leased_instance
 from sitl.harness.mission import fly
+from sitl.testing.helpers import as_schema_2
 from sitl.vehicle.truth import read_truth, touchdown
 
 pytestmark = pytest.mark.sitl
@@ -68,7 +69,7 @@ def test_a_scarce_pack_ends_the_search_and_brings_the_vehicle_home_above_the_res
     assert final.t_s >= ended.t_s
     records = [r for r in FlightLog.read(run_dir / "flight").records if r.get("source") == "energy"]
     assert len(records) == 1
-    assert records[0]["inputs"]["remaining"] >= RESERVE  # decided above the reserve, far above PX4's critical 7 %
+    assert records[0]["stimulus"]["remaining"] >= RESERVE  # decided above the reserve, far above PX4's critical 7 %
     # The vehicle came home (the autopilot's return lands it at its launch point) and touched down there.
     _, truth = read_truth(run_dir / "truth.jsonl")
     down = touchdown(truth)
@@ -76,7 +77,9 @@ def test_a_scarce_pack_ends_the_search_and_brings_the_vehicle_home_above_the_res
     assert math.hypot(down.position_ned_m[0] - home_ne_m[0], down.position_ned_m[1] - home_ne_m[1]) < 2.0
     metrics = mission_metrics(run_dir, plan.mission_id, plan.condition.name, plan.strategy.name, plan.run, plan.seed)
     assert metrics.landed  # at home: the return, not a zone (the report's outcome kinds are issue 53's next step)
-    # The budget's decision replays from the log as flown (its source and inputs are recorded).
+    # The budget's decision replays from the log as flown (its stimulus is recorded).
     again = replay(run_dir / "flight")
     assert again.identical, again.differences
     assert again.decisions == len(decisions)
+    older = replay(as_schema_2(run_dir / "flight", run_dir / "as_schema_2"))  # the log as schema 2 wrote it
+    assert (older.identical, older.decisions) == (True, len(decisions)), older.differences

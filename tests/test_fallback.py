@@ -9,7 +9,7 @@ import math
 import pytest
 
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
-from companion.guidance.operator import operator_decision
+from companion.guidance.stimulus import Denied, EnergyLow, FrameSeen, OperatorOrder, Started, TimeUp
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent, OperatorCommand, RefusalCause
 from companion.perception.projection import HeadPlaneOccupancy
@@ -29,13 +29,13 @@ def searching(**overrides: object) -> tuple[LandingGuidance, VehicleState]:
     settings: dict[str, object] = {"mission_time_limit_s": 60.0, "fallback": {"sites": SITES, "site_time_s": 90.0}}
     g = _guidance(**{**settings, **overrides})
     state = VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)
-    g.start(state)
+    g.on(Started(state))
     return g, state
 
 
 def fly(g: LandingGuidance, state: VehicleState, t_s: float, maps: HeadPlaneOccupancy) -> tuple[Decision, VehicleState]:
     """One frame with no zone seen (the map ``maps``), and the vehicle at the decision's setpoint."""
-    d = g.on_frame(_frame(t_s, [], None, maps), state)
+    d = g.on(FrameSeen(state, _frame(t_s, [], None, maps), seq=0))
     if d.setpoint is None:
         return d, VehicleState(t_s, state.north_m, state.east_m, state.down_m, 0.0)
     sp = d.setpoint
@@ -60,8 +60,8 @@ def frames(
 
 def test_when_the_time_is_used_up_the_nearest_site_is_flown_to_checked_and_landed_on() -> None:
     g, state = searching()
-    assert g.time_used_up(VehicleState(59.9, 0.0, 0.0, -20.0, 0.0)) is None
-    d = g.time_used_up(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0))
+    assert g.on(TimeUp(VehicleState(59.9, 0.0, 0.0, -20.0, 0.0))) is None
+    d = g.on(TimeUp(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0)))
     assert d is not None
     assert (d.phase, d.event, d.kind) == (LandingPhase.APPROACH, DecisionEvent.FALLBACK_SITE, CommandKind.SETPOINT)
     assert d.reason == "no landing within 60 s of the start: fallback site lawn, 10 m away"
@@ -76,7 +76,7 @@ def test_when_the_time_is_used_up_the_nearest_site_is_flown_to_checked_and_lande
 
 def test_a_site_the_map_refuses_is_given_up_for_the_next_and_with_none_left_the_last_resort() -> None:
     g, state = searching()
-    g.time_used_up(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0))
+    g.on(TimeUp(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0)))
     lawn, yard = _map(person_at=(10.2, 0.3)), _map(person_at=(-9.0, 12.2))
     both_taken = HeadPlaneOccupancy(lawn.grid, lawn.free & yard.free, lawn.known)
     made, state, _ = frames(g, state, 60.0, both_taken, {LandingPhase.FAILSAFE})
@@ -93,9 +93,9 @@ def test_a_site_the_map_refuses_is_given_up_for_the_next_and_with_none_left_the_
 
 def test_a_site_not_landed_on_in_its_time_is_given_up() -> None:
     g, _ = searching(fallback={"sites": SITES[:1], "site_time_s": 5.0})
-    g.time_used_up(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0))
-    assert g.time_used_up(VehicleState(64.9, 0.0, 0.0, -20.0, 0.0)) is None
-    d = g.time_used_up(VehicleState(65.0, 0.0, 0.0, -20.0, 0.0))
+    g.on(TimeUp(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0)))
+    assert g.on(TimeUp(VehicleState(64.9, 0.0, 0.0, -20.0, 0.0))) is None
+    d = g.on(TimeUp(VehicleState(65.0, 0.0, 0.0, -20.0, 0.0)))
     assert d is not None
     assert (d.phase, d.kind, d.cause) == (LandingPhase.FAILSAFE, CommandKind.HOLD, RefusalCause.SITE_TIMED_OUT)
     assert d.reason == "not landed at site lawn within 5 s; no fallback site left in reach: hold"
@@ -103,12 +103,12 @@ def test_a_site_not_landed_on_in_its_time_is_given_up() -> None:
 
 def test_with_the_energy_budget_only_sites_no_farther_than_home_are_in_reach() -> None:
     g, _ = searching(energy={"enabled": True, "capacity_mah": 5000})
-    out_of_reach = g.time_used_up(VehicleState(30.0, 0.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=8.0)
+    out_of_reach = g.on(EnergyLow(VehicleState(30.0, 0.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=8.0))
     assert out_of_reach is not None
     assert (out_of_reach.kind, out_of_reach.event) == (CommandKind.RETURN, DecisionEvent.ENERGY_LOW)
     assert out_of_reach.reason == "energy budget used up; no fallback site left in reach: return"
     g, _ = searching(energy={"enabled": True, "capacity_mah": 5000})
-    in_reach = g.time_used_up(VehicleState(30.0, 0.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=12.0)
+    in_reach = g.on(EnergyLow(VehicleState(30.0, 0.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=12.0))
     assert in_reach is not None
     assert in_reach.event is DecisionEvent.FALLBACK_SITE
     assert in_reach.target is not None
@@ -117,12 +117,12 @@ def test_with_the_energy_budget_only_sites_no_farther_than_home_are_in_reach() -
 
 def test_the_energy_budget_ending_at_a_site_chosen_before_gives_it_up_when_it_lies_farther_than_home() -> None:
     g, _ = searching(energy={"enabled": True, "capacity_mah": 5000})
-    chosen = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(5.0, 0.0, 0.0, -20.0, 0.0), False, False)
+    chosen = g.on(OperatorOrder(VehicleState(5.0, 0.0, 0.0, -20.0, 0.0), OperatorCommand.NEXT_FALLBACK, False, False))
     assert isinstance(chosen, Decision)
     assert g.fallback.current is not None
     assert g.fallback.current.name == "lawn"
     # Home is 8 m away, the lawn 10 m and the yard 15 m: neither may be flown to any more.
-    d = g.time_used_up(VehicleState(6.0, 0.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=8.0)
+    d = g.on(EnergyLow(VehicleState(6.0, 0.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=8.0))
     assert d is not None
     assert (d.phase, d.kind, d.event) == (LandingPhase.FAILSAFE, CommandKind.RETURN, DecisionEvent.ENERGY_LOW)
     assert d.reason == "energy budget used up: site lawn out of reach; no fallback site left in reach: return"
@@ -130,15 +130,15 @@ def test_the_energy_budget_ending_at_a_site_chosen_before_gives_it_up_when_it_li
 
 def test_the_energy_budget_ending_at_a_site_in_reach_flies_on_and_ends_in_its_own_action() -> None:
     g, _ = searching(energy={"enabled": True, "capacity_mah": 5000})
-    assert g.time_used_up(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0)) is not None  # the time limit: the lawn
+    assert g.on(TimeUp(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0))) is not None  # the time limit: the lawn
     at = VehicleState(61.0, 5.0, 0.0, -20.0, 0.0)  # 5 m from the lawn, home 6 m away
-    d = g.time_used_up(at, "energy budget used up", reach_m=6.0)
+    d = g.on(EnergyLow(at, "energy budget used up", reach_m=6.0))
     assert d is not None
     assert (d.phase, d.kind, d.event) == (LandingPhase.APPROACH, CommandKind.NONE, DecisionEvent.ENERGY_LOW)
     assert d.reason == "energy budget used up: site lawn in reach, flown on"
     assert d.target is not None
     assert d.target.north_m == 10.0
-    assert g.time_used_up(VehicleState(61.1, 5.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=6.0) is None
+    assert g.on(EnergyLow(VehicleState(61.1, 5.0, 0.0, -20.0, 0.0), "energy budget used up", reach_m=6.0)) is None
     # The lawn is refused: the yard (22 m away) is out of reach, and the energy budget's action ends it.
     made, _, _ = frames(g, at, 61.0, _map(person_at=(10.2, 0.3)), {LandingPhase.FAILSAFE})
     last = made[-1]
@@ -148,29 +148,29 @@ def test_the_energy_budget_ending_at_a_site_in_reach_flies_on_and_ends_in_its_ow
 
 def test_without_sites_the_end_of_the_budget_is_the_decision_it_always_was() -> None:
     g = _guidance(mission_time_limit_s=60.0)
-    g.start(VehicleState(0.0, 0.0, 0.0, -20.0, 0.0))
-    d = g.time_used_up(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0))
+    g.on(Started(VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)))
+    d = g.on(TimeUp(VehicleState(60.0, 0.0, 0.0, -20.0, 0.0)))
     assert d is not None
     assert (d.reason, d.event, d.cause) == ("no landing within 60 s of the start: hold", DecisionEvent.TIME_LIMIT, None)
 
 
-# -- "next fallback site" from the ground station (companion.guidance.operator) ------------------------------------
+# -- "next fallback site" from the ground station (an OperatorOrder to the landing logic) ---------------------------
 def test_the_ground_stations_next_site_ends_the_search_for_the_nearest_site_then_the_one_after() -> None:
     g, state = searching()
-    d = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(5.0, 0.0, 0.0, -20.0, 0.0), False, False)
+    d = g.on(OperatorOrder(VehicleState(5.0, 0.0, 0.0, -20.0, 0.0), OperatorCommand.NEXT_FALLBACK, False, False))
     assert isinstance(d, Decision)
     assert (d.phase, d.event, d.cause) == (LandingPhase.APPROACH, DecisionEvent.FALLBACK_SITE, RefusalCause.OPERATOR)
     assert d.reason == "next fallback site, from the ground station: fallback site lawn, 10 m away"
     assert d.target is not None
     assert (d.target.north_m, d.target.east_m) == (10.0, 0.0)
     # Asked again on the way: the lawn is given up for the yard.
-    d = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(8.0, 4.0, 0.0, -20.0, 0.0), False, False)
+    d = g.on(OperatorOrder(VehicleState(8.0, 4.0, 0.0, -20.0, 0.0), OperatorCommand.NEXT_FALLBACK, False, False))
     assert isinstance(d, Decision)
     assert d.target is not None
     assert (d.target.north_m, d.target.east_m) == (-9.0, 12.0)
     # None left: denied, nothing changes (the yard is still flown to and checked).
-    denied = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(9.0, 0.0, 4.0, -20.0, 0.0), False, False)
-    assert denied == "no fallback site left to try in reach"
+    denied = g.on(OperatorOrder(VehicleState(9.0, 0.0, 4.0, -20.0, 0.0), OperatorCommand.NEXT_FALLBACK, False, False))
+    assert denied == Denied("no fallback site left to try in reach")
     assert g.target is not None
     assert g.target.north_m == -9.0
     made, state, _ = frames(g, VehicleState(9.0, 0.0, 4.0, -20.0, 0.0), 9.0, _map(), {CommandKind.LAND})
@@ -180,17 +180,17 @@ def test_the_ground_stations_next_site_ends_the_search_for_the_nearest_site_then
 
 def test_next_site_is_denied_without_sites_or_outside_a_search() -> None:
     g, state = searching(fallback={"sites": []})
-    assert operator_decision(g, OperatorCommand.NEXT_FALLBACK, state, False, False) == (
+    assert g.on(OperatorOrder(state, OperatorCommand.NEXT_FALLBACK, False, False)) == Denied(
         "no fallback sites in this mission (guidance.fallback)"
     )
     g = _guidance(fallback={"sites": SITES})
-    idle = operator_decision(g, OperatorCommand.NEXT_FALLBACK, VehicleState(0.0, 0.0, 0.0, -20.0, 0.0), False, False)
-    assert idle == "no search, approach or descent to act on (phase idle)"
+    idle = g.on(OperatorOrder(VehicleState(0.0, 0.0, 0.0, -20.0, 0.0), OperatorCommand.NEXT_FALLBACK, False, False))
+    assert idle == Denied("no search, approach or descent to act on (phase idle)")
 
 
 def test_a_site_the_ground_station_chose_that_the_map_refuses_ends_in_the_last_resort() -> None:
     g, state = searching(fallback={"sites": SITES[:1], "site_time_s": 90.0})
-    d = operator_decision(g, OperatorCommand.NEXT_FALLBACK, state, False, False)
+    d = g.on(OperatorOrder(state, OperatorCommand.NEXT_FALLBACK, False, False))
     assert isinstance(d, Decision)
     made, _, _ = frames(g, state, 0.0, _map(person_at=(10.2, 0.3)), {LandingPhase.FAILSAFE})
     last = made[-1]

@@ -54,7 +54,8 @@ class TripsInDescent:
         self.tripped_at_s: float | None = None
 
     def __call__(self) -> float:
-        if self.app is not None and self.app.guidance.phase is LandingPhase.DESCENT and self.tripped_at_s is None:
+        descending = self.app is not None and self.app.landing.guidance.phase is LandingPhase.DESCENT
+        if descending and self.tripped_at_s is None:
             self.tripped_at_s = time.monotonic()
         return time.monotonic() + (0.0 if self.tripped_at_s is None else 1e6)
 
@@ -81,7 +82,8 @@ async def test_a_wall_limit_reached_mid_descent_leaves_the_vehicle_holding_under
 
     try:
         run = asyncio.create_task(app.run())
-        await wait_until_async(lambda: app.guidance.phase is LandingPhase.FAILSAFE or run.done(), 150, "the wall limit")
+        guidance = app.landing.guidance
+        await wait_until_async(lambda: guidance.phase is LandingPhase.FAILSAFE or run.done(), 150, "the wall limit")
         assert not run.done(), run.exception() if run.done() else None
         held = await sitl_state_when(lambda s: s["mode"] == "AUTO.LOITER" and s["t_s"] >= 1.0, "the hold")
         # Ten simulated seconds on: still holding, still watched.

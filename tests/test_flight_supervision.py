@@ -168,7 +168,7 @@ async def hand_over(app: FlightApp, link: FakeLink, t_s: float = 1.0) -> None:
     assert state is not None
     await app.on_tick(state)
     assert link.commands[0][0] == "start_offboard"
-    assert app.guidance.phase is LandingPhase.SEARCH
+    assert app.landing.guidance.phase is LandingPhase.SEARCH
 
 
 async def tick(
@@ -187,7 +187,7 @@ async def test_the_pilot_switching_mode_ends_commanding_at_once_and_for_good(app
     link.status.mode = FlightMode.POSCTL  # the pilot's switch
     sent = len(link.commands)
     await tick(app, link, 1.1)
-    assert app.guidance.phase is LandingPhase.YIELDED
+    assert app.landing.guidance.phase is LandingPhase.YIELDED
     for k in range(20):  # whatever happens next, nothing more goes out
         link.status.mode = FlightMode.HOLD if k % 2 else FlightMode.OFFBOARD
         await tick(app, link, 1.2 + 0.1 * k)
@@ -258,10 +258,10 @@ async def test_a_silent_camera_holds_after_t1_and_lands_after_t2(app_and_link: A
         await hand_over(app, link, t_s=start_s)
         hold: tuple[float, Any] | None = None
         t_s = start_s
-        while app.guidance.phase is not LandingPhase.FAILSAFE and t_s < start_s + t2 + 2.0:
+        while app.landing.guidance.phase is not LandingPhase.FAILSAFE and t_s < start_s + t2 + 2.0:
             t_s = round(t_s + period_s, 3)
             await tick(app, link, t_s)
-            if hold is None and app.guidance.phase is LandingPhase.HOLD:
+            if hold is None and app.landing.guidance.phase is LandingPhase.HOLD:
                 hold = (t_s, link.commands[-1])
         assert hold is not None, "never held"
         return hold[0], hold[1], t_s
@@ -343,7 +343,7 @@ async def test_a_wall_limit_in_flight_holds_and_the_program_stays_until_the_pilo
 
     await hand_over(app, link)
     await tick(app, link, 1.1)
-    assert app.guidance.phase is LandingPhase.SEARCH
+    assert app.landing.guidance.phase is LandingPhase.SEARCH
     clock.now_s = 300.0  # the wall limit, mid-flight
     await tick(app, link, 1.2)
     assert link.commands[-1] == ("hold", None)  # the last resort, at once: never the offboard-loss failsafe
@@ -421,10 +421,10 @@ async def test_a_dry_run_on_the_bench_waits_decides_in_the_air_and_ends_once_the
 
     for k in range(300):  # 30 s on the bench: no failsafe, no start
         await tick(app, link, 0.1 * k, altitude_m=0.0)
-    assert app.guidance.phase is LandingPhase.IDLE
+    assert app.landing.guidance.phase is LandingPhase.IDLE
     link.status.armed = link.status.in_air = True
     await tick(app, link, 31.0, altitude_m=1.0)  # the head plane (1.7 m up) not yet below the camera
-    assert app.guidance.phase is LandingPhase.IDLE
+    assert app.landing.guidance.phase is LandingPhase.IDLE
     t_s = 32.0
     await tick(app, link, t_s)  # 20 m: deciding starts
     assert app.outcome.phase == LandingPhase.SEARCH.value
@@ -553,10 +553,10 @@ async def test_every_fallback_site_chosen_is_said_to_the_ground_station_even_wit
     app = FlightApp(mission, link, NoFrames(), SlzPipeline.from_config(mission.perception), FlightRecorder(tmp_path))
 
     await hand_over(app, link)
-    app.guidance.enter(LandingPhase.APPROACH, 2.0)  # approaching a zone when the time runs out
+    app.landing.guidance.enter(LandingPhase.APPROACH, 2.0)  # approaching a zone when the time runs out
     app.outcome.phase = LandingPhase.APPROACH.value
     await tick(app, link, 31.5)
-    assert app.guidance.phase is LandingPhase.APPROACH
+    assert app.landing.guidance.phase is LandingPhase.APPROACH
     texts = [fields["text"] for name, fields in link.ground.sent if name == "STATUSTEXT"]
     assert "fallback site north_lawn" in "".join(texts), texts  # (chunked at 50 characters)
 
@@ -635,7 +635,8 @@ async def test_a_camera_that_comes_up_after_the_companion_is_waited_for_within_i
     assert late.attempts == 4
     waits = [r["waiting_for"] for r in read_log(app.recorder.path) if r["kind"] == "waiting"]
     assert waits == ["the camera: sitl: cannot connect: [Errno 111] Connection refused"]  # said once, not per try
-    app.config = app.config.model_copy(update={"camera": app.config.camera.model_copy(update={"wait_for_s": 0.05})})
+    soon = app.config.camera.model_copy(update={"wait_for_s": 0.05})
+    app.landing.config = app.config.model_copy(update={"camera": soon})
     app.source = LateCamera(failures=1000)
     with pytest.raises(CameraError, match="cannot connect"):
         await app._open()  # past the bound: the camera's own error

@@ -20,7 +20,14 @@ from companion.ground.command_channel import AckResult
 from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
 from sitl.config import SitlConfig
 from sitl.harness.process import SitlProcess
-from sitl.testing.helpers import CompanionFlight, free_udp_port, start_camera_sitl, wait_until, write_sitl_mission
+from sitl.testing.helpers import (
+    CompanionFlight,
+    as_schema_2,
+    free_udp_port,
+    start_camera_sitl,
+    wait_until,
+    write_sitl_mission,
+)
 from tests.mavproxy_client import MavProxy
 from tests.test_ground_channel import Gcs
 
@@ -137,9 +144,12 @@ def test_signed_commands_reject_a_zone_and_go_around_unsigned_ones_are_refused_a
     poses = [r for r in records if r["kind"] == "pose" and go_t_s < r["t_s"] <= go_t_s + 10.0]
     assert max(-p["down_m"] for p in poses) > go_alt_m + 1.5
     assert flown[-1]["phase"] == "done"
-    # The flight replays identically, the ground station's decisions included.
+    # The flight replays identically, the ground station's decisions included; so does its log as schema 2 wrote it
+    # (each decision's inputs where schema 3 has its stimulus).
     report = replay(tmp_path / "flight")
     assert report.identical, report.differences
+    older = replay(as_schema_2(tmp_path / "flight", tmp_path / "as_schema_2"))
+    assert (older.identical, older.decisions) == (True, report.decisions), older.differences
 
 
 def test_next_fallback_site_from_the_ground_station_flies_to_the_site_checks_it_and_lands_there(

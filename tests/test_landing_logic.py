@@ -17,6 +17,7 @@ from companion.guidance.config import FailsafeAction, GuidanceConfig
 from companion.guidance.footprint import footprint_view
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
+from companion.guidance.stimulus import FrameSeen, Landed, PilotTookOver, Silence, Started, TimeUp
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent
 from companion.perception.density import DensityMap
@@ -78,18 +79,18 @@ def _fly(state: VehicleState, setpoint_alt: float, n: float, e: float, t: float)
 def test_the_first_choice_holds_position_for_the_observation_window_and_no_search_pattern_starts() -> None:
     g = _guidance(commitment={"observe_s": 8.0}, search_timeout_s=2.0)  # a window longer than the search timeout
     state = VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)
-    g.start(state)
+    g.on(Started(state))
     zone = _track(7, 6.0, 8.0, 2.5)
     t = 0.0
     while t < 7.95:  # from the first frame with a zone at 0.1 s: watching, holding where it is
         t += 0.1
-        d = g.on_frame(_frame(t, [zone], Target(6.0, 8.0, 2.5, 7), _map()), state)
+        d = g.on(FrameSeen(state, _frame(t, [zone], Target(6.0, 8.0, 2.5, 7), _map()), seq=0))
         assert d.phase is LandingPhase.SEARCH
         assert d.event is DecisionEvent.HOLD_NO_TARGET, t
         assert "watching zones" in d.reason
         assert d.setpoint is not None
         assert (d.setpoint.north_m, d.setpoint.east_m) == pytest.approx((0.0, 0.0))
-    d = g.on_frame(_frame(8.2, [zone], Target(6.0, 8.0, 2.5, 7), _map()), state)
+    d = g.on(FrameSeen(state, _frame(8.2, [zone], Target(6.0, 8.0, 2.5, 7), _map()), seq=0))
     assert d.phase is LandingPhase.APPROACH
     assert g.commitment.committed_id == 7
 
@@ -97,7 +98,7 @@ def test_the_first_choice_holds_position_for_the_observation_window_and_no_searc
 def test_a_clean_landing_goes_search_approach_descent_land() -> None:
     g = _guidance()
     state = VehicleState(0.0, 0.0, 0.0, -15.0, 0.0)
-    start = g.start(state)
+    start = g.on(Started(state))
     assert start.phase is LandingPhase.SEARCH
     assert start.setpoint is not None
     assert -start.setpoint.down_m == pytest.approx(20.0)  # climbs to the search altitude
@@ -107,7 +108,7 @@ def test_a_clean_landing_goes_search_approach_descent_land() -> None:
     t = 0.0
     while g.phase not in (LandingPhase.LAND, LandingPhase.SEARCH) or t == 0.0:
         t += 0.1
-        d = g.on_frame(_frame(t, [zone], target, _map()), state)
+        d = g.on(FrameSeen(state, _frame(t, [zone], target, _map()), seq=0))
         phases.append(d.phase)
         if d.kind is CommandKind.LAND:
             break
@@ -125,13 +126,13 @@ def test_a_clean_landing_goes_search_approach_descent_land() -> None:
     assert phases[-1] is LandingPhase.LAND
     assert math.hypot(state.north_m - 6.0, state.east_m - 8.0) <= 0.75
     assert state.altitude_m <= 2.05
-    assert g.landed(t + 1).phase is LandingPhase.DONE
+    assert g.on(Landed(VehicleState(t + 1, state.north_m, state.east_m, 0.0, 0.0))).phase is LandingPhase.DONE
 
 
 def _descending_over(g: LandingGuidance, alt: float) -> VehicleState:
     state = VehicleState(0.0, 0.0, 0.0, -alt, 0.0)
-    g.start(state)
-    d = g.on_frame(_frame(0.1, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map()), state)
+    g.on(Started(state))
+    d = g.on(FrameSeen(state, _frame(0.1, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map()), seq=0))
     assert d.phase is LandingPhase.DESCENT
     return state
 
@@ -142,8 +143,10 @@ def test_a_person_walking_into_the_footprint_aborts_the_descent() -> None:
     need = g.config.unsafe_frames_to_abort
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(need - 1):  # fewer frames in a row than the limit: the model's flicker, not yet a person
-        assert g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state).phase is LandingPhase.DESCENT
-    d = g.on_frame(_frame(1.0, [zone], target, occupied), state)  # the limit reached: a person
+        assert (
+            g.on(FrameSeen(state, _frame(0.2 + 0.1 * k, [zone], target, occupied), seq=0)).phase is LandingPhase.DESCENT
+        )
+    d = g.on(FrameSeen(state, _frame(1.0, [zone], target, occupied), seq=0))  # the limit reached: a person
     assert d.phase is LandingPhase.SEARCH
     assert "person" in d.reason
     assert d.setpoint is not None
@@ -157,26 +160,32 @@ def test_a_flickering_false_positive_does_not_abort() -> None:
     zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
     for k in range(20):  # occupied every other frame: never the limit in a row
         head_plane = _map(person_at=(0.5, 0.3)) if k % 2 else _map()
-        assert g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, head_plane), state).phase is LandingPhase.DESCENT
+        assert (
+            g.on(FrameSeen(state, _frame(0.2 + 0.1 * k, [zone], target, head_plane), seq=0)).phase
+            is LandingPhase.DESCENT
+        )
     assert g.reselections == 0
 
 
 def test_the_footprint_is_checked_at_the_landing_point_not_under_the_vehicle() -> None:
     g = _guidance()
     state = VehicleState(0.0, 0.0, 0.0, -14.0, 0.0)
-    g.start(state)
+    g.on(Started(state))
     zone, target = _track(3, 0.6, 0.0, 3.0), Target(0.6, 0.0, 3.0, 3)  # the landing point 0.6 m north
-    assert g.on_frame(_frame(0.1, [zone], target, _map()), state).phase is LandingPhase.DESCENT
+    assert g.on(FrameSeen(state, _frame(0.1, [zone], target, _map()), seq=0)).phase is LandingPhase.DESCENT
     beside_vehicle = _map(person_at=(-1.4, 0.0))  # occupied 0.6 m from the vehicle, 1.2 m from the landing point
     for k in range(2 * g.config.unsafe_frames_to_abort):
-        assert g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, beside_vehicle), state).phase is LandingPhase.DESCENT
+        assert (
+            g.on(FrameSeen(state, _frame(0.2 + 0.1 * k, [zone], target, beside_vehicle), seq=0)).phase
+            is LandingPhase.DESCENT
+        )
 
 
 def test_a_lost_track_keeps_the_landing_point_and_a_shrinking_zone_aborts() -> None:
     g = _guidance()
     state = _descending_over(g, 12.0)
     for k in range(10):  # the zone's track comes and goes with a noisy map: the landing point stays
-        d = g.on_frame(_frame(0.2 + 0.1 * k, [], None, _map()), state)
+        d = g.on(FrameSeen(state, _frame(0.2 + 0.1 * k, [], None, _map()), seq=0))
         assert d.phase is LandingPhase.DESCENT
         assert d.setpoint is not None
         assert (d.setpoint.north_m, d.setpoint.east_m) == pytest.approx((0.2, 0.0))
@@ -184,8 +193,10 @@ def test_a_lost_track_keeps_the_landing_point_and_a_shrinking_zone_aborts() -> N
     state = _descending_over(g2, 12.0)
     shrunk = _track(3, 0.2, 0.0, 0.6)
     for k in range(g2.config.unsafe_frames_to_abort - 1):
-        assert g2.on_frame(_frame(0.2 + 0.1 * k, [shrunk], None, _map()), state).phase is LandingPhase.DESCENT
-    d = g2.on_frame(_frame(1.0, [shrunk], None, _map()), state)
+        assert (
+            g2.on(FrameSeen(state, _frame(0.2 + 0.1 * k, [shrunk], None, _map()), seq=0)).phase is LandingPhase.DESCENT
+        )
+    d = g2.on(FrameSeen(state, _frame(1.0, [shrunk], None, _map()), seq=0))
     assert d.phase is LandingPhase.SEARCH
     assert "shrank" in d.reason
 
@@ -193,9 +204,9 @@ def test_a_lost_track_keeps_the_landing_point_and_a_shrinking_zone_aborts() -> N
 def test_a_zone_outside_the_geofence_is_never_approached() -> None:
     g = _guidance()
     state = VehicleState(0.0, 15.0, 0.0, -20.0, 0.0)
-    g.start(state)
+    g.on(Started(state))
     outside = Target(25.0, 0.0, 3.0, 7)  # the fence ends at 20 m north
-    d = g.on_frame(_frame(0.1, [_track(7, 25.0, 0.0, 3.0)], outside, _map()), state)
+    d = g.on(FrameSeen(state, _frame(0.1, [_track(7, 25.0, 0.0, 3.0)], outside, _map()), seq=0))
     assert d.phase is LandingPhase.SEARCH
     assert d.setpoint is not None
     assert FENCE.contains_ne(d.setpoint.north_m, d.setpoint.east_m)
@@ -205,9 +216,9 @@ def test_no_landing_without_a_recent_map_of_a_free_footprint() -> None:
     g = _guidance(walkers={"enabled": False})  # the walker gate would first send it back up to look
     # Descend blind (nothing known around the vehicle), the zone still tracked: at 2 m it must not land.
     state = VehicleState(0.0, 0.0, 0.0, -2.0, 0.0)
-    g.start(state)
+    g.on(Started(state))
     blind = _map(known_radius_m=0.0)
-    d = g.on_frame(_frame(0.1, [_track(3, 0.0, 0.0, 3.0)], Target(0.0, 0.0, 3.0, 3), blind), state)
+    d = g.on(FrameSeen(state, _frame(0.1, [_track(3, 0.0, 0.0, 3.0)], Target(0.0, 0.0, 3.0, 3), blind), seq=0))
     assert d.kind is not CommandKind.LAND
     assert d.phase is LandingPhase.SEARCH
     assert "no map saw the footprint free" in d.reason
@@ -216,42 +227,42 @@ def test_no_landing_without_a_recent_map_of_a_free_footprint() -> None:
 def test_silence_holds_then_runs_the_failsafe_action() -> None:
     g = _guidance(failsafe_action=FailsafeAction.RETURN)
     state = VehicleState(0.0, 1.0, 2.0, -18.0, 30.0)
-    g.start(state)
-    assert g.perception_silent(state, 0.5) is None
-    hold = g.perception_silent(state, 1.2)
+    g.on(Started(state))
+    assert g.on(Silence(state, 0.5)) is None
+    hold = g.on(Silence(state, 1.2))
     assert hold is not None
     assert hold.phase is LandingPhase.HOLD
     assert hold.setpoint is not None
     assert (hold.setpoint.north_m, hold.setpoint.east_m, hold.setpoint.down_m) == pytest.approx((1.0, 2.0, -18.0))
-    action = g.perception_silent(state, 5.5)
+    action = g.on(Silence(state, 5.5))
     assert action is not None
     assert action.kind is CommandKind.RETURN
     assert not g.commanding
     # Perception back after a hold (before T2) resumes the search.
     g2 = _guidance()
-    g2.start(state)
-    g2.perception_silent(state, 1.5)
-    assert g2.on_frame(_frame(2.0, [], None, _map()), state).phase is LandingPhase.SEARCH
+    g2.on(Started(state))
+    g2.on(Silence(state, 1.5))
+    assert g2.on(FrameSeen(state, _frame(2.0, [], None, _map()), seq=0)).phase is LandingPhase.SEARCH
 
 
 def test_the_pilot_taking_over_is_final() -> None:
     g = _guidance()
     state = _descending_over(g, 14.0)
-    assert g.pilot_took_over(1.0, "POSCTL").phase is LandingPhase.YIELDED
-    d = g.on_frame(_frame(1.1, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map()), state)
+    assert g.on(PilotTookOver(VehicleState(1.0, 0.0, 0.0, -14.0, 0.0), "POSCTL")).phase is LandingPhase.YIELDED
+    d = g.on(FrameSeen(state, _frame(1.1, [_track(3, 0.2, 0.0, 3.0)], Target(0.2, 0.0, 3.0, 3), _map()), seq=0))
     assert d.kind is CommandKind.NONE
-    assert g.perception_silent(state, 30.0) is None
+    assert g.on(Silence(state, 30.0)) is None
     assert not g.commanding
 
 
 def test_no_target_for_a_while_flies_a_search_pattern_inside_the_fence() -> None:
     g = _guidance(search_timeout_s=1.0, search_leg_m=8.0)
     state = VehicleState(0.0, 15.0, 15.0, -20.0, 0.0)
-    g.start(state)
+    g.on(Started(state))
     points = []
     for k in range(1, 80):
         state = VehicleState(0.1 * k, 15.0, 15.0, -20.0, 0.0)  # the vehicle clock runs; the vehicle stays put
-        d = g.on_frame(_frame(0.1 * k, [], None, _map()), state)
+        d = g.on(FrameSeen(state, _frame(0.1 * k, [], None, _map()), seq=0))
         assert d.setpoint is not None
         points.append((d.setpoint.north_m, d.setpoint.east_m))
         assert FENCE.contains(d.setpoint.north_m, d.setpoint.east_m, -d.setpoint.down_m)
@@ -278,17 +289,20 @@ def test_used_up_reselections_hold_and_never_land() -> None:
     state = _descending_over(g, 14.0)
     occupied = _map(person_at=(0.5, 0.3))
     zone, target = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3)
-    g.on_frame(_frame(0.2, [zone], target, occupied), state)
-    assert g.on_frame(_frame(0.25, [zone], target, occupied), state).phase is LandingPhase.SEARCH
+    g.on(FrameSeen(state, _frame(0.2, [zone], target, occupied), seq=0))
+    assert g.on(FrameSeen(state, _frame(0.25, [zone], target, occupied), seq=0)).phase is LandingPhase.SEARCH
     climbed = VehicleState(0.3, state.north_m, state.east_m, -g.config.search_altitude_m, 0.0)  # back up
     # The refused zone is not chosen again; one 5 m away is.
-    assert g.on_frame(_frame(0.3, [zone], target, _map()), climbed).target is None
+    assert g.on(FrameSeen(climbed, _frame(0.3, [zone], target, _map()), seq=0)).target is None
     other, other_target = _track(4, 0.2, 5.0, 3.0), Target(0.2, 5.0, 3.0, 4)
     over_other = VehicleState(0.35, 0.2, 5.0, climbed.down_m, 0.0)
-    assert g.on_frame(_frame(0.35, [zone, other], other_target, _map()), over_other).phase is LandingPhase.DESCENT
+    assert (
+        g.on(FrameSeen(over_other, _frame(0.35, [zone, other], other_target, _map()), seq=0)).phase
+        is LandingPhase.DESCENT
+    )
     occupied_other = _map(person_at=(0.5, 5.3))
-    g.on_frame(_frame(0.4, [other], other_target, occupied_other), over_other)
-    last = g.on_frame(_frame(0.45, [other], other_target, occupied_other), over_other)
+    g.on(FrameSeen(over_other, _frame(0.4, [other], other_target, occupied_other), seq=0))
+    last = g.on(FrameSeen(over_other, _frame(0.45, [other], other_target, occupied_other), seq=0))
     assert last.phase is LandingPhase.FAILSAFE
     assert last.kind is CommandKind.HOLD  # not the configured land: the map just refused a landing here
 
@@ -297,10 +311,10 @@ def test_below_the_models_altitude_range_maps_do_not_decide() -> None:
     g = _guidance(perception_min_altitude_m=6.0, walkers={"enabled": False})  # no look at the gate (tested below)
     _descending_over(g, 7.0)  # this frame's map (free footprint) is the landing map
     low = VehicleState(1.0, 0.2, 0.0, -4.0, 0.0)
-    d = g.on_frame(_frame(1.0, [], None, _map(person_at=(0.3, 0.0))), low)
+    d = g.on(FrameSeen(low, _frame(1.0, [], None, _map(person_at=(0.3, 0.0))), seq=0))
     assert d.phase is LandingPhase.DESCENT  # ground texture at 4 m is not trusted to be a person
     at_two = VehicleState(2.0, 0.2, 0.0, -2.0, 0.0)
-    assert g.on_frame(_frame(2.0, [], None, _map(person_at=(0.3, 0.0))), at_two).kind is CommandKind.LAND
+    assert g.on(FrameSeen(at_two, _frame(2.0, [], None, _map(person_at=(0.3, 0.0))), seq=0)).kind is CommandKind.LAND
 
 
 def test_the_blind_baseline_lands_on_its_point_whatever_the_map_says() -> None:
@@ -308,20 +322,20 @@ def test_the_blind_baseline_lands_on_its_point_whatever_the_map_says() -> None:
     point = Target(0.3, 0.0, 0.0, None)  # the random policy's committed point: no zone, no track
     occupied = _map(person_at=(0.3, 0.0))
     state = VehicleState(0.0, 0.0, 0.0, -14.0, 0.0)
-    g.start(state)
+    g.on(Started(state))
     for k in range(8):
-        assert g.on_frame(_frame(0.1 * k, [], point, occupied), state).phase is LandingPhase.DESCENT
+        assert g.on(FrameSeen(state, _frame(0.1 * k, [], point, occupied), seq=0)).phase is LandingPhase.DESCENT
     low = VehicleState(1.0, 0.3, 0.0, -2.0, 0.0)
-    assert g.on_frame(_frame(1.0, [], point, occupied), low).kind is CommandKind.LAND
+    assert g.on(FrameSeen(low, _frame(1.0, [], point, occupied), seq=0)).kind is CommandKind.LAND
     assert _guidance().config.blind_landing is False  # never by default
 
 
 def test_a_mission_that_never_lands_holds_when_its_time_is_used_up() -> None:
     g = _guidance(mission_time_limit_s=60.0)
-    assert g.time_used_up(VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)) is None  # not started
-    g.start(VehicleState(10.0, 0.0, 0.0, -20.0, 0.0))
-    assert g.time_used_up(VehicleState(69.9, 0.0, 0.0, -20.0, 0.0)) is None
-    d = g.time_used_up(VehicleState(70.0, 0.0, 0.0, -20.0, 0.0))  # vehicle clock, 60 s after the start
+    assert g.on(TimeUp(VehicleState(0.0, 0.0, 0.0, -20.0, 0.0))) is None  # not started
+    g.on(Started(VehicleState(10.0, 0.0, 0.0, -20.0, 0.0)))
+    assert g.on(TimeUp(VehicleState(69.9, 0.0, 0.0, -20.0, 0.0))) is None
+    d = g.on(TimeUp(VehicleState(70.0, 0.0, 0.0, -20.0, 0.0)))  # vehicle clock, 60 s after the start
     assert d is not None
     assert d.phase is LandingPhase.FAILSAFE
     assert d.kind is CommandKind.HOLD  # never a blind landing
@@ -333,7 +347,7 @@ def _aborted_low_down(g: LandingGuidance) -> VehicleState:
     state = _descending_over(g, 6.0)
     zone, target, occupied = _track(3, 0.2, 0.0, 3.0), Target(0.2, 0.0, 3.0, 3), _map(person_at=(0.5, 0.3))
     for k in range(g.config.unsafe_frames_to_abort):
-        d = g.on_frame(_frame(0.2 + 0.1 * k, [zone], target, occupied), state)
+        d = g.on(FrameSeen(state, _frame(0.2 + 0.1 * k, [zone], target, occupied), seq=0))
     assert d.phase is LandingPhase.SEARCH
     return state
 
@@ -348,13 +362,13 @@ def test_after_an_abort_low_down_a_new_descent_waits_until_the_vehicle_has_climb
     t = 1.0
     while state.altitude_m < climb_to - g.config.land_tolerance_m:
         t += 0.1
-        d = g.on_frame(_frame(t, [other], other_target, _map()), state)
+        d = g.on(FrameSeen(state, _frame(t, [other], other_target, _map()), seq=0))
         assert d.phase is LandingPhase.APPROACH, f"at {state.altitude_m:.1f} m"
         assert d.setpoint is not None
         assert -d.setpoint.down_m > state.altitude_m  # climbing
         state = _fly(state, min(-d.setpoint.down_m, state.altitude_m + 0.5), d.setpoint.north_m, d.setpoint.east_m, t)
         assert t < 10.0
-    d = g.on_frame(_frame(t + 0.1, [other], other_target, _map()), state)
+    d = g.on(FrameSeen(state, _frame(t + 0.1, [other], other_target, _map()), seq=0))
     assert d.phase is LandingPhase.DESCENT  # back up: the new zone may be descended onto
 
 
@@ -370,7 +384,7 @@ def test_with_no_climb_back_height_the_vehicle_climbs_to_the_search_altitude_and
     t = 1.0
     while state.altitude_m < climb_to_m - g.config.land_tolerance_m:
         t += 0.1
-        d = g.on_frame(_frame(t, [other], other_target, _map()), state)
+        d = g.on(FrameSeen(state, _frame(t, [other], other_target, _map()), seq=0))
         assert d.phase is LandingPhase.SEARCH, f"at {state.altitude_m:.1f} m"
         assert d.target is None
         assert g.commitment.committed_id is None
@@ -380,7 +394,7 @@ def test_with_no_climb_back_height_the_vehicle_climbs_to_the_search_altitude_and
         state = _fly(state, min(-d.setpoint.down_m, state.altitude_m + 0.5), d.setpoint.north_m, d.setpoint.east_m, t)
         assert t < 10.0
     assert state.altitude_m < climb_to_m + 0.5
-    d = g.on_frame(_frame(t + 0.1, [other], other_target, _map()), state)
+    d = g.on(FrameSeen(state, _frame(t + 0.1, [other], other_target, _map()), seq=0))
     assert d.phase is LandingPhase.DESCENT  # back up: chosen, and descended onto (it lies under the vehicle)
     assert d.target is not None
     assert d.target.track_id == 4
@@ -403,7 +417,7 @@ def _descend_with(g: LandingGuidance, maps: Callable[[float], HeadPlaneOccupancy
     t = 0.1
     while t < t_limit_s:
         t += 0.1
-        d = g.on_frame(_frame(t, [zone], target, maps(t)), state)
+        d = g.on(FrameSeen(state, _frame(t, [zone], target, maps(t)), seq=0))
         decisions.append(d)
         if d.kind is not CommandKind.SETPOINT or d.phase is not LandingPhase.DESCENT:
             break
@@ -500,12 +514,12 @@ def test_a_person_seen_in_the_footprint_after_the_gate_and_above_the_floor_sends
     while not g.descent.walkers.passed:  # a free footprint at the gate: the look, then the gate is passed
         t += 0.1
         state = VehicleState(t, 0.0, 0.0, -gate_m, 0.0)
-        g.on_frame(_frame(t, [zone], target, _map()), state)
+        g.on(FrameSeen(state, _frame(t, [zone], target, _map()), seq=0))
         assert t < 5.0
     state = VehicleState(t, 0.2, 0.0, -(c.perception_min_altitude_m + 0.1), 0.0)  # on the way down, above the floor
     occupied = _map(person_at=(0.5, 0.3))
     t += 0.1
-    d = g.on_frame(_frame(t, [zone], target, occupied), state)
+    d = g.on(FrameSeen(state, _frame(t, [zone], target, occupied), seq=0))
     assert d.phase is LandingPhase.DESCENT
     assert d.setpoint is not None
     assert -d.setpoint.down_m == pytest.approx(gate_m)  # back up to the gate, not an abort
@@ -514,7 +528,7 @@ def test_a_person_seen_in_the_footprint_after_the_gate_and_above_the_floor_sends
     while d.phase is LandingPhase.DESCENT:  # still there: the wait is bounded like any wait at the gate
         t += 0.1
         state = VehicleState(t, 0.2, 0.0, -gate_m, 0.0)
-        d = g.on_frame(_frame(t, [zone], target, occupied), state)
+        d = g.on(FrameSeen(state, _frame(t, [zone], target, occupied), seq=0))
         assert t - since < 4.0
     assert d.phase is LandingPhase.SEARCH
     assert "person seen inside the footprint at the gate" in d.reason

@@ -1,4 +1,4 @@
-"""The ground station's commands in the landing logic (companion.guidance.operator) and at the flight's desk
+"""The ground station's commands in the landing logic (an OperatorOrder to LandingGuidance.on) and at the flight's desk
 (OperatorDesk: the person check on the newest map), on hand-made maps and tracks. The same commands sent over
 MAVLink to a companion flying the SITL are in tests/test_ground_commands_flight.py."""
 
@@ -14,7 +14,7 @@ from companion.app.operator_desk import OperatorDesk
 from companion.app.recorder import FlightRecorder, read_log
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand, RefusedCommand
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
-from companion.guidance.operator import operator_decision
+from companion.guidance.stimulus import Denied, FrameSeen, OperatorOrder, Started
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent, OperatorCommand, RefusalCause
 from companion.perception.selection import Target
@@ -29,8 +29,8 @@ TARGET = Target(6.0, 8.0, 2.5, 7)
 def approaching(g: LandingGuidance) -> VehicleState:
     """Searching at 20 m over the origin, then approaching the zone 10 m away."""
     state = VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)
-    g.start(state)
-    d = g.on_frame(_frame(0.1, [ZONE], TARGET, _map()), state)
+    g.on(Started(state))
+    d = g.on(FrameSeen(state, _frame(0.1, [ZONE], TARGET, _map()), seq=0))
     assert d.phase is LandingPhase.APPROACH
     return state
 
@@ -39,10 +39,12 @@ def test_a_command_with_nothing_to_act_on_is_denied_and_changes_nothing() -> Non
     g = _guidance()
     state = VehicleState(0.0, 0.0, 0.0, -20.0, 0.0)
     for command in (OperatorCommand.GO_AROUND, OperatorCommand.REJECT_ZONE, OperatorCommand.LAND_NOW):
-        assert operator_decision(g, command, state, False, False) == "no approach or descent to act on (phase idle)"
-    g.start(state)
-    denied = operator_decision(g, OperatorCommand.GO_AROUND, state, False, False)
-    assert denied == "no approach or descent to act on (phase search)"
+        assert g.on(OperatorOrder(state, command, False, False)) == Denied(
+            "no approach or descent to act on (phase idle)"
+        )
+    g.on(Started(state))
+    denied = g.on(OperatorOrder(state, OperatorCommand.GO_AROUND, False, False))
+    assert denied == Denied("no approach or descent to act on (phase search)")
     assert g.phase is LandingPhase.SEARCH
     assert g.reselections == 0
 
@@ -50,7 +52,7 @@ def test_a_command_with_nothing_to_act_on_is_denied_and_changes_nothing() -> Non
 def test_a_go_around_in_the_descent_climbs_back_and_searches_again() -> None:
     g = _guidance()
     state = _descending_over(g, 8.0)
-    d = operator_decision(g, OperatorCommand.GO_AROUND, state, False, False)
+    d = g.on(OperatorOrder(state, OperatorCommand.GO_AROUND, False, False))
     assert isinstance(d, Decision)
     assert (d.phase, d.event, d.cause) == (LandingPhase.SEARCH, DecisionEvent.OPERATOR_GO_AROUND, RefusalCause.OPERATOR)
     assert d.setpoint is not None
@@ -61,13 +63,13 @@ def test_a_go_around_in_the_descent_climbs_back_and_searches_again() -> None:
 def test_a_rejected_zone_in_the_approach_is_refused_and_another_is_chosen() -> None:
     g = _guidance()
     state = approaching(g)
-    d = operator_decision(g, OperatorCommand.REJECT_ZONE, state, False, False)
+    d = g.on(OperatorOrder(state, OperatorCommand.REJECT_ZONE, False, False))
     assert isinstance(d, Decision)
     assert (d.phase, d.event, d.cause) == (LandingPhase.SEARCH, DecisionEvent.OPERATOR_REJECT, RefusalCause.OPERATOR)
     assert d.setpoint is not None
     assert (d.setpoint.north_m, d.setpoint.east_m) == (0.0, 0.0)  # holds where it is
     other = _track(9, -6.0, -8.0, 2.0)
-    after = g.on_frame(_frame(0.2, [ZONE, other], TARGET, _map()), state)
+    after = g.on(FrameSeen(state, _frame(0.2, [ZONE, other], TARGET, _map()), seq=0))
     assert after.phase is LandingPhase.APPROACH
     assert after.target is not None
     assert after.target.track_id == 9  # the rejected zone, bigger, is not chosen again
@@ -76,13 +78,13 @@ def test_a_rejected_zone_in_the_approach_is_refused_and_another_is_chosen() -> N
 def test_land_now_lands_over_the_target_is_denied_away_from_it_or_over_a_person_unless_forced() -> None:
     g = _guidance()
     state = approaching(g)
-    far = operator_decision(g, OperatorCommand.LAND_NOW, state, False, False)
-    assert far == "10.0 m from the target: land-now lands where the vehicle is; wait until over it"
+    far = g.on(OperatorOrder(state, OperatorCommand.LAND_NOW, False, False))
+    assert far == Denied("10.0 m from the target: land-now lands where the vehicle is; wait until over it")
     over = VehicleState(1.0, 6.2, 8.1, -12.0, 0.0)
-    person = operator_decision(g, OperatorCommand.LAND_NOW, over, True, False)
-    assert person == "a person in the footprint on the newest map (param1 = 1 forces the landing)"
+    person = g.on(OperatorOrder(over, OperatorCommand.LAND_NOW, True, False))
+    assert person == Denied("a person in the footprint on the newest map (param1 = 1 forces the landing)")
     assert g.phase is LandingPhase.APPROACH  # a denial changes nothing
-    forced = operator_decision(g, OperatorCommand.LAND_NOW, over, True, True)
+    forced = g.on(OperatorOrder(over, OperatorCommand.LAND_NOW, True, True))
     assert isinstance(forced, Decision)
     assert (forced.phase, forced.kind, forced.event) == (
         LandingPhase.LAND,
@@ -92,7 +94,7 @@ def test_land_now_lands_over_the_target_is_denied_away_from_it_or_over_a_person_
     assert "forced" in forced.reason
     clear = _guidance()
     approaching(clear)
-    landed = operator_decision(clear, OperatorCommand.LAND_NOW, over, False, False)
+    landed = clear.on(OperatorOrder(over, OperatorCommand.LAND_NOW, False, False))
     assert isinstance(landed, Decision)
     assert landed.kind is CommandKind.LAND
     assert "forced" not in landed.reason
@@ -136,9 +138,9 @@ def test_the_desk_denies_a_land_now_over_a_person_on_the_newest_map_and_records_
     assert channel.answers == [(OperatorCommand.LAND_NOW, AckResult.DENIED, reason)]
     assert desk.take(g, over, _frame(0.95, [ZONE], TARGET, _map())) == []  # nothing new: nothing decided
     channel.commands = [land_now(force=True)]
-    (accepted,) = desk.take(g, over, someone_there)
-    assert accepted.decision.kind is CommandKind.LAND
-    assert accepted.inputs == {"command": "land_now", "force": True, "person_seen": True}
+    ((order, decision),) = desk.take(g, over, someone_there)
+    assert decision.kind is CommandKind.LAND
+    assert order.inputs() == {"command": "land_now", "force": True, "person_seen": True}
     desk.recorder.close()
     records = [r for r in read_log(desk.recorder.path) if r["kind"] == "ground_command"]
     assert [(r["result"], r["force"], r["person_seen"]) for r in records] == [

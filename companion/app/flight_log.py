@@ -29,8 +29,10 @@ from companion.guidance.vocabulary import (
     ZoneChange,
 )
 
-SCHEMA_VERSION = 2
-"""1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version."""
+SCHEMA_VERSION = 3
+"""1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version; 3: a
+decision carries its ``stimulus`` (:func:`companion.guidance.stimulus.to_json`: its type and inputs) where it had
+``inputs``. Every earlier version is still read, and replayed."""
 
 
 class RecordKind(str, enum.Enum):
@@ -53,7 +55,8 @@ class RecordKind(str, enum.Enum):
     """A processed frame: its pose, tracks, target and stage timings."""
     FRAME_ERROR = "frame_error"
     DECISION = "decision"
-    """One decision of the landing logic, with its source and inputs."""
+    """One decision of the landing logic, with its source, the vehicle state and its stimulus (``inputs`` before
+    schema 3)."""
     PHASE = "phase"
     """A phase change."""
     COMMAND = "command"

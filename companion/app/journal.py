@@ -11,8 +11,8 @@ from companion.app.flight_log import RecordKind
 from companion.app.recorder import FlightRecorder
 from companion.app.start_sequence import StartStep
 from companion.guidance.landing import Decision, LandingPhase
+from companion.guidance.stimulus import Stimulus, to_json
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import DecisionSource
 from companion.vehicle.link import VehicleStatus
 
 logger = logging.getLogger(__name__)
@@ -48,17 +48,23 @@ class FlightJournal:
         self,
         decision: Decision,
         previous_phase: str,
-        source: DecisionSource,
-        state: VehicleState | None,
+        stimulus: Stimulus,
         observed: dict[str, Any] | None,
-        inputs: dict[str, Any],
     ) -> None:
-        """Record a decision (with what produced it, from which inputs, and what the map showed around its target:
-        ``observed``), the phase change from ``previous_phase`` it makes, its target switch and its failsafe."""
+        """Record a decision (with the stimulus it answered: its source, the vehicle state and its inputs; and what the
+        map showed around its target: ``observed``), the phase change from ``previous_phase`` it makes, its target
+        switch and its failsafe."""
         self._last_decision = decision
         extra = {} if observed is None else {"observed": observed}
+        source, state = stimulus.source, stimulus.state
         self.recorder.write(
-            RecordKind.DECISION, decision.t_s, decision=decision, source=source, state=state, inputs=inputs, **extra
+            RecordKind.DECISION,
+            decision.t_s,
+            decision=decision,
+            source=source,
+            state=state,
+            stimulus=to_json(stimulus),
+            **extra,
         )
         if decision.phase.value != previous_phase:
             self.recorder.write(

@@ -11,8 +11,7 @@ not, the answer and why.
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import asdict
 
 from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig
@@ -21,20 +20,12 @@ from companion.ground.command_channel import AckResult, CommandChannel, GroundCo
 from companion.ground.operator_commands import COMMAND_OF_MAV_CMD
 from companion.guidance.footprint import nearest_occupied_m
 from companion.guidance.landing import Decision, LandingGuidance
-from companion.guidance.operator import operator_decision
+from companion.guidance.stimulus import Denied, InputValue, OperatorOrder
 from companion.guidance.vehicle_state import VehicleState
 from companion.perception.pipeline import FrameResult
 from companion.vehicle.mavsdk_link import PROVISIONAL_SYSTEM_ID
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class OperatorDecision:
-    """A command the logic accepted: its decision and the inputs it was decided on (for the record and replay)."""
-
-    decision: Decision
-    inputs: dict[str, Any]
 
 
 class OperatorDesk:
@@ -105,22 +96,23 @@ class OperatorDesk:
 
     def take(
         self, guidance: LandingGuidance, state: VehicleState, newest: FrameResult | None
-    ) -> list[OperatorDecision]:
-        """The commands that arrived since the last tick, decided at ``state`` over the ``newest`` map: the accepted
-        ones' decisions (answered ``ACCEPTED``); the denied ones answered and recorded here."""
+    ) -> list[tuple[OperatorOrder, Decision]]:
+        """The commands that arrived since the last tick, each handed to the landing logic as an
+        :class:`~companion.guidance.stimulus.OperatorOrder` at ``state`` over the ``newest`` map: the accepted ones
+        with their decisions (answered ``ACCEPTED``); the denied ones answered and recorded here."""
         if self.channel is None:
             return []
         self._record_refused(state.t_s)
         accepted = []
         for command in self.channel.pending():
-            person_seen = self._person_seen(guidance, newest)
-            decided = operator_decision(guidance, command.command, state, person_seen, command.force)
-            inputs = {"command": command.command.value, "force": command.force, "person_seen": person_seen}
-            if isinstance(decided, str):
-                self._answer(command, state, AckResult.DENIED, f"{command.command.value} denied: {decided}", inputs)
+            order = OperatorOrder(state, command.command, self._person_seen(guidance, newest), command.force)
+            decided = guidance.on(order)
+            if isinstance(decided, Denied):
+                said = f"{command.command.value} denied: {decided.reason}"
+                self._answer(command, state, AckResult.DENIED, said, order.inputs())
                 continue
-            self._answer(command, state, AckResult.ACCEPTED, decided.reason, inputs)
-            accepted.append(OperatorDecision(decided, inputs))
+            self._answer(command, state, AckResult.ACCEPTED, decided.reason, order.inputs())
+            accepted.append((order, decided))
         return accepted
 
     def _person_seen(self, guidance: LandingGuidance, newest: FrameResult | None) -> bool:
@@ -132,7 +124,12 @@ class OperatorDesk:
         return nearest is not None and nearest < self.footprint_radius_m
 
     def _answer(
-        self, command: GroundCommand, state: VehicleState, result: AckResult, reason: str, inputs: dict[str, Any]
+        self,
+        command: GroundCommand,
+        state: VehicleState,
+        result: AckResult,
+        reason: str,
+        inputs: dict[str, InputValue],
     ) -> None:
         assert self.channel is not None
         denied = result is AckResult.DENIED

@@ -2,17 +2,17 @@
 
 A replayable log is one recorded with every processed frame saved losslessly (``recorder.frame_every: 1``,
 ``frame_format: png``). The replay takes the config from the log's header, feeds each frame with the pose it was paired
-with, and each decision's inputs (the vehicle state, and for ticks the silence or the mode) to a fresh pipeline and
-state machine, in the logged order. Every recomputed track list, target and decision is compared with the logged one
-after the same JSON encoding: a replay on the machine that flew reproduces the flight exactly, so any difference is a
-change of behaviour (a regression, or a different model). Optionally it writes the annotated camera video.
+with to a fresh pipeline, and each decision's recorded stimulus (:mod:`companion.guidance.stimulus`: the vehicle state,
+and the frame's result, the silence, the mode...) to a fresh state machine's one entry point, in the logged order. Every
+recomputed track list, target and decision is compared with the logged one after the same JSON encoding: a replay on the
+machine that flew reproduces the flight exactly, so any difference is a change of behaviour (a regression, or a
+different model). Optionally it writes the annotated camera video.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,16 +20,16 @@ from typing import Any
 import cv2
 import numpy as np
 
-from companion.app.flight import landing_guidance
 from companion.app.flight_log import FlightHeader, FlightLog, FlightLogError, RecordKind
+from companion.app.landing_loop import landing_guidance
 from companion.app.mission import MissionConfig, with_fallback_sites, with_fence_ne_m
 from companion.app.recorder import plain
 from companion.errors import SlzError
 from companion.geometry import GeometryError, Pose
 from companion.guidance.landing import Decision, LandingGuidance, LandingPhase
-from companion.guidance.operator import operator_decision
+from companion.guidance.stimulus import Denied, stimulus_of_record
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import DecisionSource, OperatorCommand
+from companion.guidance.vocabulary import DecisionSource
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.visualize import draw_camera_overlay
@@ -212,34 +212,16 @@ def replay(log_dir: Path, video_path: Path | None = None, video_rate_hz: float =
 
 
 def _decide(guidance: LandingGuidance, record: dict[str, Any], results: dict[int, FrameResult]) -> Decision | None:
-    """Call the state machine as the flight did for this decision record."""
-    try:
-        source = DecisionSource(record.get("source"))
-    except ValueError:
-        raise ReplayError(f"decision at t = {record['t_s']} s has no known source ({record.get('source')!r})") from None
+    """The state machine's decision on the stimulus the record names (:func:`stimulus_of_record`: schema 3's
+    ``stimulus``, or an older log's ``source`` and ``inputs``), as the flight handed it over."""
     state = VehicleState(**record["state"])
-    inputs = record.get("inputs") or {}
-    calls: dict[DecisionSource, Callable[[], Decision | None]] = {
-        DecisionSource.START: lambda: guidance.start(state),
-        DecisionSource.SILENCE: lambda: guidance.perception_silent(state, float(inputs["silent_s"])),
-        DecisionSource.LANDED: lambda: guidance.landed(state.t_s),
-        DecisionSource.TIME: lambda: guidance.time_used_up(state),
-        DecisionSource.ENERGY: lambda: guidance.time_used_up(state, str(inputs["reason"]), inputs.get("reach_m")),
-        DecisionSource.TAKEOVER: lambda: guidance.pilot_took_over(state.t_s, str(inputs["mode"])),
-        DecisionSource.LIMIT: lambda: guidance.give_up(state, str(inputs["reason"])),
-        DecisionSource.STOP: lambda: guidance.give_up(state, str(inputs["reason"])),
-        DecisionSource.OPERATOR: lambda: _operator(guidance, state, inputs),
-    }
-    if source is DecisionSource.FRAME:
-        result = results.get(int(inputs["seq"]))
-        return None if result is None else guidance.on_frame(result, state)
-    return calls[source]()
-
-
-def _operator(guidance: LandingGuidance, state: VehicleState, inputs: dict[str, Any]) -> Decision:
-    """A ground station's command as the flight decided it (an accepted one: denied ones made no decision)."""
-    command = OperatorCommand(str(inputs["command"]))
-    decided = operator_decision(guidance, command, state, bool(inputs["person_seen"]), bool(inputs["force"]))
-    if isinstance(decided, str):
-        raise ReplayError(f"the ground station's {command.value} at t = {state.t_s} s is denied now: {decided}")
+    try:
+        stimulus = stimulus_of_record(record, state, results)
+    except (KeyError, ValueError) as exc:
+        raise ReplayError(f"decision at t = {record['t_s']} s names no stimulus to replay: {exc!r}") from None
+    if stimulus is None:  # its frame has no result
+        return None
+    decided = guidance.on(stimulus)
+    if isinstance(decided, Denied):
+        raise ReplayError(f"the ground station's command at t = {state.t_s} s is denied now: {decided.reason}")
     return decided

@@ -47,6 +47,11 @@ class RunEnd:
         self.outcome = outcome
         self.done = done
 
+    def over(self) -> None:
+        """The flight is over, nothing more to record: its last decision went out, or the logic already ended it (the
+        run's tasks end)."""
+        self.done.set()
+
     def end(
         self, t_s: float | None, event: str, reason: str, outcome_reason: str | None = None, warn: bool = False
     ) -> None:

@@ -44,85 +44,63 @@ seconds. This module has no I/O: the application turns decisions into MAVLink, o
 
 from __future__ import annotations
 
-import enum
 import math
-from dataclasses import dataclass
+from typing import overload
 
 from companion.guidance.climb_back import ClimbBack
 from companion.guidance.commitment import TargetCommitment
 from companion.guidance.config import FailsafeAction, GuidanceConfig
+from companion.guidance.decision import (
+    ACTIVE_PHASES,
+    COMMAND_OF_ACTION,
+    ENDING_KINDS,
+    CommandKind,
+    Decision,
+    LandingPhase,
+)
 from companion.guidance.descent import Descent, StepKind
-from companion.guidance.fallback import BudgetStepKind, FallbackPlan, SearchBudget
+from companion.guidance.fallback import BudgetEnd, BudgetStepKind, FallbackPlan, SearchBudget
 from companion.guidance.geofence import Geofence
 from companion.guidance.safety_filter import filtered_setpoint
 from companion.guidance.search_pattern import ExpandingSquare
+from companion.guidance.stimulus import (
+    Denied,
+    EnergyLow,
+    FrameSeen,
+    Landed,
+    LimitReached,
+    OperatorOrder,
+    PilotTookOver,
+    Silence,
+    Started,
+    Stimulus,
+    StopAsked,
+    TimeUp,
+)
 from companion.guidance.vehicle_state import VehicleState
-from companion.guidance.vocabulary import CommitmentEvent, DecisionEvent, RefusalCause
+from companion.guidance.vocabulary import CommitmentEvent, DecisionEvent, OperatorCommand, RefusalCause
 from companion.perception.pipeline import FrameResult
 from companion.perception.selection import SelectionContext, SelectionPolicy, Target
 from companion.vehicle.link import Setpoint
 
+__all__ = [
+    "ACTIVE_PHASES",
+    "COMMAND_OF_ACTION",
+    "ENDING_KINDS",
+    "CommandKind",
+    "Decision",
+    "LandingGuidance",
+    "LandingPhase",
+]
+
+FRAMES_IGNORED = frozenset(
+    {LandingPhase.IDLE, LandingPhase.LAND, LandingPhase.DONE, LandingPhase.FAILSAFE, LandingPhase.YIELDED}
+)
+"""Phases in which a frame decides nothing."""
+
 CLIMBING_BACK = "climbing back to"
 """How the reason of a frame spent climbing back after an aborted descent begins (for people: what counts reads
 the decision's event)."""
-
-
-class LandingPhase(str, enum.Enum):
-    """States of the landing logic."""
-
-    IDLE = "idle"
-    SEARCH = "search"
-    APPROACH = "approach"
-    DESCENT = "descent"
-    LAND = "land"
-    DONE = "done"
-    HOLD = "hold"
-    FAILSAFE = "failsafe"
-    YIELDED = "yielded"
-
-
-ACTIVE_PHASES = frozenset({LandingPhase.SEARCH, LandingPhase.APPROACH, LandingPhase.DESCENT})
-
-
-class CommandKind(str, enum.Enum):
-    """What a decision asks of the vehicle link."""
-
-    NONE = "none"
-    SETPOINT = "setpoint"
-    LAND = "land"
-    HOLD = "hold"
-    RETURN = "return"
-
-
-ENDING_KINDS = (CommandKind.LAND, CommandKind.HOLD, CommandKind.RETURN)
-"""The commands that hand the vehicle's end to the autopilot: a landing or a last resort."""
-
-COMMAND_OF_ACTION = {
-    FailsafeAction.HOLD: CommandKind.HOLD,
-    FailsafeAction.LAND: CommandKind.LAND,
-    FailsafeAction.RETURN: CommandKind.RETURN,
-}
-"""What the vehicle link is asked for each failsafe action."""
-
-
-@dataclass(frozen=True)
-class Decision:
-    """One decision: the phase after it, the command, and why.
-
-    ``reason`` says it in words, for people; ``event``, ``cause`` (a refused or waited-on landing point's) and
-    ``zone_changes`` (the commitment's changes that this decision reports) say it as data
-    (:mod:`companion.guidance.vocabulary`), for everything that counts.
-    """
-
-    t_s: float
-    phase: LandingPhase
-    kind: CommandKind
-    setpoint: Setpoint | None
-    target: Target | None
-    reason: str
-    event: DecisionEvent
-    cause: RefusalCause | None = None
-    zone_changes: tuple[CommitmentEvent, ...] = ()
 
 
 class LandingGuidance:
@@ -241,11 +219,51 @@ class LandingGuidance:
         kind = COMMAND_OF_ACTION[action]
         return Decision(state.t_s, LandingPhase.FAILSAFE, kind, None, None, f"{reason}: {action.value}", event, cause)
 
-    # -- events ----------------------------------------------------------------------------------------------------
-    def start(self, state: VehicleState) -> Decision:
+    # -- the entry point ------------------------------------------------------------------------------------------
+    @overload
+    def on(self, stimulus: Started | FrameSeen | Landed | PilotTookOver | LimitReached | StopAsked) -> Decision: ...
+
+    @overload
+    def on(self, stimulus: Silence | TimeUp | EnergyLow) -> Decision | None: ...
+
+    @overload
+    def on(self, stimulus: OperatorOrder) -> Decision | Denied: ...
+
+    @overload
+    def on(self, stimulus: Stimulus) -> Decision | Denied | None: ...
+
+    def on(self, stimulus: Stimulus) -> Decision | Denied | None:
+        """Decide on one stimulus (:mod:`companion.guidance.stimulus`): the decision, None when it changes nothing
+        (silence not long enough, time not used up), or :class:`Denied` for an operator's command the logic will not
+        carry out."""
+        state = stimulus.state
+        match stimulus:
+            case Started():
+                return self._start(state)
+            case FrameSeen(result=result):
+                return self._frame(result, state)
+            case Silence(silent_s=silent_s):
+                return self._silence(state, silent_s)
+            case Landed():
+                return self._landed(state.t_s)
+            case TimeUp():
+                return self._time_used_up(state)
+            case EnergyLow(reason=reason, reach_m=reach_m):
+                return self._time_used_up(state, reason, reach_m)
+            case PilotTookOver(mode=mode):
+                return self._pilot_took_over(state.t_s, mode)
+            case LimitReached(reason=reason) | StopAsked(reason=reason):
+                return self.failsafe(state, reason, DecisionEvent.LIMIT, self.config.last_resort)
+            case OperatorOrder(command=command, person_seen=person_seen, force=force):
+                decided = _operator_decision(self, command, state, person_seen, force)
+                return Denied(decided) if isinstance(decided, str) else decided
+        raise TypeError(f"not a stimulus: {stimulus!r}")
+
+    # -- the stimuli -------------------------------------------------------------------------------------------------
+    def _start(self, state: VehicleState) -> Decision:
         """Begin the mission from where the vehicle is: search, at least at ``search_altitude_m``."""
         if self.phase is not LandingPhase.IDLE:
-            raise RuntimeError(f"start() in phase {self.phase.value}")
+            raise RuntimeError(f"started in phase {self.phase.value}")
         self._last_target_s = state.t_s
         self.budget.started_s = state.t_s
         self._heading_deg = state.yaw_deg
@@ -254,16 +272,10 @@ class LandingGuidance:
         n, e, event = state.north_m, state.east_m, DecisionEvent.MISSION_START
         return self.steer(state, LandingPhase.SEARCH, None, "mission start", n, e, altitude, event)
 
-    def on_frame(self, result: FrameResult, state: VehicleState) -> Decision:
+    def _frame(self, result: FrameResult, state: VehicleState) -> Decision:
         """Decide after one processed frame (``state`` at the frame's decision time)."""
         c = self.config
-        if self.phase in (
-            LandingPhase.IDLE,
-            LandingPhase.LAND,
-            LandingPhase.DONE,
-            LandingPhase.FAILSAFE,
-            LandingPhase.YIELDED,
-        ):
+        if self.phase in FRAMES_IGNORED:
             ignored = f"frame ignored in {self.phase.value}"
             return Decision(state.t_s, self.phase, CommandKind.NONE, None, None, ignored, DecisionEvent.FRAME_IGNORED)
         if self.phase is LandingPhase.HOLD:  # perception is back
@@ -280,30 +292,13 @@ class LandingGuidance:
         note = "" if said is None else f"; {said}"
         if target is None:
             since = state.t_s - (self._last_target_s if self._last_target_s is not None else state.t_s)
+            alt = self.climb.search_altitude_m
             if since < c.search_timeout_s:
-                return self.steer(
-                    state,
-                    LandingPhase.SEARCH,
-                    None,
-                    "no target yet: hold" + note,
-                    state.north_m,
-                    state.east_m,
-                    self.climb.search_altitude_m,
-                    DecisionEvent.HOLD_NO_TARGET,
-                    zone_changes=changes,
-                )
-            n, e = self.search.waypoint(state.t_s, state.north_m, state.east_m, self.climb.search_altitude_m)
-            return self.steer(
-                state,
-                LandingPhase.SEARCH,
-                None,
-                "no target: search pattern" + note,
-                n,
-                e,
-                self.climb.search_altitude_m,
-                DecisionEvent.SEARCH_PATTERN,
-                zone_changes=changes,
-            )
+                n, e, said, event = state.north_m, state.east_m, "no target yet: hold", DecisionEvent.HOLD_NO_TARGET
+            else:
+                n, e = self.search.waypoint(state.t_s, state.north_m, state.east_m, alt)
+                said, event = "no target: search pattern", DecisionEvent.SEARCH_PATTERN
+            return self.steer(state, LandingPhase.SEARCH, None, said + note, n, e, alt, event, zone_changes=changes)
         self._last_target_s = state.t_s
         self.search.reset()
         self.climb.observe(state)
@@ -370,7 +365,7 @@ class LandingGuidance:
         n, e, alt = locked.north_m, locked.east_m, step.goal_altitude_m
         return self.steer(state, LandingPhase.DESCENT, locked, step.reason, n, e, alt, step.event, step.cause)
 
-    def time_used_up(
+    def _time_used_up(
         self, state: VehicleState, energy_low: str | None = None, reach_m: float | None = None
     ) -> Decision | None:
         """The search's budget (:class:`~companion.guidance.fallback.SearchBudget`, with the energy budget's word
@@ -389,7 +384,7 @@ class LandingGuidance:
         """Fly to the nearest fallback site left in reach (:mod:`companion.guidance.fallback`), climbing first to the
         search's altitude; with none left, the last resort the search's end named."""
         end = self.fallback.ended_by
-        assert end is not None  # set by time_used_up before any site is chosen
+        assert end is not None  # set by the budget's end before any site is chosen
         site = self.fallback.next(state)
         if site is None:
             said = f"{reason}; no fallback site left in reach" if self.fallback.sites else reason
@@ -401,13 +396,7 @@ class LandingGuidance:
         n, e, event = site.north_m, site.east_m, DecisionEvent.FALLBACK_SITE
         return self.steer(state, LandingPhase.APPROACH, site.target, said, n, e, alt, event, cause)
 
-    def give_up(self, state: VehicleState, reason: str, event: DecisionEvent = DecisionEvent.LIMIT) -> Decision:
-        """End the mission before a landing, for a limit that ``reason`` names (``event``: the mission's own time
-        limit, or a limit of the program): the failsafe phase with ``last_resort`` (hold or return; never land where
-        the map has not chosen)."""
-        return self.failsafe(state, reason, event, self.config.last_resort)
-
-    def perception_silent(self, state: VehicleState, silent_s: float) -> Decision | None:
+    def _silence(self, state: VehicleState, silent_s: float) -> Decision | None:
         """No processed frame for ``silent_s`` (wall or vehicle time, the caller's watchdog): T1 hold, T2 failsafe."""
         c = self.config
         if self.phase in ACTIVE_PHASES and silent_s >= c.hold_after_silence_s:
@@ -416,34 +405,89 @@ class LandingGuidance:
                 self.descent.drop()
             self._hold = self.safe_setpoint(state, state.north_m, state.east_m, state.altitude_m)
             self.enter(LandingPhase.HOLD, state.t_s)
-            return Decision(
-                state.t_s,
-                LandingPhase.HOLD,
-                CommandKind.SETPOINT,
-                self._hold,
-                None,
-                f"perception silent {silent_s:.1f} s: hold",
-                DecisionEvent.PERCEPTION_HOLD,
-            )
+            said, event = f"perception silent {silent_s:.1f} s: hold", DecisionEvent.PERCEPTION_HOLD
+            return Decision(state.t_s, LandingPhase.HOLD, CommandKind.SETPOINT, self._hold, None, said, event)
         if self.phase is LandingPhase.HOLD and silent_s >= c.failsafe_after_silence_s:
             return self.failsafe(state, f"perception silent {silent_s:.1f} s", DecisionEvent.PERCEPTION_FAILSAFE)
         return None
 
-    def landed(self, t_s: float) -> Decision:
+    def _landed(self, t_s: float) -> Decision:
         """The autopilot reports the vehicle on the ground."""
         self.enter(LandingPhase.DONE, t_s)
         locked = self.descent.locked
         return Decision(t_s, LandingPhase.DONE, CommandKind.NONE, None, locked, "landed", DecisionEvent.LANDED)
 
-    def pilot_took_over(self, t_s: float, mode: str) -> Decision:
+    def _pilot_took_over(self, t_s: float, mode: str) -> Decision:
         """The flight mode left OFFBOARD without us: yield at once, for the rest of the flight."""
         self.enter(LandingPhase.YIELDED, t_s)
-        took_over = f"pilot took over (mode {mode})"
-        return Decision(
-            t_s, LandingPhase.YIELDED, CommandKind.NONE, None, None, took_over, DecisionEvent.PILOT_TOOK_OVER
-        )
+        said, event = f"pilot took over (mode {mode})", DecisionEvent.PILOT_TOOK_OVER
+        return Decision(t_s, LandingPhase.YIELDED, CommandKind.NONE, None, None, said, event)
 
     @property
     def commanding(self) -> bool:
         """True while the companion may still send setpoints."""
         return self.phase in (*ACTIVE_PHASES, LandingPhase.HOLD)
+
+
+# -- the ground station's commands (module-private: the landing logic's own parts, decided through LandingGuidance.on)
+OPERATOR_EVENTS: dict[OperatorCommand, tuple[DecisionEvent, str]] = {
+    OperatorCommand.GO_AROUND: (DecisionEvent.OPERATOR_GO_AROUND, "go-around from the ground station"),
+    OperatorCommand.REJECT_ZONE: (DecisionEvent.OPERATOR_REJECT, "zone rejected from the ground station"),
+    OperatorCommand.LAND_NOW: (DecisionEvent.OPERATOR_LAND, "land now, from the ground station"),
+}
+"""What each ground-station command is, as a decision: its event and its words."""
+
+
+def _operator_decision(
+    g: LandingGuidance, command: OperatorCommand, state: VehicleState, person_seen: bool, force: bool
+) -> Decision | str:
+    """A ground station's command to the landing logic ``g`` at ``state``: its decision, or why it is denied (in
+    words; a denial changes nothing). ``person_seen``: the newest map sees a person in the footprint at the target;
+    ``force``: land even so (the decision says it).
+
+    A go-around, and a rejection in the descent, abort the descent as a refused point does (climb back, a
+    re-selection spent, the point refused); a rejection in the approach refuses the zone and chooses again from where
+    the vehicle is; land-now commands the landing over the target, the vehicle within ``capture_radius_m`` of it; the
+    next fallback site ends the search (or gives up the site flown to) for the nearest fallback site not tried yet, as
+    the end of the search's budget does (:func:`_next_fallback`)."""
+    if command is OperatorCommand.NEXT_FALLBACK:
+        return _next_fallback(g, state)
+    target = g.target
+    if g.phase not in (LandingPhase.APPROACH, LandingPhase.DESCENT) or target is None:
+        return f"no approach or descent to act on (phase {g.phase.value})"
+    if command not in OPERATOR_EVENTS:
+        return f"{command.value} is not supported"
+    event, said = OPERATOR_EVENTS[command]
+    descending = g.phase is LandingPhase.DESCENT
+    if command is OperatorCommand.GO_AROUND or (command is OperatorCommand.REJECT_ZONE and descending):
+        return g.abort_descent(state, said, RefusalCause.OPERATOR, event)
+    if command is OperatorCommand.REJECT_ZONE:  # approaching: refuse the zone, choose another from here
+        g.commitment.refuse(target.north_m, target.east_m, state.t_s, said)
+        n, e, alt = state.north_m, state.east_m, max(state.altitude_m, g.climb.search_altitude_m)
+        return g.steer(state, LandingPhase.SEARCH, None, said, n, e, alt, event, RefusalCause.OPERATOR)
+    offset_m = math.hypot(target.north_m - state.north_m, target.east_m - state.east_m)
+    if offset_m > g.config.capture_radius_m:
+        return f"{offset_m:.1f} m from the target: land-now lands where the vehicle is; wait until over it"
+    if person_seen and not force:
+        return "a person in the footprint on the newest map (param1 = 1 forces the landing)"
+    said += " (forced: a person in the footprint on the newest map)" if person_seen else ""
+    g.enter(LandingPhase.LAND, state.t_s)
+    return Decision(state.t_s, LandingPhase.LAND, CommandKind.LAND, None, target, said, event)
+
+
+def _next_fallback(g: LandingGuidance, state: VehicleState) -> Decision | str:
+    """The ground station's "next fallback site" to ``g`` at ``state``: while searching, approaching or descending,
+    the nearest fallback site not tried yet in reach (the climb to the search altitude first, then the site's checks,
+    as when the search's budget ends; a site flown to now is given up); denied (in words) without sites or with none
+    left to try. The search counts as ended by the ground station: once no site is left, ``guidance.last_resort``."""
+    plan = g.fallback
+    if g.phase not in ACTIVE_PHASES:
+        return f"no search, approach or descent to act on (phase {g.phase.value})"
+    if not plan.sites:
+        return "no fallback sites in this mission (guidance.fallback)"
+    if not plan.untried(state):
+        return "no fallback site left to try in reach"
+    said = "next fallback site, from the ground station"
+    if plan.ended_by is None:
+        plan.ended_by = BudgetEnd(said, DecisionEvent.FALLBACK_SITE, g.config.last_resort)
+    return g.next_site(state, said, RefusalCause.OPERATOR)

@@ -144,6 +144,26 @@ def fly_to_the_end(
     return FlownMission(fly.returncode, out, err, truth)
 
 
+def as_schema_2(flight_dir: Path, out_dir: Path) -> Path:
+    """The flight log in ``flight_dir`` written again in ``out_dir`` as flight-log schema 2 wrote it: each decision's
+    ``stimulus`` back to ``inputs`` (without its type) and the header's version 2; the saved frames shared (a link).
+    What an older log looks like, for the tests that replay one."""
+    out_dir.mkdir(parents=True)
+    lines = []
+    for line in (flight_dir / "flight.jsonl").read_text().splitlines():
+        record = json.loads(line)
+        if record.get("kind") == "header":
+            record["schema_version"] = 2
+        if record.get("kind") == "decision":
+            stimulus = record.pop("stimulus")
+            stimulus.pop("type")
+            record["inputs"] = stimulus
+        lines.append(json.dumps(record))
+    (out_dir / "flight.jsonl").write_text("\n".join(lines) + "\n")
+    (out_dir / "frames").symlink_to((flight_dir / "frames").resolve(), target_is_directory=True)
+    return out_dir
+
+
 def run_python(*args: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
     """``python ARGS`` in this interpreter from the repository's root (a script, ``-m companion.cli ...``): a real
     process, its output captured, its exit status left to the test."""
