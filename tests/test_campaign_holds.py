@@ -10,6 +10,7 @@ import pytest
 from companion.app.flight_log import DecisionRecord
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause, ZoneChange
+from companion.perception.selection import Target
 from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, hold_cause, zones_chosen
 from sitl.campaign.record import FlownMission, flown_missions, parse_results
 from sitl.campaign.report import against_previous, build_report, hold_kind
@@ -61,7 +62,7 @@ def test_each_hold_is_explained_by_kind_from_an_old_flight_logs_words() -> None:
 
 def test_each_hold_is_explained_by_its_events_whatever_the_words() -> None:
     def typed(t_s: float, phase: str, event: DecisionEvent, cause: RefusalCause | None = None) -> DecisionRecord:
-        target = {"track_id": 1} if phase in ("approach", "descent") else None
+        target = Target(0.0, 0.0, 3.0, 1) if phase in ("approach", "descent") else None
         source = DecisionSource.TIME if event is DecisionEvent.TIME_LIMIT else DecisionSource.FRAME
         kind, at = CommandKind.SETPOINT, LandingPhase(phase)
         return DecisionRecord(t_s, kind, at, target, None, "words", source, None, event, cause)

@@ -85,10 +85,10 @@ def test_decisions_read_typed_and_kinds_in_log_order_from_the_recorders_own_reco
     first, landing = log.decisions()
     assert (first.t_s, first.kind, first.phase) == (3.0, CommandKind.SETPOINT, LandingPhase.APPROACH)
     assert first.source is DecisionSource.FRAME
-    assert first.target == {"north_m": 4.0, "east_m": 5.0, "radius_m": 2.5, "track_id": 7}
-    assert first.setpoint == {"north_m": 4.0, "east_m": 5.0, "down_m": -20.0, "yaw_deg": 90.0}
+    assert first.target == Target(4.0, 5.0, 2.5, 7)
+    assert first.setpoint == Setpoint(4.0, 5.0, -20.0, 90.0)
     assert first.state is not None
-    assert first.state["north_m"] == 1.0
+    assert first.state.north_m == 1.0
     assert (landing.kind, landing.setpoint, landing.reason) == (CommandKind.LAND, None, "land on zone 7")
     assert (first.event, landing.event) == (DecisionEvent.APPROACH, DecisionEvent.LAND)
     kinds = [kind for kind, _ in log.tagged()]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -108,12 +109,14 @@ def test_a_mission_folder_is_read_with_its_own_footprint(tmp_path: Path) -> None
     flight.mkdir()
     config = {"perception": {"zones": {"vehicle_radius_m": 0.4, "margin_m": 0.8}}}
     decision = _decision(1.0, "descent", "descend over zone 1", (0.0, 0.0))
+    target = decision.target
+    assert target is not None
     records = [
         {"kind": "header", "schema_version": 2, "config": config, "t_s": 0.0},
         {
             "kind": "decision",
             "t_s": 1.0,
-            "decision": {"kind": "setpoint", "phase": "descent", "target": decision.target, "reason": decision.reason},
+            "decision": {"kind": "setpoint", "phase": "descent", "target": asdict(target), "reason": decision.reason},
             "source": "frame",
             "state": None,
         },

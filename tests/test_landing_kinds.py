@@ -7,6 +7,7 @@ import pytest
 from companion.app.flight_log import DecisionRecord
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource
+from companion.perception.selection import Target
 from sitl.campaign.landing_kinds import LandingKind, LandingOutcome, landing_outcome
 
 pytestmark = pytest.mark.unit
@@ -15,7 +16,7 @@ pytestmark = pytest.mark.unit
 def decision(
     t_s: float, kind: str, phase: str, event: DecisionEvent, target: tuple[float, float] | None = None
 ) -> DecisionRecord:
-    at = None if target is None else {"north_m": target[0], "east_m": target[1], "radius_m": 3.0, "track_id": -1}
+    at = None if target is None else Target(target[0], target[1], 3.0, -1)
     return DecisionRecord(
         t_s, CommandKind(kind), LandingPhase(phase), at, None, "words nobody reads", DecisionSource.FRAME, None, event
     )

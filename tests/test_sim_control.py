@@ -11,6 +11,7 @@ import pytest
 from companion.vehicle.sim_control import (
     Command,
     Event,
+    LockstepAck,
     RequestError,
     SetpointNedYaw,
     Tick,
@@ -49,9 +50,9 @@ def test_a_malformed_tick_names_its_field(field: str, value: object, named: str)
 def test_both_kinds_of_acknowledgement_pass_the_sitl_s_checks() -> None:
     expecting = parse_request(ack_expecting(Tick(3, 0.3, 2), SetpointNedYaw(1.0, 2.0, -20.0, 0.5)))
     assert expecting["cmd"] == Command.LOCKSTEP_ACK
-    assert lockstep_ack(expecting) == {"seq": 3, "frames": True, "expect": {"setpoint": [1.0, 2.0, -20.0, 0.5]}}
+    assert lockstep_ack(expecting) == LockstepAck(3, True, expect_setpoint=(1.0, 2.0, -20.0, 0.5))
     counting = parse_request(ack_counting(4, 120, 245, 190))
-    assert lockstep_ack(counting) == {"seq": 4, "frames": True, "mavlink_sent": 120, "sysid": 245, "compid": 190}
+    assert lockstep_ack(counting) == LockstepAck(4, True, counted=(120, 245, 190))
 
 
 def test_a_client_can_ask_for_ticks_without_frames_and_for_frames_again() -> None:
@@ -60,8 +61,8 @@ def test_a_client_can_ask_for_ticks_without_frames_and_for_frames_again() -> Non
     assert not frames_wanted(subscribe)
     assert frames_wanted(parse_request(subscribe_request(1)))  # the default, as every older client sends it
     without = lockstep_ack(parse_request(ack_expecting(Tick(3, 0.3, None), None, frames=False)))
-    assert without == {"seq": 3, "frames": False, "expect": {}}
-    assert lockstep_ack(parse_request(ack_expecting(Tick(4, 0.4, None), None)))["frames"]
+    assert without == LockstepAck(3, False)  # expects nothing: moves on at once
+    assert lockstep_ack(parse_request(ack_expecting(Tick(4, 0.4, None), None))).frames
 
 
 @pytest.mark.parametrize("value", ["false", 0, None, [False]])

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.vehicle.sim_control import SetpointNedYaw
+from companion.vehicle.sim_control import LockstepAck, SetpointNedYaw
 from sitl.config import FaultConfig, FaultKind
 from sitl.timing.lockstep_gate import LockstepGate
 from sitl.vehicle.fault_schedule import FaultSchedule
@@ -84,12 +84,12 @@ def test_the_trajectory_log_writes_at_its_rate_and_when_forced(tmp_path: Path) -
 
 def test_an_acknowledgement_passes_only_once_the_clients_mavlink_has_arrived() -> None:
     received = {(245, 191): 3}
-    counted = {"seq": 1, "sysid": 245, "compid": 191, "mavlink_sent": 4}
+    counted = LockstepAck(1, counted=(4, 245, 191))
     assert not LockstepGate.ack_covers_mavlink(counted, None, {}, lambda s: received.get(s, 0))
     received[(245, 191)] = 4
     assert LockstepGate.ack_covers_mavlink(counted, None, {}, lambda s: received.get(s, 0))
     setpoint = SetpointNedYaw(1.0, 2.0, -10.0, 0.5)
-    expects = {"seq": 1, "expect": {"setpoint": [1.0, 2.0, -10.0, 0.5], "commands": {176: 1}}}
+    expects = LockstepAck(1, expect_setpoint=(1.0, 2.0, -10.0, 0.5), expect_commands={176: 1})
     assert not LockstepGate.ack_covers_mavlink(expects, None, {176: 1}, lambda s: 0)  # no setpoint yet
     assert not LockstepGate.ack_covers_mavlink(expects, setpoint, {}, lambda s: 0)  # the command not yet
     assert LockstepGate.ack_covers_mavlink(expects, setpoint, {176: 1}, lambda s: 0)

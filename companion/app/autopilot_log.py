@@ -219,7 +219,7 @@ def plot_side_by_side(flight: FlightLog, log: AutopilotLog, path: Path) -> None:
         top.plot(log.altitude_t_s, log.altitude_m, color="k", lw=1.0, label="autopilot (ULog)")
     top.plot(
         [d.t_s for d in decisions],
-        [-d.state["down_m"] for d in decisions if d.state],
+        [-d.state.down_m for d in decisions if d.state],
         ".",
         color="tab:orange",
         ms=3,

@@ -11,12 +11,12 @@ site the flight used; a replay reads it.
 from __future__ import annotations
 
 import logging
-from typing import Any
 
 from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig, with_fallback_sites
 from companion.app.recorder import FlightRecorder
 from companion.guidance.geofence import Geofence, latlon_to_ne_m
+from companion.json_value import JsonObject
 from companion.vehicle.link import MissionStore
 
 logger = logging.getLogger(__name__)
@@ -27,7 +27,7 @@ async def with_rally_sites(config: MissionConfig, mission: MissionStore, recorde
     must be in local NED already."""
     timeout_s = config.vehicle.connect_timeout_s
     fallback = config.guidance.fallback
-    sites: list[dict[str, Any]] = [site.model_dump() for site in fallback.sites]
+    sites: list[JsonObject] = [site.model_dump(mode="json") for site in fallback.sites]
     points = await mission.rally_points(timeout_s)
     if points:
         lat0, lon0 = await mission.global_origin(timeout_s)

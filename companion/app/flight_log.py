@@ -20,6 +20,7 @@ from companion.app.legacy_decisions import vocabulary_of
 from companion.app.recorder import RecorderError, read_log
 from companion.errors import SlzError
 from companion.guidance.landing import CommandKind, LandingPhase
+from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import (
     ZONE_CHOICES,
     CommitmentEvent,
@@ -28,6 +29,9 @@ from companion.guidance.vocabulary import (
     RefusalCause,
     ZoneChange,
 )
+from companion.json_value import JsonObject
+from companion.perception.selection import Target
+from companion.vehicle.link import Setpoint
 
 SCHEMA_VERSION = 3
 """1: logs written before this module (no ``schema_version`` in the header); 2: the header names its version; 3: a
@@ -126,6 +130,21 @@ def kind_of(record: dict[str, Any]) -> RecordKind | None:
     return _KINDS.get(str(record.get("kind")))
 
 
+def _target(logged: dict[str, Any] | None) -> Target | None:
+    """A decision's target as logged (its centre and radius, m, and its zone's track id)."""
+    if logged is None:
+        return None
+    track_id = logged.get("track_id")
+    return Target(logged["north_m"], logged["east_m"], logged["radius_m"], None if track_id is None else int(track_id))
+
+
+def _setpoint(logged: dict[str, Any] | None) -> Setpoint | None:
+    """A decision's setpoint as logged (local NED, m; yaw, deg)."""
+    return (
+        None if logged is None else Setpoint(logged["north_m"], logged["east_m"], logged["down_m"], logged["yaw_deg"])
+    )
+
+
 @dataclass(frozen=True)
 class DecisionRecord:
     """A ``decision`` record, typed: the command decided (``kind``: none, setpoint, land, hold, return) at vehicle
@@ -138,11 +157,11 @@ class DecisionRecord:
     t_s: float
     kind: CommandKind
     phase: LandingPhase
-    target: dict[str, Any] | None
-    setpoint: dict[str, Any] | None
+    target: Target | None
+    setpoint: Setpoint | None
     reason: str
     source: DecisionSource
-    state: dict[str, Any] | None
+    state: VehicleState | None
     event: DecisionEvent | None = None
     cause: RefusalCause | None = None
     zone_changes: tuple[CommitmentEvent, ...] = ()
@@ -170,11 +189,11 @@ class DecisionRecord:
             float(record["t_s"]),
             CommandKind(decision["kind"]),
             phase,
-            decision.get("target"),
-            decision.get("setpoint"),
+            _target(decision.get("target")),
+            _setpoint(decision.get("setpoint")),
             reason,
             DecisionSource(record["source"]),
-            record["state"],
+            None if record["state"] is None else VehicleState(**record["state"]),
             event,
             cause,
             changes,
@@ -210,7 +229,7 @@ class FlightHeader:
             None if record.get("version") is None else str(record["version"]),
         )
 
-    def fields(self) -> dict[str, Any]:
+    def fields(self) -> JsonObject:
         """The record's fields, as the recorder writes them (``recorder.write(RecordKind.HEADER, None, **fields)``)."""
         return {
             "schema_version": self.schema_version,

@@ -36,14 +36,15 @@ from typing import Any
 import numpy as np
 
 from companion.app.flight_log import RecordKind
+from companion.json_value import JsonObject, JsonValue
 from companion.perception.projection import HeadPlaneOccupancy
 
-SCHEMAS: dict[str, dict[str, Any]] = {}
-_TIME = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
-_VEC3 = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
-_QUAT = {"type": "object", "properties": {k: {"type": "number"} for k in "xyzw"}}
-_POSE = {"type": "object", "properties": {"position": _VEC3, "orientation": _QUAT}}
-_COLOR = {"type": "object", "properties": {k: {"type": "number"} for k in "rgba"}}
+SCHEMAS: dict[str, JsonObject] = {}
+_TIME: JsonObject = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
+_VEC3: JsonObject = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
+_QUAT: JsonObject = {"type": "object", "properties": {k: {"type": "number"} for k in "xyzw"}}
+_POSE: JsonObject = {"type": "object", "properties": {"position": _VEC3, "orientation": _QUAT}}
+_COLOR: JsonObject = {"type": "object", "properties": {k: {"type": "number"} for k in "rgba"}}
 SCHEMAS["foxglove.CompressedImage"] = {
     "type": "object",
     "properties": {
@@ -78,7 +79,7 @@ SCHEMAS["foxglove.PoseInFrame"] = {
     "type": "object",
     "properties": {"timestamp": _TIME, "frame_id": {"type": "string"}, "pose": _POSE},
 }
-_CYLINDER = {
+_CYLINDER: JsonObject = {
     "type": "object",
     "properties": {
         "pose": _POSE,
@@ -134,16 +135,16 @@ TOPICS = {
     "/slz/events": "foxglove.Log",
     "/truth/people": "foxglove.SceneUpdate",
 }
-NED_IN_ENU = {"x": math.sqrt(0.5), "y": math.sqrt(0.5), "z": 0.0, "w": 0.0}
+NED_IN_ENU: JsonObject = {"x": math.sqrt(0.5), "y": math.sqrt(0.5), "z": 0.0, "w": 0.0}
 """The rotation taking NED vectors to ENU: north to y, east to x, down to -z."""
 
 
-def stamp(t_s: float) -> dict[str, int]:
+def stamp(t_s: float) -> JsonObject:
     ns = max(0, round(t_s * 1e9))
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
-def quaternion(rotation: list[list[float]]) -> dict[str, float]:
+def quaternion(rotation: list[list[float]]) -> JsonObject:
     """(x, y, z, w) of a 3x3 rotation matrix (rows)."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation
     trace = r00 + r11 + r22
@@ -160,10 +161,22 @@ def quaternion(rotation: list[list[float]]) -> dict[str, float]:
     return {"w": (r10 - r01) / s, "x": (r02 + r20) / s, "y": (r12 + r21) / s, "z": s / 4}
 
 
-def discs(t_s: float, prefix: str, discs: list[tuple[float, float, float]], rgba: tuple[float, ...]) -> dict[str, Any]:
+def discs(t_s: float, prefix: str, discs: list[tuple[float, float, float]], rgba: tuple[float, ...]) -> JsonObject:
     """A scene update of flat cylinders (north, east, radius) on the ground of ``world_ned``."""
+    return scene_update(t_s, disc_entities(t_s, prefix, discs, rgba))
+
+
+def scene_update(t_s: float, entities: list[JsonValue]) -> JsonObject:
+    """A foxglove.SceneUpdate that replaces every entity by ``entities``."""
+    return {"deletions": [{"timestamp": stamp(t_s), "type": 1, "id": ""}], "entities": entities}
+
+
+def disc_entities(
+    t_s: float, prefix: str, discs: list[tuple[float, float, float]], rgba: tuple[float, ...]
+) -> list[JsonValue]:
+    """Flat cylinders (north, east, radius) on the ground of ``world_ned``, one scene entity each."""
     r, g, b, a = rgba
-    entities = [
+    return [
         {
             "timestamp": stamp(t_s),
             "frame_id": "world_ned",
@@ -182,11 +195,10 @@ def discs(t_s: float, prefix: str, discs: list[tuple[float, float, float]], rgba
         }
         for k, (n, e, radius) in enumerate(discs)
     ]
-    return {"deletions": [{"timestamp": stamp(t_s), "type": 1, "id": ""}], "entities": entities}
 
 
-def image_file_message(image: Path, t_s: float) -> Callable[[], dict[str, Any]]:
-    def build() -> dict[str, Any]:
+def image_file_message(image: Path, t_s: float) -> Callable[[], JsonObject]:
+    def build() -> JsonObject:
         fmt = "png" if image.suffix.lower() == ".png" else "jpeg"
         data = base64.b64encode(image.read_bytes()).decode()
         return {"timestamp": stamp(t_s), "frame_id": "camera", "data": data, "format": fmt}
@@ -194,11 +206,11 @@ def image_file_message(image: Path, t_s: float) -> Callable[[], dict[str, Any]]:
     return build
 
 
-def log_message(t_s: float, level: int, name: str, message: str) -> dict[str, Any]:
+def log_message(t_s: float, level: int, name: str, message: str) -> JsonObject:
     return {"timestamp": stamp(t_s), "level": level, "message": message, "name": name, "file": "", "line": 0}
 
 
-def world_ned_transform(t_s: float) -> dict[str, Any]:
+def world_ned_transform(t_s: float) -> JsonObject:
     """``world`` (ENU) to ``world_ned``: the fixed rotation."""
     return {
         "timestamp": stamp(t_s),
@@ -209,12 +221,12 @@ def world_ned_transform(t_s: float) -> dict[str, Any]:
     }
 
 
-def grid_message(t_s: float, head_plane: HeadPlaneOccupancy) -> dict[str, Any]:
+def grid_message(t_s: float, head_plane: HeadPlaneOccupancy) -> JsonObject:
     """The head-plane occupancy as a foxglove.Grid in ``world_ned``: columns along north (its x), rows along east."""
     grid = head_plane.grid
     cells = np.where(head_plane.known, np.where(head_plane.free, 2, 1), 0).astype(np.uint8)
     data = np.ascontiguousarray(cells.T)  # (east, north): a row of the message runs along north, x of world_ned
-    origin = {"x": grid.north_min_m, "y": grid.east_min_m, "z": 0.0}
+    origin: JsonObject = {"x": grid.north_min_m, "y": grid.east_min_m, "z": 0.0}
     return {
         "timestamp": stamp(t_s),
         "frame_id": "world_ned",
@@ -228,7 +240,7 @@ def grid_message(t_s: float, head_plane: HeadPlaneOccupancy) -> dict[str, Any]:
     }
 
 
-def image_message(t_s: float, data: bytes, fmt: str) -> dict[str, Any]:
+def image_message(t_s: float, data: bytes, fmt: str) -> JsonObject:
     """A compressed camera image (``fmt``: jpeg or png)."""
     return {"timestamp": stamp(t_s), "frame_id": "camera", "data": base64.b64encode(data).decode(), "format": fmt}
 
@@ -267,12 +279,12 @@ def messages_of(record: dict[str, Any], folder: Path | None) -> Iterator[tuple[s
             },
         )
         zones = [(float(z["north_m"]), float(z["east_m"]), float(z["radius_m"])) for z in record["tracks"] or []]
-        update = discs(t_s, "zone", zones, (0.6, 0.6, 0.6, 0.5))
+        entities = disc_entities(t_s, "zone", zones, (0.6, 0.6, 0.6, 0.5))
         target = record.get("target")
         if target:
             disc = (float(target["north_m"]), float(target["east_m"]), float(target["radius_m"]))
-            update["entities"] += discs(t_s, "target", [disc], (0.1, 0.8, 0.2, 0.8))["entities"]
-        yield "/slz/zones", t_s, update
+            entities += disc_entities(t_s, "target", [disc], (0.1, 0.8, 0.2, 0.8))
+        yield "/slz/zones", t_s, scene_update(t_s, entities)
     elif kind == RecordKind.DECISION.value:
         d = record["decision"]
         words = f"{d.get('phase')}: {d.get('kind')}" + (f" ({d['reason']})" if d.get("reason") else "")

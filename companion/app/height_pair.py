@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.errors import SlzError
+from companion.json_value import JsonObject
 from companion.perception.config import MotionHeightConfig
 from companion.perception.motion_height import CELL_PX, HeightMap, HeightState
 
@@ -291,7 +292,7 @@ def pair_height_map(
     )
 
 
-def summary(height: HeightMap, geometry: PairGeometry) -> dict[str, Any]:
+def summary(height: HeightMap, geometry: PairGeometry) -> JsonObject:
     """What the map says, in keys that say what they hold."""
     state = height.state
     raised = state == HeightState.RAISED

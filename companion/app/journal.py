@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
 
 from companion.app.flight_log import RecordKind
 from companion.app.recorder import FlightRecorder
@@ -13,6 +12,7 @@ from companion.app.start_sequence import StartStep
 from companion.guidance.landing import Decision, LandingPhase
 from companion.guidance.stimulus import Stimulus, to_json
 from companion.guidance.vehicle_state import VehicleState
+from companion.json_value import JsonObject
 from companion.vehicle.link import VehicleStatus
 
 logger = logging.getLogger(__name__)
@@ -49,7 +49,7 @@ class FlightJournal:
         decision: Decision,
         previous_phase: str,
         stimulus: Stimulus,
-        observed: dict[str, Any] | None,
+        observed: JsonObject | None,
     ) -> None:
         """Record a decision (with the stimulus it answered: its source, the vehicle state and its inputs; and what the
         map showed around its target: ``observed``), the phase change from ``previous_phase`` it makes, its target

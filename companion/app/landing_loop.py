@@ -21,7 +21,6 @@ import logging
 import math
 import time
 from collections.abc import Awaitable, Callable
-from typing import Any
 
 from companion.app.commands import VehicleCommands
 from companion.app.fallback_sites import with_rally_sites
@@ -59,6 +58,7 @@ from companion.guidance.stimulus import (
 )
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent
+from companion.json_value import JsonObject
 from companion.perception.pipeline import FrameResult, SlzPipeline
 from companion.perception.selection import SelectionPolicy
 from companion.perception.zones import ZoneFinder
@@ -97,7 +97,7 @@ async def fence_in_local_ned(config: MissionConfig, mission: MissionStore, recor
 
 def observed_at_target(
     result: FrameResult, decision: Decision, state: VehicleState, min_altitude_m: float
-) -> dict[str, Any] | None:
+) -> JsonObject | None:
     """What a map that decides (taken at or above ``min_altitude_m``) showed around the landing point of a descent or a
     landing: the landing report's "nearest person seen" (m; None: nobody on the map). None for other decisions."""
     target = decision.target
@@ -190,7 +190,7 @@ class LandingLoop:
         """A decision reads frames now (the mission started and is not over or the autopilot's)."""
         return self.start_sequence.started and self.guidance.phase not in FRAMES_UNREAD
 
-    async def apply(self, decision: Decision, stimulus: Stimulus, observed: dict[str, Any] | None = None) -> None:
+    async def apply(self, decision: Decision, stimulus: Stimulus, observed: JsonObject | None = None) -> None:
         """Record a decision with the ``stimulus`` it answered (:meth:`FlightJournal.decision`), report its phase
         change to the ground station and, when flying, send it."""
         previous = self.outcome.phase

@@ -25,6 +25,7 @@ from companion.app.mission import OperatingMode
 from companion.app.timeline import flight_events
 from companion.guidance.landing import ENDING_KINDS, CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource
+from companion.json_value import JsonObject
 
 logger = logging.getLogger(__name__)
 
@@ -118,7 +119,7 @@ def flight_ending(log: FlightLog) -> FlightEnding:
     return FlightEnding.HELD
 
 
-def _zone(target: dict[str, Any] | None) -> dict[str, Any] | None:
+def _zone(target: dict[str, Any] | None) -> JsonObject | None:
     if target is None:
         return None
     return {

@@ -33,6 +33,7 @@ from companion.app.foxglove_topics import (
 )
 from companion.app.live_view_config import LiveViewConfig
 from companion.errors import SlzError
+from companion.json_value import JsonObject
 
 if TYPE_CHECKING:
     from companion.camera.frames import Frame
@@ -112,7 +113,7 @@ class LiveView:
                 return
             self._guard(job)
 
-    def _send(self, topic: str, t_s: float, message: dict[str, Any] | Callable[[], dict[str, Any]]) -> None:
+    def _send(self, topic: str, t_s: float, message: JsonObject | Callable[[], JsonObject]) -> None:
         channel = self._channels[topic]
         if not channel.has_sinks():  # no client wants it: build nothing
             return

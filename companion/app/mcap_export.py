@@ -11,11 +11,11 @@ import json
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from companion.app.flight_log import FlightLog
 from companion.app.foxglove_topics import SCHEMAS, TOPICS, messages_of, truth_messages, world_ned_transform
 from companion.errors import SlzError
+from companion.json_value import JsonObject
 
 
 class ExportError(SlzError):
@@ -42,9 +42,9 @@ class _Out:
         }
         self.counts: Counter[str] = Counter()
 
-        self._pending: list[tuple[float, int, str, dict[str, Any] | Callable[[], dict[str, Any]]]] = []
+        self._pending: list[tuple[float, int, str, JsonObject | Callable[[], JsonObject]]] = []
 
-    def add(self, topic: str, t_s: float, message: dict[str, Any] | Callable[[], dict[str, Any]]) -> None:
+    def add(self, topic: str, t_s: float, message: JsonObject | Callable[[], JsonObject]) -> None:
         """Queue one message (or a function that builds it, for the frames: built when written, one at a time)."""
         self._pending.append((t_s, len(self._pending), topic, message))
 

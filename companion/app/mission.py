@@ -8,7 +8,7 @@ from __future__ import annotations
 import enum
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
@@ -17,6 +17,7 @@ from companion.config import ConfigError, StrictModel, format_validation_error, 
 from companion.ground.config import GroundStationConfig
 from companion.guidance.config import GuidanceConfig
 from companion.guidance.geofence import Geofence, GeofenceConfig
+from companion.json_value import JsonObject
 from companion.perception.config import MODEL_PATH_FIELDS, PerceptionConfig
 from companion.vehicle.link import FlightMode
 
@@ -260,7 +261,7 @@ REQUIRED_FOR_FLIGHT = (("polygon_ne_m", "polygon_latlon_deg"), ("max_altitude_m"
 """The geofence fields a config must give for ``slz fly`` (one of each group): no flight on a default fence."""
 
 
-def with_fallback_sites(config: MissionConfig, sites: list[dict[str, Any]]) -> MissionConfig:
+def with_fallback_sites(config: MissionConfig, sites: list[JsonObject]) -> MissionConfig:
     """``config`` with ``sites`` as its fallback sites (``guidance.fallback.sites``, the rally points downloaded at the
     start among them), validated again with every cross-check; raises ConfigError naming what they contradict."""
     data = config.model_dump(mode="json")

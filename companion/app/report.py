@@ -39,6 +39,7 @@ from companion.geometry import Pose
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.perception.pipeline import camera_from_config
 from companion.perception.projection import HeadPlaneProjector
+from companion.perception.selection import Target
 from companion.perception.visualize import draw_circles_overlay
 
 logger = logging.getLogger(__name__)
@@ -112,7 +113,7 @@ def summarize(log: FlightLog) -> dict[str, Any]:
         "commands_sent": log.count(RecordKind.COMMAND),
         "land_command": None
         if land is None or land.state is None
-        else {"t_s": land.t_s, "north_m": land.state["north_m"], "east_m": land.state["east_m"]},
+        else {"t_s": land.t_s, "north_m": land.state.north_m, "east_m": land.state.east_m},
         "latency_ms": {
             "count": len(latencies),
             "median": _percentile(latencies, 50),
@@ -123,7 +124,7 @@ def summarize(log: FlightLog) -> dict[str, Any]:
     }
 
 
-def tracks_at_landing(log: FlightLog) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+def tracks_at_landing(log: FlightLog) -> tuple[list[dict[str, Any]], Target | None]:
     """The tracked zones when the final descent began (the last entry into descent before the land command, else
     the tracks at the land command or the last frame) and the target landed on (or the last one)."""
     tracks: list[dict[str, Any]] = []
@@ -163,13 +164,13 @@ def _plot_top_view(log: FlightLog, config: MissionConfig, path: Path) -> None:
         )
     poses = log.of(RecordKind.POSE)  # the whole flight once a second; older logs: the states decisions saw
     states = [(r["north_m"], r["east_m"]) for r in poses] or [
-        (d.state["north_m"], d.state["east_m"]) for d in decisions if d.state
+        (d.state.north_m, d.state.east_m) for d in decisions if d.state
     ]
     if states:
         ne = np.array(states, dtype=float)
         ax.plot(ne[:, 1], ne[:, 0], color="0.45", lw=1.5, label="path" if poses else "path (vehicle states)")
         ax.plot(ne[0, 1], ne[0, 0], "o", color="0.2", label="start")
-    setpoints = np.array([[d.setpoint["north_m"], d.setpoint["east_m"]] for d in decisions if d.setpoint is not None])
+    setpoints = np.array([[d.setpoint.north_m, d.setpoint.east_m] for d in decisions if d.setpoint is not None])
     if len(setpoints):
         label = "setpoints " + ("sent" if log.count(RecordKind.COMMAND) else "decided (not sent)")
         ax.plot(setpoints[:, 1], setpoints[:, 0], ".", color="tab:blue", ms=3, alpha=0.5, label=label)
@@ -184,18 +185,18 @@ def _plot_top_view(log: FlightLog, config: MissionConfig, path: Path) -> None:
                 label="zones at final descent" if i == 0 else None,
             )
         )
-    targets: dict[Any, dict[str, Any]] = {}  # each target zone where it was last chosen
+    targets: dict[object, Target] = {}  # each target zone where it was last chosen
     for d in decisions:  # the targets acted on: approached, descended over or landed on
         if (t := d.target) is not None and d.phase in (LandingPhase.APPROACH, LandingPhase.DESCENT, LandingPhase.LAND):
-            targets[t["track_id"] if t["track_id"] is not None else (t["north_m"], t["east_m"])] = t
+            targets[t.track_id if t.track_id is not None else (t.north_m, t.east_m)] = t
     for i, t in enumerate(targets.values()):
         ax.add_patch(
-            Circle((t["east_m"], t["north_m"]), max(t["radius_m"], 0.3), fill=False, edgecolor="gold", lw=1.5,
+            Circle((t.east_m, t.north_m), max(t.radius_m, 0.3), fill=False, edgecolor="gold", lw=1.5,
                    label="targets acted on (last estimate)" if i == 0 else None)
         )  # fmt: skip
     land = next((d.state for d in decisions if d.kind is CommandKind.LAND and d.state), None)
     if land is not None:
-        ax.plot(land["east_m"], land["north_m"], "x", color="green", ms=14, mew=3, label="land")
+        ax.plot(land.east_m, land.north_m, "x", color="green", ms=14, mew=3, label="land")
     extent = float(np.abs(fence).max()) + 3.0
     ax.set_xlim(-extent, extent)
     ax.set_ylim(-extent, extent)
@@ -226,7 +227,7 @@ def _plot_timeline(log: FlightLog, path: Path) -> None:
     for a, b, phase in _phase_spans(log, t1):
         top.axvspan(a, b, color=PHASE_COLOURS.get(phase, "#eeeeee"), alpha=0.6, lw=0)
         top.text((a + b) / 2, 0.98, phase, transform=top.get_xaxis_transform(), ha="center", va="top", fontsize=8)
-    top.plot([d.t_s for d in decisions], [-d.state["down_m"] for d in decisions if d.state], color="k", lw=1.2)
+    top.plot([d.t_s for d in decisions], [-d.state.down_m for d in decisions if d.state], color="k", lw=1.2)
     for r in log.of(RecordKind.FAILSAFE):
         if r["t_s"] is not None:
             top.axvline(r["t_s"], color="red", ls="--", lw=1)

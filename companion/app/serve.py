@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from companion.errors import SlzError
+from companion.json_value import JsonObject
 
 logger = logging.getLogger(__name__)
 
@@ -88,7 +89,7 @@ def parse_request(line: str) -> tuple[list[str], Path]:
     return argv, Path(log)
 
 
-def run_one(run: Callable[[Sequence[str]], int], argv: list[str]) -> dict[str, Any]:
+def run_one(run: Callable[[Sequence[str]], int], argv: list[str]) -> JsonObject:
     """``run(argv)``'s exit code as a reply; an exception is written to the command's log and named in the reply.
 
     Signal handlers a command installs (``slz sitl`` stops its vehicle on SIGTERM) are put back when it ends, so

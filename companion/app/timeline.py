@@ -4,16 +4,15 @@ them, and the landing report files them."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from companion.app.flight_log import FlightLog, RecordKind
 from companion.guidance.landing import LandingPhase
+from companion.json_value import JsonObject
 
 
-def flight_events(log: FlightLog) -> list[dict[str, Any]]:
+def flight_events(log: FlightLog) -> list[JsonObject]:
     """The timeline of ``log``: ``{"t_s", "event", "reason"}`` in log order. A switch of target is a decision whose
     target zone differs from the last one decided on (a return to the search without one starts afresh)."""
-    events: list[dict[str, Any]] = []
+    events: list[JsonObject] = []
     starting = (RecordKind.HANDOVER, RecordKind.TAKEOFF, RecordKind.WAITING_FOR_HANDOVER)
     kinds = (RecordKind.PHASE, RecordKind.FAILSAFE, RecordKind.ERROR, RecordKind.DECISION, RecordKind.SUPERVISION)
     target_id: object = None  # the zone decided on last: a change of it is a switch, with the decision's reason

@@ -41,6 +41,7 @@ from companion.ground.mavlink_frames import (
     TIMESTAMP_UNITS_PER_S,
     Frame,
     FrameError,
+    FrameHeader,
     pack,
     signing_timestamp,
     unpack,
@@ -305,12 +306,12 @@ class CommandChannel:
                 self._send(peer, pack(HEARTBEAT, beat, **self._header()))
             await asyncio.sleep(HEARTBEAT_PERIOD_S)
 
-    def _header(self) -> dict[str, Any]:
+    def _header(self) -> FrameHeader:
         self._seq = (self._seq + 1) & 0xFF
-        header: dict[str, Any] = {"seq": self._seq, "sys_id": self.system_id, "comp_id": MAV_COMP_ID_ONBOARD_COMPUTER}
+        header: FrameHeader = {"seq": self._seq, "sys_id": self.system_id, "comp_id": MAV_COMP_ID_ONBOARD_COMPUTER}
         if self.key is not None:
             self._own_stamp = max(self._own_stamp + 1, signing_timestamp(self.wall_clock()))
-            header.update(key=self.key, link_id=0, timestamp=self._own_stamp)
+            header["key"], header["link_id"], header["timestamp"] = self.key, 0, self._own_stamp
         return header
 
     def _send(self, address: tuple[str, int], frame: bytes) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import hashlib
 import struct
 from dataclasses import dataclass
+from typing import TypedDict
 
 from companion.errors import SlzError
 
@@ -104,6 +105,21 @@ class Frame:
     timestamp: int | None = None
     signature_ok: bool | None = None
     """None: unsigned, or signed and no key to check it with."""
+
+
+class _RequiredHeader(TypedDict):
+    seq: int
+    sys_id: int
+    comp_id: int
+
+
+class FrameHeader(_RequiredHeader, total=False):
+    """:func:`pack`'s header arguments: the sequence number and the sender, and for a signed frame its key, link id
+    and timestamp."""
+
+    key: bytes
+    link_id: int
+    timestamp: int
 
 
 def pack(

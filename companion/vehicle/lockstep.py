@@ -17,6 +17,7 @@ import asyncio
 import contextlib
 import logging
 import math
+from collections.abc import Callable
 from typing import Any
 from urllib.parse import urlparse
 
@@ -24,6 +25,7 @@ from companion.errors import SlzError
 from companion.vehicle.sim_control import (
     Command,
     Event,
+    Message,
     RequestError,
     SetpointNedYaw,
     Tick,
@@ -45,7 +47,7 @@ class LockstepError(SlzError):
 
 
 class _Protocol(asyncio.DatagramProtocol):
-    def __init__(self, queue: asyncio.Queue[dict[str, Any]]) -> None:
+    def __init__(self, queue: asyncio.Queue[Message]) -> None:
         self.queue = queue
         self.malformed = 0
 
@@ -76,7 +78,7 @@ class LockstepClient:
         self.address = (parsed.hostname, parsed.port)
         self.tick_timeout_s = tick_timeout_s
         self.period_s = math.nan
-        self._queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._queue: asyncio.Queue[Message] = asyncio.Queue()
         self._transport: asyncio.DatagramTransport | None = None
         self._protocol: _Protocol | None = None
 
@@ -101,7 +103,8 @@ class LockstepClient:
             logger.info("%s runs free (%s): no lockstep", self.url, reply.get("error"))
             self.close()
             return False
-        self.period_s = float(reply.get("tick_period_s", math.nan))
+        period_s = reply.get("tick_period_s")
+        self.period_s = float(period_s) if isinstance(period_s, (int, float)) else math.nan
         logger.info("lockstep with %s, tick %.3f s", self.url, self.period_s)
         return True
 
@@ -110,7 +113,7 @@ class LockstepClient:
             raise LockstepError(self.url, "not open")
         self._transport.sendto(request, self.address)
 
-    async def _next(self, wanted: Any, what: str) -> dict[str, Any]:
+    async def _next(self, wanted: Callable[[Message], bool], what: str) -> Message:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.tick_timeout_s
         while True:

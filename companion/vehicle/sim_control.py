@@ -20,12 +20,14 @@ from __future__ import annotations
 import enum
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from companion.errors import SlzError
+from companion.json_value import JsonObject, JsonValue
 
 
 class Command(str, enum.Enum):
@@ -58,12 +60,16 @@ class Event(str, enum.Enum):
     TICK = "tick"
 
 
-def encode(command: Command, **fields: Any) -> bytes:
+Message = JsonObject
+"""A request, a reply or an event: a JSON object."""
+
+
+def encode(command: Command, **fields: JsonValue) -> bytes:
     """One request datagram."""
     return json.dumps({"cmd": command.value, **fields}).encode("utf-8")
 
 
-def decode_event(data: bytes) -> dict[str, Any] | None:
+def decode_event(data: bytes) -> Message | None:
     """A reply or event datagram as a mapping with a string ``event``; None for anything else (to be counted)."""
     try:
         event = json.loads(data)
@@ -81,7 +87,7 @@ class Tick:
     frame_seq: int | None
 
     @classmethod
-    def from_event(cls, event: dict[str, Any]) -> Tick:
+    def from_event(cls, event: Mapping[str, object]) -> Tick:
         """Parse a ``tick`` event (raises :class:`RequestError` naming a bad field)."""
         frame_seq = event.get("frame_seq")
         return cls(
@@ -90,7 +96,7 @@ class Tick:
             None if frame_seq is None else whole_number(event, "frame_seq", 0, 1 << 53),
         )
 
-    def to_event(self) -> dict[str, Any]:
+    def to_event(self) -> Message:
         """The ``tick`` event."""
         return {"event": Event.TICK.value, "seq": self.seq, "t_s": self.t_s, "frame_seq": self.frame_seq}
 
@@ -119,7 +125,7 @@ def ack_expecting(tick: Tick, setpoint: SetpointNedYaw | None, frames: bool = Tr
     """``lockstep_ack`` of a client that cannot count its MAVLink messages (MAVSDK re-sends on its own thread): the
     SITL moves on once the position setpoint it names has arrived (or at once, with None). ``frames``: whether the
     client wants a camera frame with the next tick (see :func:`lockstep_ack`)."""
-    expect: dict[str, Any] = {}
+    expect: Message = {}
     if setpoint is not None:
         expect["setpoint"] = [float(v) for v in setpoint]
     return encode(Command.LOCKSTEP_ACK, seq=tick.seq, expect=expect, **_frames_field(frames))
@@ -136,7 +142,7 @@ def _frames_field(frames: bool) -> dict[str, bool]:
     return {} if frames else {"frames": False}
 
 
-def frames_wanted(request: dict[str, Any]) -> bool:
+def frames_wanted(request: Mapping[str, object]) -> bool:
     """The optional ``frames`` flag of a ``lockstep_subscribe`` or ``lockstep_ack`` (absent: True)."""
     return True if "frames" not in request else flag(request, "frames")
 
@@ -188,7 +194,7 @@ def _finite_float(text: str) -> float:
     return value
 
 
-def parse_request(data: bytes) -> dict[str, Any]:
+def parse_request(data: bytes) -> Message:
     """One datagram as a request; raises ValueError (with a short reason) when it is not one."""
     if len(data) > MAX_REQUEST_BYTES:
         raise ValueError(f"request of {len(data)} bytes, more than {MAX_REQUEST_BYTES}")
@@ -200,7 +206,7 @@ def parse_request(data: bytes) -> dict[str, Any]:
     return request
 
 
-def number(request: dict[str, Any], key: str, low: float, high: float, default: float | None = None) -> float:
+def number(request: Mapping[str, object], key: str, low: float, high: float, default: float | None = None) -> float:
     """``request[key]`` as a finite number in [low, high] (``default`` when absent, if given)."""
     value = request.get(key, default)
     if value is None:
@@ -212,7 +218,7 @@ def number(request: dict[str, Any], key: str, low: float, high: float, default: 
     return float(value)
 
 
-def whole_number(request: dict[str, Any], key: str, low: int, high: int) -> int:
+def whole_number(request: Mapping[str, object], key: str, low: int, high: int) -> int:
     """``request[key]`` as an integer in [low, high]."""
     value = request.get(key)
     if isinstance(value, bool) or not isinstance(value, int):
@@ -222,7 +228,7 @@ def whole_number(request: dict[str, Any], key: str, low: int, high: int) -> int:
     return value
 
 
-def flag(request: dict[str, Any], key: str) -> bool:
+def flag(request: Mapping[str, object], key: str) -> bool:
     """``request[key]`` as a JSON boolean (a string such as ``"false"`` is refused, not taken as true)."""
     value = request.get(key)
     if not isinstance(value, bool):
@@ -230,7 +236,24 @@ def flag(request: dict[str, Any], key: str) -> bool:
     return value
 
 
-def lockstep_ack(request: dict[str, Any]) -> dict[str, Any]:
+@dataclass(frozen=True)
+class LockstepAck:
+    """A checked ``lockstep_ack`` (:func:`lockstep_ack`): the tick ``seq`` it acknowledges, whether the next tick
+    comes with a camera frame, and what MAVLink must have arrived before the SITL moves on: the client's own count
+    (``counted``: messages sent, from system and component) or what it expects (a setpoint and command counts; an
+    ``expect`` with neither moves on at once)."""
+
+    seq: int
+    frames: bool = True
+    counted: tuple[int, int, int] | None = None
+    """``(mavlink_sent, sysid, compid)``; None: the ack says what it expects instead."""
+    expect_setpoint: tuple[float, float, float, float] | None = None
+    """[north_m, east_m, down_m, yaw_rad] that must have arrived (None: none)."""
+    expect_commands: Mapping[int, int] | None = None
+    """COMMAND_LONG/INT counts by MAV_CMD id that must have arrived (None: none)."""
+
+
+def lockstep_ack(request: Mapping[str, object]) -> LockstepAck:
     """A checked ``lockstep_ack``: ``seq`` and either ``expect`` (a setpoint of four numbers and/or command counts)
     or the client's own count of MAVLink messages (``mavlink_sent`` from ``sysid``/``compid``); ``frames`` (optional,
     default true): whether the next tick comes with a camera frame. A frame skipped that way is not drawn, and its
@@ -239,30 +262,26 @@ def lockstep_ack(request: dict[str, Any]) -> dict[str, Any]:
     frames = frames_wanted(request)
     expect = request.get("expect")
     if expect is None:
-        return {
-            "seq": seq,
-            "frames": frames,
-            "mavlink_sent": whole_number(request, "mavlink_sent", 0, 1 << 53),
-            "sysid": whole_number(request, "sysid", 0, 255),
-            "compid": whole_number(request, "compid", 0, 255),
-        }
+        sent = whole_number(request, "mavlink_sent", 0, 1 << 53)
+        return LockstepAck(
+            seq, frames, (sent, whole_number(request, "sysid", 0, 255), whole_number(request, "compid", 0, 255))
+        )
     if not isinstance(expect, dict) or not set(expect) <= {"setpoint", "commands"}:
         raise RequestError("expect: expected an object with 'setpoint' and/or 'commands'")
-    checked: dict[str, Any] = {}
-    setpoint = expect.get("setpoint")
+    setpoint, checked_setpoint = expect.get("setpoint"), None
     if setpoint is not None:
         if not isinstance(setpoint, list) or len(setpoint) != 4:
             raise RequestError("expect.setpoint: expected [north_m, east_m, down_m, yaw_rad]")
         values = {f"expect.setpoint[{i}]": v for i, v in enumerate(setpoint)}
-        checked["setpoint"] = [number(values, key, -1e7, 1e7) for key in values]
-    commands = expect.get("commands")
+        n, e, d, yaw = (number(values, key, -1e7, 1e7) for key in values)
+        checked_setpoint = (n, e, d, yaw)
+    commands, counts = expect.get("commands"), None
     if commands is not None:
         if not isinstance(commands, dict) or len(commands) > 16:
             raise RequestError("expect.commands: expected an object of at most 16 command counts")
-        counts: dict[int, int] = {}
+        counts = {}
         for key in commands:
             if not key.isdigit() or int(key) > 65535:
                 raise RequestError("expect.commands: keys are MAV_CMD ids")
             counts[int(key)] = whole_number(commands, key, 0, 1 << 31)
-        checked["commands"] = counts
-    return {"seq": seq, "frames": frames, "expect": checked}
+    return LockstepAck(seq, frames, None, checked_setpoint, counts)

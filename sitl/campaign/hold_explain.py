@@ -36,6 +36,7 @@ import numpy.typing as npt
 from companion.app.flight_log import DecisionRecord, FlightLog
 from companion.geometry import inside_polygon
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause, ZoneChange
+from companion.perception.selection import Target
 from sitl.vehicle.truth import TruthHeader, TruthRecord, body_edges_m, clearance_m, people_at, read_truth
 
 FREE_SAMPLE_S = 5.0
@@ -267,11 +268,11 @@ def explain_hold(
         ``FREE_SAMPLE_S`` from the first frame's decision to the last (not looked for without it).
     """
     out = HoldExplanation(footprint_radius_m=vehicle_radius_m + margin_m, vehicle_radius_m=vehicle_radius_m)
-    target: dict[str, Any] | None = None  # the point the previous decision flew to
+    target: Target | None = None  # the point the previous decision flew to
 
     def refuse(t_s: float, event: str) -> None:
         if target is not None:
-            n, e = float(target["north_m"]), float(target["east_m"])
+            n, e = float(target.north_m), float(target.east_m)
             out.refusals.append(Refusal(t_s, event, n, e, truth.nearest_edge_m(t_s, n, e)))
 
     for d in decisions:

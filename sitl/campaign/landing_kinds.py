@@ -55,7 +55,7 @@ def landing_outcome(decisions: list[DecisionRecord]) -> LandingOutcome:
         before = [d for d in to_sites if d.t_s <= landing.t_s]
         if before and before[-1].target is not None:
             target = before[-1].target
-            site = (float(target["north_m"]), float(target["east_m"]))
+            site = (float(target.north_m), float(target.east_m))
             return LandingOutcome(LandingKind.FALLBACK_SITE, site, len(before))
         return LandingOutcome(LandingKind.ZONE, None, 0)
     kinds = {

@@ -29,6 +29,7 @@ from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause
+from companion.perception.selection import Target
 from sitl.campaign.landing_kinds import landing_outcome
 from sitl.campaign.metric_fields import Summary, result_field
 from sitl.config import SitlConfig
@@ -164,13 +165,13 @@ class MissionMetrics:
         return out
 
 
-def _final_descent(flight: FlightLog) -> tuple[float | None, float | None, dict[str, Any] | None]:
+def _final_descent(flight: FlightLog) -> tuple[float | None, float | None, Target | None]:
     """Start times of the final descent and of its landing descent (the first decision after the last wait at the
     walker gate; the final descent's start without one), and the target when the final descent began."""
     start: float | None = None
     release: float | None = None
     waiting = False
-    target: dict[str, Any] | None = None
+    target: Target | None = None
     previous: LandingPhase | None = None
     last_command_t: float | None = None
     for kind, record in flight.tagged(RecordKind.COMMAND, RecordKind.DECISION):
@@ -323,17 +324,17 @@ def mission_metrics(
 
     area = iou = nan
     if target is not None and descent_t is not None:
-        r_zone = float(target["radius_m"])
+        r_zone = float(target.radius_m)
         area = math.pi * r_zone**2
         at = min(truth, key=lambda r: abs(r.t_s - descent_t)) if truth else None
         if at is not None:
-            free = max(0.0, float(body_edges_m(header, at, target["north_m"], target["east_m"]).min()))
+            free = max(0.0, float(body_edges_m(header, at, target.north_m, target.east_m).min()))
             big, small = max(r_zone, free), min(r_zone, free)
             iou = (small / big) ** 2 if big > 0 else nan
 
     path = np.array([r.position_ned_m for r in truth if math.isfinite(started) and started <= r.t_s <= t_end + 1e-9])
     path_length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
-    targets = [d.target["track_id"] for d in decisions if d.target is not None]
+    targets = [d.target.track_id for d in decisions if d.target is not None]
     # The first zone committed to (a commitment within the capture radius goes straight to the descent, whose
     # decision does not carry the change: then the first target of all).
     first = next((d.target for d in decisions if d.chose_zones() and d.target is not None), None) or next(
@@ -382,8 +383,8 @@ def mission_metrics(
         zones_chosen=zones_chosen(decisions),
         ending=ending.kind.value,
         sites_flown_to=ending.sites_flown_to,
-        first_zone_north_m=float(first["north_m"]) if first is not None else nan,
-        first_zone_east_m=float(first["east_m"]) if first is not None else nan,
+        first_zone_north_m=float(first.north_m) if first is not None else nan,
+        first_zone_east_m=float(first.east_m) if first is not None else nan,
         overflown_above_gate=down is not None and bool(under[~landing].any()),
     )
 

@@ -140,8 +140,8 @@ def draw_mission_top_view(run_dir: Path, size_px: int = 800, half_extent_m: floa
         centre = to_px(track["north_m"], track["east_m"])
         cv2.circle(view, centre, round(track["radius_m"] * px_per_m), ZONE_BGR, 1, cv2.LINE_AA)
     if target is not None:
-        centre = to_px(target["north_m"], target["east_m"])
-        cv2.circle(view, centre, round(target["radius_m"] * px_per_m), TARGET_BGR, 2, cv2.LINE_AA)
+        centre = to_px(target.north_m, target.east_m)
+        cv2.circle(view, centre, round(target.radius_m * px_per_m), TARGET_BGR, 2, cv2.LINE_AA)
     if down is not None:
         n, e, _ = down.position_ned_m
         cv2.drawMarker(view, to_px(n, e), TOUCHDOWN_BGR, cv2.MARKER_CROSS, 22, 3)

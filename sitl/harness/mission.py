@@ -236,7 +236,7 @@ def evaluate(spec: MissionSpec, exit_code: int, wall_s: float) -> MissionResult:
         nearest_person_m=nearest,
         people_within_1m=within_1,
         people_within_1_5m=within_15,
-        target_radius_m=None if target is None else float(target["radius_m"]),
+        target_radius_m=None if target is None else float(target.radius_m),
         failsafes=list(outcome.get("failsafes", [])),
         sim_time_s=records[-1].t_s if records else 0.0,
         wall_s=wall_s,

@@ -11,9 +11,8 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
 
-from companion.vehicle.sim_control import SetpointNedYaw, same_setpoint
+from companion.vehicle.sim_control import LockstepAck, SetpointNedYaw, same_setpoint
 
 Address = tuple[str, int]
 
@@ -45,7 +44,7 @@ class LockstepGate:
         self.frames_wanted = True  # the client wants a camera frame with the next tick
         self.setpoints_between_ticks = 0  # ignored: arrived between ticks and not the acknowledged setpoint
         self._sent_wall = math.nan  # when the current tick went out (NaN: not yet)
-        self._ack: dict[str, Any] | None = None
+        self._ack: LockstepAck | None = None
         self._last_ack_wall = -math.inf
         self._frame_client_lost_wall = math.nan
 
@@ -68,7 +67,7 @@ class LockstepGate:
         """The client leaves: the SITL runs free from here."""
         self.released = True
 
-    def acknowledge(self, addr: Address, ack: dict[str, Any]) -> None:
+    def acknowledge(self, addr: Address, ack: LockstepAck) -> None:
         """A checked ``lockstep_ack`` from ``addr`` (ValueError from anyone but the client)."""
         if not self.enabled or addr != self.client:
             raise ValueError("not this SITL's lockstep client")
@@ -99,16 +98,16 @@ class LockstepGate:
         """The current tick went out now."""
         self._sent_wall = time.monotonic()
 
-    def pending_ack(self) -> dict[str, Any] | None:
+    def pending_ack(self) -> LockstepAck | None:
         """The acknowledgement of the current tick, when it came."""
         ack = self._ack
-        return ack if ack is not None and ack.get("seq") == self.seq else None
+        return ack if ack is not None and ack.seq == self.seq else None
 
     def passed(self, latest_setpoint: SetpointNedYaw | None) -> None:
         """The current tick was acknowledged and its MAVLink received: on to the next; ``latest_setpoint`` holds
         until then (a late re-send of an older one between ticks is ignored)."""
         if self._ack is not None:
-            self.frames_wanted = bool(self._ack.get("frames", True))
+            self.frames_wanted = self._ack.frames
         self._ack = None
         self.seq += 1
         self.next_tick_s += self.period_s
@@ -117,7 +116,7 @@ class LockstepGate:
 
     @staticmethod
     def ack_covers_mavlink(
-        ack: dict[str, Any],
+        ack: LockstepAck,
         last_setpoint: SetpointNedYaw | None,
         commands_seen: dict[int, int],
         received_from: Callable[[tuple[int, int]], int],
@@ -130,14 +129,14 @@ class LockstepGate:
         float32, the yaw within 1e-4 rad) and/or ``{"commands": {id: count}}`` (checked: ids as numbers;
         ``commands_seen``: that many COMMAND_LONG/INT of each id).
         """
-        expect = ack.get("expect")
-        if expect is not None:
-            setpoint = expect.get("setpoint")
-            if setpoint is not None and (last_setpoint is None or not same_setpoint(last_setpoint, setpoint)):
+        if ack.counted is None:
+            setpoint = ack.expect_setpoint
+            if setpoint is not None and (last_setpoint is None or not same_setpoint(last_setpoint, list(setpoint))):
                 return False
-            wanted = (expect.get("commands") or {}).items()
+            wanted = (ack.expect_commands or {}).items()
             return all(commands_seen.get(command, 0) >= count for command, count in wanted)
-        return bool(received_from((ack["sysid"], ack["compid"])) >= ack["mavlink_sent"])
+        sent, sysid, compid = ack.counted
+        return bool(received_from((sysid, compid)) >= sent)
 
     def ack_overdue(self) -> bool:
         """The current tick has waited longer than ``timeout_s`` for its acknowledgement."""
