@@ -244,7 +244,7 @@ OVER_ATTRIBUTE_BUDGET = {
     "sitl.config.SitlConfig": 29,
     "companion.guidance.config.GuidanceConfig": 28,
     "sitl.world.scenario.ScenarioConfig": 28,
-    "sitl.autopilot.commander.Commander": 24,
+    "sitl.autopilot.commander.Commander": 23,
     "sitl.render.camera.WorldRenderer": 21,
     "companion.app.outcome.FlightOutcome": 21,
 }

@@ -189,7 +189,7 @@ class LandingGuidance:
     ) -> Decision:
         if self.fallback.current is not None:  # the map refused the site: the next one, or the last resort
             self.descent.refuse()
-            return self.next_site(state, f"{reason}: site {self.fallback.current.name} refused", cause)
+            return _next_site(self, state, f"{reason}: site {self.fallback.current.name} refused", cause)
         self.reselections += 1
         locked = self.descent.locked
         if locked is not None:
@@ -247,9 +247,9 @@ class LandingGuidance:
             case Landed():
                 return self._landed(state.t_s)
             case TimeUp():
-                return self._time_used_up(state)
+                return _budget(self, state)
             case EnergyLow(reason=reason, reach_m=reach_m):
-                return self._time_used_up(state, reason, reach_m)
+                return _budget(self, state, reason, reach_m)
             case PilotTookOver(mode=mode):
                 return self._pilot_took_over(state.t_s, mode)
             case LimitReached(reason=reason) | StopAsked(reason=reason):
@@ -365,37 +365,6 @@ class LandingGuidance:
         n, e, alt = locked.north_m, locked.east_m, step.goal_altitude_m
         return self.steer(state, LandingPhase.DESCENT, locked, step.reason, n, e, alt, step.event, step.cause)
 
-    def _time_used_up(
-        self, state: VehicleState, energy_low: str | None = None, reach_m: float | None = None
-    ) -> Decision | None:
-        """The search's budget (:class:`~companion.guidance.fallback.SearchBudget`, with the energy budget's word
-        ``energy_low`` and reach ``reach_m``: :mod:`companion.guidance.energy`) as a decision: the nearest fallback site
-        in reach, else the last resort; or flying on to the site flown to, said."""
-        if self.budget.started_s is None or self.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
-            return None
-        step = self.budget.step(state, energy_low, reach_m)
-        if step is None or step.kind is BudgetStepKind.NEXT_SITE:
-            return None if step is None else self.next_site(state, step.reason, step.cause)
-        site, event = self.fallback.current, DecisionEvent.ENERGY_LOW
-        assert site is not None  # flown on to
-        return Decision(state.t_s, self.phase, CommandKind.NONE, None, site.target, step.reason, event)
-
-    def next_site(self, state: VehicleState, reason: str, cause: RefusalCause | None) -> Decision:
-        """Fly to the nearest fallback site left in reach (:mod:`companion.guidance.fallback`), climbing first to the
-        search's altitude; with none left, the last resort the search's end named."""
-        end = self.fallback.ended_by
-        assert end is not None  # set by the budget's end before any site is chosen
-        site = self.fallback.next(state)
-        if site is None:
-            said = f"{reason}; no fallback site left in reach" if self.fallback.sites else reason
-            return self.failsafe(state, said, end.event, end.action, cause)
-        self.descent.drop()
-        alt = max(state.altitude_m, self.climb.search_altitude_m)
-        self.climb.to_m, self.climb.over_ne_m = alt, (state.north_m, state.east_m)
-        said = f"{reason}: fallback site {site.name}, {self.fallback.distance_m(state):.0f} m away"
-        n, e, event = site.north_m, site.east_m, DecisionEvent.FALLBACK_SITE
-        return self.steer(state, LandingPhase.APPROACH, site.target, said, n, e, alt, event, cause)
-
     def _silence(self, state: VehicleState, silent_s: float) -> Decision | None:
         """No processed frame for ``silent_s`` (wall or vehicle time, the caller's watchdog): T1 hold, T2 failsafe."""
         c = self.config
@@ -490,4 +459,38 @@ def _next_fallback(g: LandingGuidance, state: VehicleState) -> Decision | str:
     said = "next fallback site, from the ground station"
     if plan.ended_by is None:
         plan.ended_by = BudgetEnd(said, DecisionEvent.FALLBACK_SITE, g.config.last_resort)
-    return g.next_site(state, said, RefusalCause.OPERATOR)
+    return _next_site(g, state, said, RefusalCause.OPERATOR)
+
+
+# -- the search's budget and the fallback sites (module-private, decided through LandingGuidance.on) -----------------
+def _budget(
+    g: LandingGuidance, state: VehicleState, energy_low: str | None = None, reach_m: float | None = None
+) -> Decision | None:
+    """The search's budget (:class:`~companion.guidance.fallback.SearchBudget`, with the energy budget's word
+    ``energy_low`` and reach ``reach_m``: :mod:`companion.guidance.energy`) as a decision: the nearest fallback site
+    in reach, else the last resort; or flying on to the site flown to, said."""
+    if g.budget.started_s is None or g.phase not in (*ACTIVE_PHASES, LandingPhase.HOLD):
+        return None
+    step = g.budget.step(state, energy_low, reach_m)
+    if step is None or step.kind is BudgetStepKind.NEXT_SITE:
+        return None if step is None else _next_site(g, state, step.reason, step.cause)
+    site, event = g.fallback.current, DecisionEvent.ENERGY_LOW
+    assert site is not None  # flown on to
+    return Decision(state.t_s, g.phase, CommandKind.NONE, None, site.target, step.reason, event)
+
+
+def _next_site(g: LandingGuidance, state: VehicleState, reason: str, cause: RefusalCause | None) -> Decision:
+    """Fly to the nearest fallback site left in reach (:mod:`companion.guidance.fallback`), climbing first to the
+    search's altitude; with none left, the last resort the search's end named."""
+    end = g.fallback.ended_by
+    assert end is not None  # set by the budget's end before any site is chosen
+    site = g.fallback.next(state)
+    if site is None:
+        said = f"{reason}; no fallback site left in reach" if g.fallback.sites else reason
+        return g.failsafe(state, said, end.event, end.action, cause)
+    g.descent.drop()
+    alt = max(state.altitude_m, g.climb.search_altitude_m)
+    g.climb.to_m, g.climb.over_ne_m = alt, (state.north_m, state.east_m)
+    said = f"{reason}: fallback site {site.name}, {g.fallback.distance_m(state):.0f} m away"
+    n, e, event = site.north_m, site.east_m, DecisionEvent.FALLBACK_SITE
+    return g.steer(state, LandingPhase.APPROACH, site.target, said, n, e, alt, event, cause)

@@ -14,10 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.geometry import inside_polygon
 from sitl.autopilot.arming_checks import prearm_problem
 from sitl.autopilot.battery import BatteryLevel, failsafe_action
 from sitl.autopilot.controller import Setpoint
+from sitl.autopilot.flight_tasks import mode_setpoint
+from sitl.autopilot.geofence import Fence, GeofenceWatch
 from sitl.autopilot.land_detector import LOW_THRUST_SHARE, TOUCHING_BELOW_MPS, LandDetector, LandEvent
 from sitl.autopilot.modes import FlightMode
 from sitl.autopilot.navigator import Navigator
@@ -27,35 +28,6 @@ from sitl.dynamics.base import F64Array, VehicleState
 from sitl.dynamics.rigid_body import quaternion_to_matrix
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Fence:
-    """An uploaded geofence in local NED: polygons as (K, 2) north/east vertex arrays, circles as (north, east,
-    radius). The vehicle must be inside at least one inclusion area when there are any, and outside every exclusion
-    area (PX4's ``Geofence::checkPolygons``)."""
-
-    inclusion_polygons: tuple[F64Array, ...] = ()
-    exclusion_polygons: tuple[F64Array, ...] = ()
-    inclusion_circles: tuple[tuple[float, float, float], ...] = ()
-    exclusion_circles: tuple[tuple[float, float, float], ...] = ()
-
-    def __bool__(self) -> bool:
-        return bool(
-            self.inclusion_polygons or self.exclusion_polygons or self.inclusion_circles or self.exclusion_circles
-        )
-
-    def contains(self, north_m: float, east_m: float) -> bool:
-        """The point is allowed by every area of the fence."""
-        if any(inside_polygon(p, north_m, east_m) for p in self.exclusion_polygons):
-            return False
-        if any(math.hypot(north_m - n, east_m - e) <= r for n, e, r in self.exclusion_circles):
-            return False
-        if not (self.inclusion_polygons or self.inclusion_circles):
-            return True
-        return any(inside_polygon(p, north_m, east_m) for p in self.inclusion_polygons) or any(
-            math.hypot(north_m - n, east_m - e) <= r for n, e, r in self.inclusion_circles
-        )
 
 
 # What each failsafe parameter's values do (anything else: land).
@@ -103,7 +75,6 @@ def offboard_loss_action(value: int, rc_lost: bool) -> tuple[str, str | None]:
 
 
 RCL_ACTIONS = {1: "hold", 2: "rtl", 3: "land"}  # NAV_RCL_ACT (0: none, never triggered)
-GF_ACTIONS = {1: "warn", 2: "hold", 3: "rtl", 4: "land", 5: "land"}  # 4 (terminate) is flown as land: no parachute
 
 
 @dataclass(frozen=True)
@@ -151,9 +122,8 @@ class Commander:
         self._state: VehicleState | None = None
         self.takeoff_altitude_m = float(params["MIS_TAKEOFF_ALT"])
         self.changed = False  # set on every arm/mode change, cleared by whoever announces it
-        self.fence = Fence()
+        self.geofence = GeofenceWatch(params)
         self.battery_level = BatteryLevel.OK
-        self._fence_breached = False
         self.navigator = Navigator(self)  # mission, orbit, go-to, return home
 
     @property
@@ -177,7 +147,8 @@ class Commander:
         R = quaternion_to_matrix(self._state.quaternion_wxyz)
         return math.atan2(R[1, 0], R[0, 0])
 
-    def _capture_hold(self) -> None:
+    def capture_hold(self) -> None:
+        """Hold where the vehicle is, at its heading."""
         self.hold_ned_m = self.position()
         self.hold_yaw_rad = self._yaw()
 
@@ -198,7 +169,7 @@ class Commander:
         self.armed = True
         self._armed_at_s = self.now_s
         self.land_detector.reset_landed_time()
-        self._capture_hold()
+        self.capture_hold()
         self.event("Armed")
         return MavResult.ACCEPTED
 
@@ -236,7 +207,7 @@ class Commander:
         if source is ControlSource.PILOT:
             self.failsafe = None
         self.mode = mode
-        self._capture_hold()
+        self.capture_hold()
         self.braking = mode in (FlightMode.POSCTL, FlightMode.AUTO_LOITER)
         if mode is FlightMode.AUTO_TAKEOFF:
             self.hold_ned_m = self.position()
@@ -308,7 +279,7 @@ class Commander:
         ):
             self.disarm(reason="Disarmed: no takeoff after arming")
             return None
-        setpoint = self._mode_setpoint(state)
+        setpoint = mode_setpoint(self, state)
         if self.landed_state is LandedState.ON_GROUND and not self._wants_to_climb(setpoint, state):
             return None  # armed on the ground: motors idle until something asks to climb
         if self.landed_state is LandedState.ON_GROUND:
@@ -346,44 +317,31 @@ class Commander:
             self.disarm(reason="Disarmed after landing")
 
     def outside_fence(self) -> bool:
-        """Outside the uploaded fence, or beyond GF_MAX_HOR_DIST / GF_MAX_VER_DIST from home (0: no limit)."""
-        position = self.position()
-        offset = position - self.home_ned_m
-        max_horizontal, max_vertical = self.params["GF_MAX_HOR_DIST"], self.params["GF_MAX_VER_DIST"]
-        if max_horizontal > 0 and math.hypot(offset[0], offset[1]) > max_horizontal:
-            return True
-        if max_vertical > 0 and -offset[2] > max_vertical:
-            return True
-        return bool(self.fence) and not self.fence.contains(float(position[0]), float(position[1]))
+        """Outside the fence in force (:meth:`GeofenceWatch.outside`)."""
+        return self.geofence.outside(self.position(), self.home_ned_m)
 
     @property
     def fence_limited(self) -> bool:
-        """A fence is in force: uploaded items, or a maximum distance or height (PX4's geofence module)."""
-        return bool(self.fence) or self.params["GF_MAX_HOR_DIST"] > 0 or self.params["GF_MAX_VER_DIST"] > 0
+        """A fence is in force (PX4's geofence module)."""
+        return self.geofence.limited
 
     @property
     def fence_breached(self) -> bool:
         """The vehicle is outside the fence in force, in the air (SYS_STATUS reports the fence unhealthy)."""
-        return self._fence_breached
+        return self.geofence.breached
 
     def set_fence(self, fence: Fence) -> None:
         """A new geofence (an upload or a clear)."""
-        self.fence = fence
-        self._fence_breached = False
+        self.geofence.set(fence)
 
     def _geofence(self) -> None:
         """GF_ACTION once, when the vehicle leaves the fence in the air (as PX4: a breach, not every step outside)."""
-        if not self.fence_limited or self.landed_state is LandedState.ON_GROUND:
-            self._fence_breached = False
-            return
-        outside = self.outside_fence()
-        if outside and not self._fence_breached:
-            action = GF_ACTIONS.get(int(self.params["GF_ACTION"]))
-            if action == "warn":
-                self.event("Geofence breached", Severity.CRITICAL)
-            elif action is not None:
-                self._trigger_failsafe("Geofence breached", action)
-        self._fence_breached = outside
+        on_ground = self.landed_state is LandedState.ON_GROUND
+        action = self.geofence.breach(self.position(), self.home_ned_m, on_ground)
+        if action == "warn":
+            self.event("Geofence breached", Severity.CRITICAL)
+        elif action is not None:
+            self._trigger_failsafe("Geofence breached", action)
 
     def _failsafes(self, t_s: float) -> None:
         if not self.armed:
@@ -422,43 +380,6 @@ class Commander:
         self.failsafe_since_s = self.now_s
         self.event(f"Failsafe: {reason}, {name}", Severity.CRITICAL)
         if mode is self.mode is FlightMode.AUTO_LOITER:  # holding already, towards a go-to point: stop here
-            self._capture_hold()
+            self.capture_hold()
             self.braking = True
         self.set_mode(mode, ControlSource.FAILSAFE)
-
-    def _mode_setpoint(self, state: VehicleState) -> Setpoint:
-        nan3 = np.full(3, math.nan)
-        if self.mode is FlightMode.OFFBOARD and self.offboard is not None:
-            sp = self.offboard
-            return Setpoint(sp.position_ned_m.copy(), sp.velocity_ned_mps.copy(), sp.yaw_rad)
-        if self.mode is FlightMode.AUTO_TAKEOFF:
-            target = self.hold_ned_m.copy()
-            target[2] = self.home_ned_m[2] - self.takeoff_altitude_m
-            if state.position_ned_m[2] - target[2] < 0.3:
-                self.set_mode(FlightMode.AUTO_LOITER, ControlSource.AUTOPILOT)
-                return Setpoint.hold(target, self.hold_yaw_rad)
-            climb = np.array([math.nan, math.nan, -self.params["MPC_TKO_SPEED"]])
-            pos = np.array([target[0], target[1], math.nan])
-            return Setpoint(pos, climb, self.hold_yaw_rad)
-        if self.mode is FlightMode.AUTO_LAND:
-            pos = np.array([self.hold_ned_m[0], self.hold_ned_m[1], math.nan])
-            return Setpoint(pos, np.array([math.nan, math.nan, self.params["MPC_LAND_SPEED"]]), self.hold_yaw_rad)
-        if self.mode is FlightMode.AUTO_RTL:
-            return self.navigator.rtl_setpoint(state)
-        if self.mode is FlightMode.AUTO_MISSION:
-            return self.navigator.mission_setpoint(state)
-        if self.mode is FlightMode.ORBIT and self.navigator.orbit is not None:
-            return self.navigator.orbit_setpoint()
-        if self.mode is FlightMode.POSCTL and np.any(self.pilot_sticks != 0) and not self.rc_lost:
-            self._capture_hold()
-            vel = self.pilot_sticks * np.array(
-                [self.params["MPC_XY_VEL_MAX"], self.params["MPC_XY_VEL_MAX"], self.params["MPC_Z_VEL_MAX_DN"]]
-            )
-            return Setpoint(nan3.copy(), vel, self.hold_yaw_rad)
-        if self.braking:  # as PX4: brake to a stop first, then hold where the vehicle stopped
-            if math.hypot(state.velocity_ned_mps[0], state.velocity_ned_mps[1]) > 0.3:
-                pos = np.array([math.nan, math.nan, self.hold_ned_m[2]])
-                return Setpoint(pos, np.array([0.0, 0.0, math.nan]), self.hold_yaw_rad)
-            self.braking = False
-            self.hold_ned_m[:2] = state.position_ned_m[:2]
-        return Setpoint.hold(self.hold_ned_m, self.hold_yaw_rad)

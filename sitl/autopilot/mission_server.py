@@ -28,7 +28,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.errors import SlzError
-from sitl.autopilot.commander import Fence
+from sitl.autopilot.geofence import Fence
 from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
 from sitl.autopilot.navigator import NavCommand, Navigator, NavItem
 from sitl.autopilot.status import MavResult, Severity

@@ -184,6 +184,126 @@ class StreamSchedule:
         return out
 
 
+# -- messages built from the state, the commander and the battery alone (no noise, no origin) ---------------------
+def _boot_ms(t_s: float) -> int:
+    return round(t_s * 1000.0) & 0xFFFFFFFF
+
+
+def euler(s: VehicleState) -> tuple[float, float, float]:
+    """Roll, pitch and yaw (rad, ZYX) of the body FRD frame in NED."""
+    R = quaternion_to_matrix(s.quaternion_wxyz)
+    roll = math.atan2(R[2, 1], R[2, 2])
+    pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    return roll, pitch, yaw
+
+
+def _sys_status(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    # The geofence as PX4 reports it: present (the module runs), enabled while a fence is in force, healthy
+    # unless breached. Without the bit, a ground station reads "no fence, unhealthy": MAVProxy said "fence breach".
+    fence = mavlink.MAV_SYS_STATUS_GEOFENCE
+    health = SENSORS | (0 if cmd.fence_breached else fence)
+    if cmd.rc_lost:
+        health &= ~mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+    if cmd.armed or cmd.prearm_problem() is None:
+        health |= PREARM_CHECK
+    return mav.sys_status_encode(
+        SENSORS | PREARM_CHECK | fence,
+        SENSORS | PREARM_CHECK | (fence if cmd.fence_limited else 0),
+        health,
+        500,
+        int(bat.voltage_v * 1000),
+        int(bat.current_a * 100),
+        int(bat.remaining * 100),
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+    )
+
+
+def _extended_sys_state(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    return mav.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, int(cmd.landed_state))
+
+
+def _attitude(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    roll, pitch, yaw = euler(s)
+    p, q, r = (float(v) for v in s.rates_frd_radps)
+    return mav.attitude_encode(_boot_ms(t_s), roll, pitch, yaw, p, q, r)
+
+
+def _attitude_quaternion(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    w, x, y, z = (float(v) for v in s.quaternion_wxyz)
+    p, q, r = (float(v) for v in s.rates_frd_radps)
+    return mav.attitude_quaternion_encode(_boot_ms(t_s), w, x, y, z, p, q, r, [0.0, 0.0, 0.0, 0.0])
+
+
+def _battery(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    cell_mv = int(bat.voltage_v * 1000 / 4)
+    voltages = [cell_mv] * 4 + [65535] * 6
+    return mav.battery_status_encode(
+        0,
+        mavlink.MAV_BATTERY_FUNCTION_ALL,
+        mavlink.MAV_BATTERY_TYPE_LIPO,
+        2500,
+        voltages,
+        int(bat.current_a * 100),
+        int(bat.used_mah),
+        -1,
+        int(bat.remaining * 100),
+        round(min(bat.time_remaining_s, 2**31 - 1)),
+        int(cmd.battery_level),  # MAV_BATTERY_CHARGE_STATE: OK, LOW, CRITICAL, EMERGENCY
+    )
+
+
+def _autopilot_version(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    capabilities = (
+        mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+        | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+        | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+        | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+        | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+        | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+        | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+        | mavlink.MAV_PROTOCOL_CAPABILITY_FTP
+    )
+    version = (1 << 24) | (15 << 16) | (0 << 8) | 255  # 1.15.0 release
+    return mav.autopilot_version_encode(
+        capabilities, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, 1, [0] * 18
+    )
+
+
+def _vibration(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    level = 0.5 if cmd.landed_state is not LandedState.ON_GROUND else 0.05
+    return mav.vibration_encode(int(t_s * 1e6), level, level, level, 0, 0, 0)
+
+
+def _rc_channels(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    if cmd.rc_lost:
+        return mav.rc_channels_encode(_boot_ms(t_s), 0, *([65535] * 18), 0)
+    sticks = cmd.pilot_sticks if cmd.mode is FlightMode.POSCTL else np.zeros(3)
+    pitch, roll, throttle = 1500 - 500 * sticks[0], 1500 + 500 * sticks[1], 1500 - 500 * sticks[2]
+    channels = [round(float(v)) for v in (roll, pitch, throttle, 1500)] + [1500] * 4 + [65535] * 10
+    return mav.rc_channels_encode(_boot_ms(t_s), 8, *channels, 255)
+
+
+def _mission_current(mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
+    nav = cmd.navigator
+    total = len(nav.mission)
+    if total == 0:
+        state = mavlink.MISSION_STATE_NO_MISSION
+    elif nav.mission_current >= total:
+        state = mavlink.MISSION_STATE_COMPLETE
+    elif cmd.mode is FlightMode.AUTO_MISSION:
+        state = mavlink.MISSION_STATE_ACTIVE
+    else:
+        state = mavlink.MISSION_STATE_NOT_STARTED if nav.mission_current == 0 else mavlink.MISSION_STATE_PAUSED
+    in_mission = 1 if cmd.mode is FlightMode.AUTO_MISSION else 2
+    return mav.mission_current_encode(min(nav.mission_current, 65535), total, state, in_mission)
+
+
 class TelemetryBuilder:
     """Builds telemetry messages from the state, commander and battery.
 
@@ -204,28 +324,30 @@ class TelemetryBuilder:
         self.motor_outputs = np.zeros(4)  # the latest motor commands, [0, 1] (SERVO_OUTPUT_RAW)
         self.setpoint: Setpoint | None = None  # what the position controller follows now (targets, errors)
         self._builders: dict[str, Callable[[Any, float, VehicleState, Commander, Battery], Any]] = {
-            "SYS_STATUS": self._sys_status,
-            "EXTENDED_SYS_STATE": self._extended_sys_state,
-            "ATTITUDE": self._attitude,
-            "ATTITUDE_QUATERNION": self._attitude_quaternion,
+            "SYS_STATUS": _sys_status,
+            "EXTENDED_SYS_STATE": _extended_sys_state,
+            "ATTITUDE": _attitude,
+            "ATTITUDE_QUATERNION": _attitude_quaternion,
             "LOCAL_POSITION_NED": self._local_position,
             "GLOBAL_POSITION_INT": self._global_position,
             "GPS_RAW_INT": self._gps_raw,
-            "BATTERY_STATUS": self._battery,
+            "BATTERY_STATUS": _battery,
             "HOME_POSITION": self._home,
-            "AUTOPILOT_VERSION": self._autopilot_version,
+            "AUTOPILOT_VERSION": _autopilot_version,
             "VFR_HUD": self._vfr_hud,
             "ALTITUDE": self._altitude,
             "ESTIMATOR_STATUS": self._estimator_status,
-            "VIBRATION": self._vibration,
-            "RC_CHANNELS": self._rc_channels,
+            "VIBRATION": _vibration,
+            "RC_CHANNELS": _rc_channels,
             "SERVO_OUTPUT_RAW": self._servo_output_raw,
             "NAV_CONTROLLER_OUTPUT": self._nav_controller_output,
             "POSITION_TARGET_LOCAL_NED": self._position_target,
             "GPS_GLOBAL_ORIGIN": self._gps_global_origin,
-            "MISSION_CURRENT": self._mission_current,
+            "MISSION_CURRENT": _mission_current,
             "PROTOCOL_VERSION": lambda mav, t_s, s, cmd, bat: ProtocolVersionMessage(),
         }
+
+    euler = staticmethod(euler)
 
     def can_build(self, name: str) -> bool:
         """True for the messages this autopilot sends."""
@@ -253,71 +375,20 @@ class TelemetryBuilder:
             return p
         return p + self.rng.normal(0.0, self.position_noise_m, size=3)
 
-    @staticmethod
-    def _boot_ms(t_s: float) -> int:
-        return round(t_s * 1000.0) & 0xFFFFFFFF
-
-    def _sys_status(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        # The geofence as PX4 reports it: present (the module runs), enabled while a fence is in force, healthy
-        # unless breached. Without the bit, a ground station reads "no fence, unhealthy": MAVProxy said "fence breach".
-        fence = mavlink.MAV_SYS_STATUS_GEOFENCE
-        health = SENSORS | (0 if cmd.fence_breached else fence)
-        if cmd.rc_lost:
-            health &= ~mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
-        if cmd.armed or cmd.prearm_problem() is None:
-            health |= PREARM_CHECK
-        return mav.sys_status_encode(
-            SENSORS | PREARM_CHECK | fence,
-            SENSORS | PREARM_CHECK | (fence if cmd.fence_limited else 0),
-            health,
-            500,
-            int(bat.voltage_v * 1000),
-            int(bat.current_a * 100),
-            int(bat.remaining * 100),
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-        )
-
-    def _extended_sys_state(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        return mav.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, int(cmd.landed_state))
-
-    @staticmethod
-    def euler(s: VehicleState) -> tuple[float, float, float]:
-        """Roll, pitch and yaw (rad, ZYX) of the body FRD frame in NED."""
-        R = quaternion_to_matrix(s.quaternion_wxyz)
-        roll = math.atan2(R[2, 1], R[2, 2])
-        pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
-        yaw = math.atan2(R[1, 0], R[0, 0])
-        return roll, pitch, yaw
-
-    def _attitude(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        roll, pitch, yaw = self.euler(s)
-        p, q, r = (float(v) for v in s.rates_frd_radps)
-        return mav.attitude_encode(self._boot_ms(t_s), roll, pitch, yaw, p, q, r)
-
-    def _attitude_quaternion(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        w, x, y, z = (float(v) for v in s.quaternion_wxyz)
-        p, q, r = (float(v) for v in s.rates_frd_radps)
-        return mav.attitude_quaternion_encode(self._boot_ms(t_s), w, x, y, z, p, q, r, [0.0, 0.0, 0.0, 0.0])
-
     def _local_position(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
         n, e, d = (float(v) for v in self._noisy(s.position_ned_m))
         vn, ve, vd = (float(v) for v in s.velocity_ned_mps)
-        return mav.local_position_ned_encode(self._boot_ms(t_s), n, e, d, vn, ve, vd)
+        return mav.local_position_ned_encode(_boot_ms(t_s), n, e, d, vn, ve, vd)
 
     def _global_position(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
         n, e, d = (float(v) for v in self._noisy(s.position_ned_m))
         lat, lon, alt = ned_to_geodetic(n, e, d, self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m)
         rel = float(cmd.home_ned_m[2]) - d
         vn, ve, vd = (float(v) for v in s.velocity_ned_mps)
-        yaw = self.euler(s)[2]
+        yaw = euler(s)[2]
         hdg = round(math.degrees(yaw) % 360.0 * 100) % 36000
         return mav.global_position_int_encode(
-            self._boot_ms(t_s),
+            _boot_ms(t_s),
             round(lat * 1e7),
             round(lon * 1e7),
             round(alt * 1000),
@@ -346,23 +417,6 @@ class TelemetryBuilder:
             14,
         )
 
-    def _battery(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        cell_mv = int(bat.voltage_v * 1000 / 4)
-        voltages = [cell_mv] * 4 + [65535] * 6
-        return mav.battery_status_encode(
-            0,
-            mavlink.MAV_BATTERY_FUNCTION_ALL,
-            mavlink.MAV_BATTERY_TYPE_LIPO,
-            2500,
-            voltages,
-            int(bat.current_a * 100),
-            int(bat.used_mah),
-            -1,
-            int(bat.remaining * 100),
-            round(min(bat.time_remaining_s, 2**31 - 1)),
-            int(cmd.battery_level),  # MAV_BATTERY_CHARGE_STATE: OK, LOW, CRITICAL, EMERGENCY
-        )
-
     def _home(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
         n, e, d = (float(v) for v in cmd.home_ned_m)
         lat, lon, alt = ned_to_geodetic(n, e, d, self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m)
@@ -380,27 +434,11 @@ class TelemetryBuilder:
             int(t_s * 1e6),
         )
 
-    def _autopilot_version(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        capabilities = (
-            mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-            | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-            | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-            | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-            | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
-            | mavlink.MAV_PROTOCOL_CAPABILITY_FTP
-        )
-        version = (1 << 24) | (15 << 16) | (0 << 8) | 255  # 1.15.0 release
-        return mav.autopilot_version_encode(
-            capabilities, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0x26AC, 0x0011, 1, [0] * 18
-        )
-
     # -- what a ground station's instruments read (true state: no draw from the noise generator) ---------------
     def _vfr_hud(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
         vn, ve, vd = (float(v) for v in s.velocity_ned_mps)
         speed = math.hypot(vn, ve)
-        heading = round(math.degrees(self.euler(s)[2]) % 360.0) % 360
+        heading = round(math.degrees(euler(s)[2]) % 360.0) % 360
         throttle = round(100 * float(np.mean(self.motor_outputs))) if cmd.armed else 0
         alt_amsl = self.origin.alt_m - float(s.position_ned_m[2])
         return mav.vfr_hud_encode(speed, speed, heading, throttle, alt_amsl, -vd)
@@ -425,18 +463,6 @@ class TelemetryBuilder:
         sigma = max(self.position_noise_m, 0.01)
         return mav.estimator_status_encode(int(t_s * 1e6), flags, 0.1, 0.1, 0.1, 0.05, 0.0, 0.0, sigma, sigma)
 
-    def _vibration(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        level = 0.5 if cmd.landed_state is not LandedState.ON_GROUND else 0.05
-        return mav.vibration_encode(int(t_s * 1e6), level, level, level, 0, 0, 0)
-
-    def _rc_channels(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        if cmd.rc_lost:
-            return mav.rc_channels_encode(self._boot_ms(t_s), 0, *([65535] * 18), 0)
-        sticks = cmd.pilot_sticks if cmd.mode is FlightMode.POSCTL else np.zeros(3)
-        pitch, roll, throttle = 1500 - 500 * sticks[0], 1500 + 500 * sticks[1], 1500 - 500 * sticks[2]
-        channels = [round(float(v)) for v in (roll, pitch, throttle, 1500)] + [1500] * 4 + [65535] * 10
-        return mav.rc_channels_encode(self._boot_ms(t_s), 8, *channels, 255)
-
     def _servo_output_raw(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
         pwm = [round(1000 + 1000 * float(min(max(m, 0.0), 1.0))) if cmd.armed else 900 for m in self.motor_outputs]
         return mav.servo_output_raw_encode(int(t_s * 1e6) & 0xFFFFFFFF, 0, *(pwm + [0] * (16 - len(pwm))))
@@ -451,7 +477,7 @@ class TelemetryBuilder:
         target = self._target(s)
         dn, de = float(target[0] - s.position_ned_m[0]), float(target[1] - s.position_ned_m[1])
         bearing = round(math.degrees(math.atan2(de, dn)))
-        roll, pitch, yaw = self.euler(s)
+        roll, pitch, yaw = euler(s)
         return mav.nav_controller_output_encode(
             math.degrees(roll),
             math.degrees(pitch),
@@ -477,7 +503,7 @@ class TelemetryBuilder:
             mask |= 1024
         p, v = (float(x) for x in position), (float(x) for x in velocity)
         return mav.position_target_local_ned_encode(
-            self._boot_ms(t_s), mavlink.MAV_FRAME_LOCAL_NED, mask, *p, *v, 0.0, 0.0, 0.0, float(yaw), 0.0
+            _boot_ms(t_s), mavlink.MAV_FRAME_LOCAL_NED, mask, *p, *v, 0.0, 0.0, 0.0, float(yaw), 0.0
         )
 
     def _gps_global_origin(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
@@ -485,17 +511,3 @@ class TelemetryBuilder:
         return mav.gps_global_origin_encode(
             round(o.lat_deg * 1e7), round(o.lon_deg * 1e7), round(o.alt_m * 1000), int(t_s * 1e6)
         )
-
-    def _mission_current(self, mav: Any, t_s: float, s: VehicleState, cmd: Commander, bat: Battery) -> Any:
-        nav = cmd.navigator
-        total = len(nav.mission)
-        if total == 0:
-            state = mavlink.MISSION_STATE_NO_MISSION
-        elif nav.mission_current >= total:
-            state = mavlink.MISSION_STATE_COMPLETE
-        elif cmd.mode is FlightMode.AUTO_MISSION:
-            state = mavlink.MISSION_STATE_ACTIVE
-        else:
-            state = mavlink.MISSION_STATE_NOT_STARTED if nav.mission_current == 0 else mavlink.MISSION_STATE_PAUSED
-        in_mission = 1 if cmd.mode is FlightMode.AUTO_MISSION else 2
-        return mav.mission_current_encode(min(nav.mission_current, 65535), total, state, in_mission)
