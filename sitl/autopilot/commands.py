@@ -85,8 +85,11 @@ class AutopilotHost(Protocol):
     """Each link's telemetry schedule, by the link's ``id()``."""
     lockstep: LockstepGate
     actuators: ActuatorOutputs
-    ulog: FlightULog | None
-    """The flight's ULog, when the config asks for one (commands and parameter changes go in)."""
+
+    @property
+    def ulog(self) -> FlightULog | None:
+        """The flight's ULog, when the config asks for one (commands and parameter changes go in)."""
+        ...
 
     def statustext(self, text: str, severity: Severity = Severity.INFO) -> None:
         """A STATUSTEXT on every link."""

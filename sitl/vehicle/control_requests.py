@@ -47,9 +47,13 @@ class ControlledVehicle(Protocol):
     camera: SimCamera | None
     """The simulated camera, or None without one."""
     camera_failed: bool
-    handler_errors: int
     actuators: ActuatorOutputs
     """The autopilot's actuator outputs and the warning device on one."""
+
+    @property
+    def handler_errors(self) -> int:
+        """Messages and requests whose handling raised."""
+        ...
 
     def fail_camera(self, failed: bool) -> None:
         """The camera delivers nothing from now on (or again)."""

@@ -9,19 +9,16 @@ from __future__ import annotations
 
 import functools
 import logging
-import math
 import select
 import signal
 import time
-from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from companion.config import quote
 from companion.errors import SlzError
-from companion.vehicle.sim_control import Event, Tick
+from companion.vehicle.sim_control import Tick
 from sitl.autopilot.actuators import ActuatorOutputs
 from sitl.autopilot.battery import Battery, BatteryMonitor
 from sitl.autopilot.broadcast import HEARTBEAT_PERIOD_S, Broadcaster
@@ -41,10 +38,10 @@ from sitl.timing.lockstep_gate import LockstepGate
 from sitl.vehicle.control_channel import ControlChannel
 from sitl.vehicle.control_requests import ControlRequests
 from sitl.vehicle.fault_schedule import FaultSchedule
-from sitl.vehicle.live_truth import LiveTruth, LiveTruthError
+from sitl.vehicle.inputs import Inputs
+from sitl.vehicle.live_truth import LiveTruthError
+from sitl.vehicle.records import VehicleRecords
 from sitl.vehicle.run_end import RunEnd
-from sitl.vehicle.trajectory_log import TrajectoryLog
-from sitl.vehicle.truth import TruthRecord, TruthWriter
 
 if TYPE_CHECKING:  # the camera module needs the renderer, which a SITL without a camera never loads
     from sitl.vehicle.sim_camera import SimCamera
@@ -88,10 +85,7 @@ class SitlVehicle:
 
     def __init__(self, config: SitlConfig) -> None:
         self.config = config
-        self.trajectory: TrajectoryLog | None = None  # first, so close() works from any failure below
-        self.truth: TruthWriter | None = None
-        self.ulog: FlightULog | None = None
-        self.live: LiveTruth | None = None
+        self.records = VehicleRecords()  # first, so close() works from any failure below
         try:
             home_ned_m = np.array([*config.home_ne_m, 0.0])
             self.dynamics = make_dynamics(config.dynamics, config.physics_rate_hz, home_ned_m)
@@ -149,27 +143,29 @@ class SitlVehicle:
         self._running = True
         self._exit_code = 0
         self.run_end = RunEnd(config.end_after_touchdown_s)
-        self.handler_errors = 0  # messages and requests whose handling raised (dropped, logged, counted)
-        self._last_handler_error_wall = -math.inf
         self.lockstep = LockstepGate(config.lockstep, config.lockstep_period_s, config.lockstep_timeout_s)
-        self.requests = ControlRequests(self)
+        requests = ControlRequests(self)
         self.mavlink = MavlinkServer(self)
+        self.inputs = Inputs(self.links, self.control, self.mavlink, requests)
         self.faults = FaultSchedule(config.faults)
         self.camera_failed = False  # injected: the camera delivers nothing (ticks go on without frames)
-        # Ground truth and trajectory logs
-        if config.truth_path is not None and self.camera is not None:
-            self.truth = TruthWriter(Path(config.truth_path), config.seed)
-        if config.log_path is not None:
-            self.trajectory = TrajectoryLog(Path(config.log_path), config.log_rate_hz)
-        if config.ulog_path is not None:
-            self.ulog = FlightULog(Path(config.ulog_path), config.log_rate_hz, self.params, config.system_id)
-            self.broadcast.sink = functools.partial(self.ulog.statustext_at, self.clock)
-        if config.live_view_port is not None:
-            try:
-                self.live = LiveTruth(config.live_view_port, config.bind_address)
-            except LiveTruthError as exc:
-                self.close()
-                raise SitlError("live_view", str(exc)) from None
+        try:  # ground truth, trajectory, ULog, live view
+            self.records.open(config, self.params, truth=self.camera is not None)
+        except LiveTruthError as exc:
+            self.close()
+            raise SitlError("live_view", str(exc)) from None
+        if self.records.ulog is not None:
+            self.broadcast.sink = functools.partial(self.records.ulog.statustext_at, self.clock)
+
+    @property
+    def handler_errors(self) -> int:
+        """Messages and requests whose handling raised (dropped, logged, counted)."""
+        return self.inputs.handler_errors
+
+    @property
+    def ulog(self) -> FlightULog | None:
+        """The run's ULog (None: not asked for), where the autopilot logs commands and parameter changes."""
+        return self.records.ulog
 
     # -- lifecycle ---------------------------------------------------------------------------------------------
     def limits(self) -> ControllerLimits:
@@ -209,16 +205,7 @@ class SitlVehicle:
         if self.camera is not None:
             self.camera.close()
             self.camera = None
-        if self.trajectory is not None:
-            self.trajectory.close()
-            self.trajectory = None
-        for log in (self.ulog, self.live):
-            if log is not None:
-                log.close()
-        self.ulog = self.live = None
-        if self.truth is not None:
-            self.truth.close()
-            self.truth = None
+        self.records.close()
 
     def run(self) -> int:
         """Run until shutdown, ``duration_s`` or a lockstep timeout; returns the exit code."""
@@ -229,7 +216,7 @@ class SitlVehicle:
         try:
             while self._running:
                 if not fast or self.clock.steps % self._outer_every == 0:
-                    self._poll()
+                    self.inputs.poll()
                 self.broadcast.heartbeat_if_due(self.lockstep.enabled and self.lockstep.client is None)
                 if self.config.duration_s is not None and self.clock.now_s >= self.config.duration_s - 1e-9:
                     logger.info("duration reached at %.3f s simulated", self.clock.now_s)
@@ -335,15 +322,10 @@ class SitlVehicle:
         self._running = False
 
     def _write_truth(self) -> None:
-        """One ground-truth record at this instant (people positions only when some walk)."""
-        if self.truth is None or self.camera is None:
-            return
-        t_s = self.clock.now_s
-        s, cmd = self.dynamics.state(), self.commander
-        n, e, d = (float(v) for v in s.position_ned_m)
-        state = (cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, bool(s.on_ground))
-        vehicle = TruthRecord(t_s, (n, e, d), *state, warning=self.actuators.warning_on)
-        self.truth.write(t_s, self.camera.people_at(t_s), vehicle)
+        """One ground-truth record at this instant (:meth:`VehicleRecords.truth_at`)."""
+        if self.camera is not None:
+            state, warning = self.dynamics.state(), self.actuators.warning_on
+            self.records.truth_at(self.clock.now_s, state, self.commander, warning, self.camera.people_at)
 
     # -- the physics step ----------------------------------------------------------------------------------------
     def _step(self) -> None:
@@ -387,51 +369,10 @@ class SitlVehicle:
         self.broadcast.heartbeat_now()
 
     def _write_log_row(self, force: bool = False) -> None:
-        t_s = self.clock.now_s
-        cmd = self.commander
-        if self.ulog is not None and (force or self.ulog.due(t_s)):
-            level = int(self.battery_monitor.level)
-            self.ulog.sample(t_s, self.dynamics.state(), cmd, self._setpoint, self.battery, level)
-        if self.live is not None and self.live.due(t_s):  # the crowd as it stands: never advanced here
-            self.live.sample(t_s, None if self.camera is None else self.camera.people(), self.dynamics.state())
-        if self.trajectory is None or not (force or self.trajectory.due(t_s)):
-            return
-        self.trajectory.write(t_s, self.dynamics.state(), cmd.armed, cmd.mode.px4_name, cmd.landed_state.name, force)
-
-    # -- inputs --------------------------------------------------------------------------------------------------
-    def _poll(self) -> None:
-        """Handle what came in on the links and the control channel. One select() asks which sockets have something,
-        so an idle socket costs no receive call (a poll runs at every outer step, 100 times a simulated second)."""
-        assert self.control is not None
-        sockets: list[MavlinkLink | ControlChannel] = [*self.links, self.control]
-        readable = select.select(sockets, [], [], 0)[0]
-        for link in self.links:
-            if link not in readable:
-                continue
-            for msg, from_peer in link.receive():
-                try:
-                    self.mavlink.handle(link, msg, from_peer)
-                except Exception as exc:  # a message no check foresaw: drop and count it, never die of it
-                    self._handler_failed(f"MAVLink {msg.get_type()} on {link.name}", exc)
-        self.mavlink.missions.tick()
-        self.mavlink.pump()
-        if self.control not in readable:
-            return
-        for request, addr in self.control.receive():
-            try:
-                self.requests.handle(request, addr)
-            except Exception as exc:
-                self._handler_failed(f"control {quote(request.get('cmd'))}", exc)
-                self.control.send({"event": Event.ERROR.value, "cmd": "?", "error": "request failed"}, addr)
-
-    def _handler_failed(self, what: str, exc: Exception) -> None:
-        """Count a request whose handling raised; log it at most once per wall second."""
-        self.handler_errors += 1
-        now = time.monotonic()
-        if now - self._last_handler_error_wall >= 1.0:
-            self._last_handler_error_wall = now
-            name = type(exc).__name__
-            logger.error("%s dropped: %s: %s (%d so far)", what, name, quote(str(exc)), self.handler_errors)
+        battery = (self.battery, int(self.battery_monitor.level))
+        people = None if self.camera is None else self.camera.people
+        t_s, state, cmd = self.clock.now_s, self.dynamics.state, self.commander
+        self.records.row(t_s, state, cmd, self._setpoint, battery, people, force)
 
 
 def inject_faults(vehicle: SitlVehicle, t_s: float) -> None:
