@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from bench.machine import machine_context, save_report
-from companion.app.flight_log import FlightLog, RecordKind
+from companion.flightlog.flight_log import FlightLog, RecordKind
 from sitl.harness.instances import lease_instance
 from sitl.harness.mission import MissionSpec, fly
 from sitl.testing.foxglove_client import FoxgloveClient

@@ -31,14 +31,14 @@ import numpy as np
 import numpy.typing as npt
 
 from bench.machine import machine_context, save_report
-from companion.app.flight_log import FlightLog, RecordKind
-from companion.app.replay import config_from_header
 from companion.config import load_yaml_config
+from companion.flightlog.flight_log import FlightLog, RecordKind
 from companion.geometry import Pose, inside_polygon
 from companion.perception.density import input_scale, predict_downscaled
 from companion.perception.occupancy import OccupancyMapper
 from companion.perception.pipeline import SlzPipeline
 from companion.perception.projection import HeadPlaneOccupancy
+from companion.tools.replay import config_from_header
 from sitl.campaign.hold_explain import TruthAt
 from sitl.config import SitlConfig
 from sitl.vehicle.sim_camera import scene_light

@@ -31,7 +31,7 @@ from typing import Any
 from bench.campaign_sample import SPEC
 from bench.machine import machine_context, save_report
 from bench.mission_cpu import WARM_UP, process_cpu_s
-from companion.app.flight_log import FlightLog
+from companion.flightlog.flight_log import FlightLog
 from sitl.campaign.spec import load_campaign_spec
 from sitl.campaign.worker import fly_one
 from sitl.harness.instances import leased_instance

@@ -18,7 +18,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
+from companion.flightlog.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.guidance.vocabulary import DecisionEvent
 from sitl.campaign.runner import read_results
 from sitl.campaign.stats import Estimate, mcnemar_exact, paired_mean_difference

@@ -53,11 +53,11 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     import hashlib
 
     from companion.app.flight import FlightApp
-    from companion.app.flight_log import SCHEMA_VERSION, FlightHeader, RecordKind
     from companion.app.mission import FrameFormat, OperatingMode, validate_for_flight
-    from companion.app.recorder import FlightRecorder, prune_flights
     from companion.camera.frames import CameraError
     from companion.camera.sources import open_frame_source
+    from companion.flightlog.flight_log import SCHEMA_VERSION, FlightHeader, RecordKind
+    from companion.flightlog.recorder import FlightRecorder, prune_flights
     from companion.guidance.landing import LandingPhase
     from companion.perception.model_validation import validation_of
     from companion.vehicle.link import VehicleError
@@ -155,7 +155,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     finally:
         recorder.close()
         if recorder.path.is_file():
-            from companion.app.landing_report import ENDING_WORDS, FlightEnding, write_landing_report
+            from companion.tools.landing_report import ENDING_WORDS, FlightEnding, write_landing_report
 
             report = write_landing_report(recorder.directory)  # beside the log: what the operator files
             says = "no landing report (the log could not be read)"
@@ -169,8 +169,8 @@ def _cmd_fly(args: argparse.Namespace) -> int:
 def _cmd_doctor(args: argparse.Namespace) -> int:
     import asyncio
 
-    from companion.app.doctor import DoctorLimits, Status, diagnose
     from companion.app.mission import load_mission_config
+    from companion.tools.doctor import DoctorLimits, Status, diagnose
 
     config = load_mission_config(args.config)
     limits = DoctorLimits(
@@ -192,17 +192,17 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from companion.app.recorder import RecorderError
-    from companion.app.replay import ReplayError
+    from companion.flightlog.recorder import RecorderError
+    from companion.tools.replay import ReplayError
 
     try:
         import matplotlib  # noqa: F401  (the plots)
 
-        from companion.app.report import ReportError, build_flight_report
+        from companion.tools.report import ReportError, build_flight_report
     except ImportError as exc:
         sys.stderr.write(f"slz report: {exc}: install the plotting extra, pip install 'slz-lander[report]'\n")
         return 1
-    from companion.app.flight_log import flight_folder
+    from companion.flightlog.flight_log import flight_folder
 
     try:
         report = build_flight_report(flight_folder(args.flight), args.out, video=not args.no_video, ulog=args.ulog)
@@ -215,8 +215,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from companion.app.flight_log import flight_folder
-    from companion.app.mcap_export import ExportError, export_mcap
+    from companion.flightlog.flight_log import flight_folder
+    from companion.tools.mcap_export import ExportError, export_mcap
 
     if not args.mcap:
         sys.stderr.write("slz export: say the format: --mcap\n")
@@ -237,9 +237,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from companion.app.flight_log import flight_folder
-    from companion.app.recorder import RecorderError
-    from companion.app.replay import ReplayError, replay
+    from companion.flightlog.flight_log import flight_folder
+    from companion.flightlog.recorder import RecorderError
+    from companion.tools.replay import ReplayError, replay
 
     try:
         report = replay(flight_folder(args.flight), video_path=args.video)
@@ -266,7 +266,7 @@ def _positive(value: float | None, flag: str) -> str | None:
 
 
 def _cmd_height_map(args: argparse.Namespace) -> int:
-    from companion.app.height_pair import HeightPairError, run
+    from companion.tools.height_pair import HeightPairError, run
 
     for value, flag in (
         (args.altitude_m, "--altitude-m"),
@@ -302,7 +302,7 @@ def _cmd_height_map(args: argparse.Namespace) -> int:
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
-    from companion.app.serve import serve
+    from companion.tools.serve import serve
 
     return serve(main, preload=args.preload)
 

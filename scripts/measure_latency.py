@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.app.flight_log import FlightLog, FlightLogError, RecordKind, flight_folder
+from companion.flightlog.flight_log import FlightLog, FlightLogError, RecordKind, flight_folder
 
 MIN_PAIRS = 20
 """Frame pairs with a measured rotation needed for an estimate."""

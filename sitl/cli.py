@@ -142,7 +142,7 @@ def _interrupt(signum: int, frame: object) -> None:
 def _campaign_replay(args: argparse.Namespace) -> int:
     import json
 
-    from companion.app.replay import replay
+    from companion.tools.replay import replay
     from sitl.campaign.metrics import mission_metrics, stale
     from sitl.campaign.report import completed
     from sitl.campaign.runner import read_results

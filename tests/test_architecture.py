@@ -32,9 +32,11 @@ FLOORS: dict[str, int] = {
     "companion.perception": 1,
     "companion.guidance.vocabulary": 1,  # the landing logic's words, which the ground channel speaks too
     "companion.guidance": 2,
-    "companion.app": 3,
-    "companion.cli": 4,
-    "companion": 4,
+    "companion.flightlog": 3,  # the flight log's schema, its recorder and the views of its records
+    "companion.app": 4,  # the live flight
+    "companion.tools": 5,  # the offline tools
+    "companion.cli": 6,
+    "companion": 6,
     # the simulated world's and vehicle's parts (no I/O of a process)
     "sitl.geodesy": 10,
     "sitl.timing": 10,

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from companion.app.flight_log import DecisionRecord
+from companion.flightlog.flight_log import DecisionRecord
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause, ZoneChange
 from companion.perception.selection import Target

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.flight_log import FlightLog, RecordKind
+from companion.flightlog.flight_log import FlightLog, RecordKind
 from companion.guidance.commitment import CommitmentConfig
 from companion.guidance.vocabulary import DecisionEvent, ZoneChange
 from sitl.campaign.hold_explain import explain_run

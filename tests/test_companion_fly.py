@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.replay import replay
+from companion.tools.replay import replay
 from sitl.harness.process import SitlProcess
 from sitl.testing.helpers import (
     CompanionFlight,
@@ -133,6 +133,6 @@ def test_in_the_field_the_companion_waits_for_the_handover_then_yields_at_once_t
     # Issue 65: the landing report names the pilot's takeover, and slz report draws the flight.
     assert "fly: the pilot took over;" in out
     assert json.loads((tmp_path / "flight" / "landing_report.json").read_text())["outcome"] == "pilot_took_over"
-    from companion.app.report import build_flight_report
+    from companion.tools.report import build_flight_report
 
     assert build_flight_report(tmp_path / "flight", tmp_path / "report", video=False).files

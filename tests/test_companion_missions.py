@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 import pytest
 
-from companion.app.recorder import read_log
+from companion.flightlog.recorder import read_log
 from companion.guidance.geofence import Geofence, GeofenceConfig
 from companion.perception.config import PerceptionConfig
 from sitl.harness.instances import leased_instance
@@ -153,7 +153,7 @@ def test_the_sitls_ulog_lines_up_with_the_companions_log_in_slz_report(demo: Dem
     )
     assert done.returncode == 0, done.stderr[-3000:]
     assert f"wrote {out / 'autopilot.png'}" in done.stdout
-    from companion.app.autopilot_log import read_autopilot_log
+    from companion.tools.autopilot_log import read_autopilot_log
 
     autopilot = read_autopilot_log(ulog)
     modes = [m for _, m in autopilot.modes]
@@ -381,7 +381,7 @@ def test_a_lost_link_stops_commanding_and_the_autopilot_failsafe_lands(tmp_path:
     report = json.loads((Path(r.run_dir) / "flight" / "landing_report.json").read_text())
     assert report["outcome"] == "link_lost"
     assert "failsafe (autopilot)" in [e["event"] for e in report["decisions"]]
-    from companion.app.report import build_flight_report
+    from companion.tools.report import build_flight_report
 
     drawn = build_flight_report(Path(r.run_dir) / "flight", tmp_path / "report", video=False)
     assert drawn.files

@@ -123,7 +123,7 @@ def test_empty_section_means_defaults(tmp_path: Path) -> None:
 
 def test_a_replay_takes_the_config_its_flight_ran_with() -> None:
     from companion.app.mission import load_mission_config
-    from companion.app.replay import config_from_header
+    from companion.tools.replay import config_from_header
 
     today = load_mission_config(Path("mission_configs/sitl.yaml")).model_dump(mode="json")
     assert config_from_header(today).perception.model.min_gsd_m_per_px == pytest.approx(0.045)

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.flight_log import FlightLog
-from companion.app.replay import replay
+from companion.flightlog.flight_log import FlightLog
 from companion.guidance.vocabulary import DecisionEvent
+from companion.tools.replay import replay
 from sitl.campaign.metrics import mission_metrics
 from sitl.campaign.spec import load_campaign_spec
 from sitl.campaign.worker import mission_spec

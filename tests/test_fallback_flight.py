@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.app.flight_log import FlightLog, RecordKind
-from companion.app.replay import replay
+from companion.flightlog.flight_log import FlightLog, RecordKind
+from companion.tools.replay import replay
 from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
 from sitl.testing.helpers import (
     GroundStation,

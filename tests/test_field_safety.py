@@ -21,8 +21,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.app.flight import FlightApp
 from companion.app.mission import validate_for_flight
-from companion.app.recorder import FlightRecorder, read_log
 from companion.camera.sources import open_frame_source
+from companion.flightlog.recorder import FlightRecorder, read_log
 from companion.guidance.landing import LandingPhase
 from companion.vehicle.lockstep import LockstepClient
 from companion.vehicle.mavsdk_link import MavsdkVehicleLink
@@ -171,7 +171,7 @@ def test_a_dry_run_started_on_the_ground_records_the_whole_flight_the_pilot_flie
 def test_a_fence_in_latitude_and_longitude_is_projected_from_the_ekf_origin_and_flown(
     tmp_path: Path, instance: int
 ) -> None:
-    from companion.app.replay import replay
+    from companion.tools.replay import replay
     from sitl.geodesy import ned_to_geodetic
 
     sitl = start_camera_sitl(tmp_path, instance, seed=1, gcs_port=free_udp_port(), lockstep=True)
@@ -263,7 +263,7 @@ def test_a_stopped_service_leaves_the_vehicle_holding_not_to_the_offboard_loss_f
     report = json.loads((tmp_path / "flight" / "landing_report.json").read_text())
     assert report["outcome"] == "stopped"
     assert len([r for r in records if r["kind"] == "failsafe"]) == 1
-    from companion.app.report import build_flight_report
+    from companion.tools.report import build_flight_report
 
     assert build_flight_report(tmp_path / "flight", tmp_path / "report", video=False).files
 
@@ -297,9 +297,9 @@ def test_a_companion_killed_in_flight_leaves_px4_v1_15_hovering_in_position_mode
     north_m, east_m = (later["position_ned_m"][i] - failsafe["position_ned_m"][i] for i in (0, 1))
     assert math.hypot(north_m, east_m) < 5.0
     # The killed flight's log survives to its last record, and slz report names the ending and draws it.
-    from companion.app.flight_log import FlightLog
-    from companion.app.landing_report import FlightEnding, landing_report
-    from companion.app.report import build_flight_report
+    from companion.flightlog.flight_log import FlightLog
+    from companion.tools.landing_report import FlightEnding, landing_report
+    from companion.tools.report import build_flight_report
 
     assert landing_report(FlightLog.read(tmp_path / "flight"))["outcome"] == FlightEnding.CRASHED.value
     assert build_flight_report(tmp_path / "flight", tmp_path / "report", video=False).files

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.flight_log import REQUIRED_FIELDS, SCHEMA_VERSION, FlightLog, FlightLogError, RecordKind
-from companion.app.recorder import FlightRecorder
+from companion.flightlog.flight_log import REQUIRED_FIELDS, SCHEMA_VERSION, FlightLog, FlightLogError, RecordKind
+from companion.flightlog.recorder import FlightRecorder
 
 pytestmark = pytest.mark.unit
 
@@ -110,7 +110,7 @@ def test_a_decision_naming_an_unknown_source_is_named_with_its_time(tmp_path: Pa
 
 
 def test_the_header_is_written_and_read_typed_and_an_older_one_reads_with_defaults(tmp_path: Path) -> None:
-    from companion.app.flight_log import FlightHeader
+    from companion.flightlog.flight_log import FlightHeader
 
     written = FlightHeader(
         {"mode": "dry_run"}, SCHEMA_VERSION, "models/density/slz_yolox.onnx", "ab" * 32, True, "9.9.9"

@@ -18,8 +18,8 @@ import pytest
 from companion.app.drivers import FreeRunningDriver
 from companion.app.flight import FlightApp
 from companion.app.mission import MissionConfig
-from companion.app.recorder import FlightRecorder, read_log
 from companion.camera.frames import CameraError, CameraFault, Frame
+from companion.flightlog.recorder import FlightRecorder, read_log
 from companion.guidance.landing import LandingPhase
 from companion.perception.config import PerceptionConfig
 from companion.perception.pipeline import SlzPipeline

@@ -13,10 +13,10 @@ from typing import Any
 
 import pytest
 
-from companion.app.recorder import read_log
-from companion.app.replay import replay
+from companion.flightlog.recorder import read_log
 from companion.ground import mavlink_frames as frames
 from companion.ground.command_channel import AckResult
+from companion.tools.replay import replay
 from sitl.campaign.landing_kinds import LandingKind, landing_outcome_of_run
 from sitl.config import SitlConfig
 from sitl.harness.process import SitlProcess

@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 import pytest
 
-from companion.app.height_pair import HeightPairError, gps_baseline_m, photo_meta, run
 from companion.geometry import PinholeCamera, Pose, T_body_camera_from_mount
+from companion.tools.height_pair import HeightPairError, gps_baseline_m, photo_meta, run
 from sitl.render.camera import Light, WorldRenderer
 from sitl.world.crowd import Crowd
 from sitl.world.park import Park

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.app.flight_log import DecisionRecord
-from companion.app.legacy_decisions import vocabulary_of, zone_changes_of
+from companion.flightlog.flight_log import DecisionRecord
+from companion.flightlog.legacy_decisions import vocabulary_of, zone_changes_of
 from sitl.campaign.hold_explain import TruthAt, abort_kind, explain_hold, explain_run, release_kind
 from sitl.vehicle.truth import TruthHeader, TruthRecord
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from companion.app.flight_log import DecisionRecord
+from companion.flightlog.flight_log import DecisionRecord
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource
 from companion.perception.selection import Target

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig
-from companion.app.recorder import FlightRecorder
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.geometry import Pose
 from sitl.config import SitlConfig
 from sitl.dynamics.base import VehicleState

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.app.foxglove_topics import TOPICS
 from companion.app.live_view_config import LiveViewConfig
+from companion.flightlog.foxglove_topics import TOPICS
 from sitl.testing.helpers import free_udp_port, sitl_mission_yaml, slz_fly_argv, start_camera_sitl, wait_until
 
 foxglove = pytest.importorskip("foxglove")

@@ -11,7 +11,7 @@ from typing import cast
 import pytest
 
 from companion.app.operator_desk import OperatorDesk
-from companion.app.recorder import FlightRecorder, read_log
+from companion.flightlog.recorder import FlightRecorder, read_log
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand, RefusedCommand
 from companion.guidance.landing import CommandKind, Decision, LandingGuidance, LandingPhase
 from companion.guidance.stimulus import Denied, FrameSeen, OperatorOrder, Started
@@ -152,8 +152,8 @@ def test_the_desk_denies_a_land_now_over_a_person_on_the_newest_map_and_records_
 
 def test_refused_and_misaddressed_commands_are_ground_command_records_the_landing_report_lists(tmp_path: Path) -> None:
     # Issue 65: an unsigned command showed only as a console warning; no record, nothing in the landing report.
-    from companion.app.flight_log import FlightLog, RecordKind
-    from companion.app.landing_report import landing_report
+    from companion.flightlog.flight_log import FlightLog, RecordKind
+    from companion.tools.landing_report import landing_report
 
     refusals = [
         RefusedCommand(31011, (255, 190), ("127.0.0.1", 1), AckResult.DENIED, "not signed", False),

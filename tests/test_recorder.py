@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.app.recorder import FlightRecorder, RecorderError, open_append, read_log
+from companion.flightlog.recorder import FlightRecorder, RecorderError, open_append, read_log
 from companion.guidance.landing import LandingPhase
 from companion.vehicle.link import Setpoint
 
@@ -43,7 +43,7 @@ def test_the_log_survives_a_killed_writer(tmp_path: Path) -> None:
     script = (
         "import os, sys\n"
         "from pathlib import Path\n"
-        "from companion.app.recorder import FlightRecorder\n"
+        "from companion.flightlog.recorder import FlightRecorder\n"
         f"rec = FlightRecorder(Path({str(tmp_path)!r}))\n"
         "for k in range(50):\n"
         "    rec.write('phase', float(k), phase='search')\n"
@@ -80,7 +80,7 @@ def test_an_unwritable_directory_is_named(tmp_path: Path) -> None:
 def test_rotation_deletes_the_oldest_flights_beyond_the_count_and_the_size(tmp_path: Path) -> None:
     import os
 
-    from companion.app.recorder import prune_flights
+    from companion.flightlog.recorder import prune_flights
 
     for i in range(5):
         flight = tmp_path / f"2026112{i}T000000Z"

@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.app.flight_log import FlightLog, RecordKind
-from companion.app.recorder import FlightRecorder
-from companion.app.report import summarize
+from companion.flightlog.flight_log import FlightLog, RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.landing import CommandKind, Decision, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import DecisionEvent
 from companion.perception.selection import Target
+from companion.tools.report import summarize
 
 pytestmark = pytest.mark.unit
 
@@ -45,7 +45,7 @@ def test_the_report_lists_each_switch_of_target_with_its_reason(tmp_path: Path) 
 
 
 def test_the_landing_report_names_the_site_the_zone_and_the_nearest_occupied_ground(tmp_path: Path) -> None:
-    from companion.app.landing_report import REPORT_NAME, write_landing_report
+    from companion.tools.landing_report import REPORT_NAME, write_landing_report
 
     recorder = FlightRecorder(tmp_path)
     recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0", model="m.onnx", model_sha256="ab")
@@ -87,7 +87,7 @@ def test_the_landing_report_names_the_site_the_zone_and_the_nearest_occupied_gro
 
 
 def test_the_landing_report_names_the_fallback_site_landed_at_and_the_ground_stations_commands(tmp_path: Path) -> None:
-    from companion.app.landing_report import REPORT_NAME, write_landing_report
+    from companion.tools.landing_report import REPORT_NAME, write_landing_report
 
     sites = [{"name": "roi_corner", "north_m": 12.0, "east_m": 12.0, "radius_m": 3.0}]
     sites.append({"name": "rally_1", "north_m": 21.0, "east_m": -4.0, "radius_m": 3.0})
@@ -135,7 +135,7 @@ def test_the_nearest_occupied_cell_is_measured_from_the_point() -> None:
 
 def _ended(tmp_path: Path, decisions: list[tuple[LandingPhase, CommandKind, DecisionEvent, str]], **end: object) -> str:
     """The landing report's outcome of a log with these decisions (source, phase, kind, event) and end record."""
-    from companion.app.landing_report import REPORT_NAME, write_landing_report
+    from companion.tools.landing_report import REPORT_NAME, write_landing_report
 
     recorder = FlightRecorder(tmp_path)
     mode = end.pop("mode", "fly")
@@ -217,7 +217,7 @@ def test_every_ending_gets_a_landing_report_that_names_it(
 
 
 def test_a_lost_links_failsafe_record_reads_in_the_timeline_with_or_without_its_action(tmp_path: Path) -> None:
-    from companion.app.timeline import flight_events
+    from companion.flightlog.timeline import flight_events
 
     recorder = FlightRecorder(tmp_path)
     recorder.write(RecordKind.FAILSAFE, 8.0, reason="link lost: stop commanding")  # before issue 65: no action
@@ -229,7 +229,7 @@ def test_a_lost_links_failsafe_record_reads_in_the_timeline_with_or_without_its_
 
 def test_the_path_slz_fly_prints_is_one_slz_report_takes(tmp_path: Path) -> None:
     # Issue 65: `slz fly` printed .../flight.jsonl and `slz report` looked for .../flight.jsonl/flight.jsonl.
-    from companion.app.flight_log import flight_folder
+    from companion.flightlog.flight_log import flight_folder
 
     recorder = FlightRecorder(tmp_path / "run" / "flight")
     recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0")
@@ -257,7 +257,7 @@ def test_the_report_says_why_frames_failed_not_only_how_many(tmp_path: Path) -> 
 
 def test_the_landing_report_lists_the_warning_devices_switches(tmp_path: Path) -> None:
     # Issue 65: the warning device's switches appeared only in the log.
-    from companion.app.landing_report import landing_report
+    from companion.tools.landing_report import landing_report
 
     recorder = FlightRecorder(tmp_path)
     recorder.write(RecordKind.HEADER, None, config={"mode": "fly"}, version="0.1.0", model="m.onnx", model_sha256="ab")

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.app.autopilot_log import AutopilotLogError, check_same_flight, read_autopilot_log
+from companion.tools.autopilot_log import AutopilotLogError, check_same_flight, read_autopilot_log
 from sitl.autopilot.flight_ulog import TOPICS
 from sitl.autopilot.ulog import Topic, ULogError, ULogWriter
 

@@ -10,11 +10,11 @@ from typing import Any, cast
 import pytest
 
 from companion.app.commands import VehicleCommands
-from companion.app.flight_log import FlightLog, RecordKind
 from companion.app.outcome import FlightOutcome
-from companion.app.recorder import FlightRecorder
 from companion.app.warning_device import WarningDevice, warning_wanted
 from companion.config import ConfigError, validate_config
+from companion.flightlog.flight_log import FlightLog, RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.config import WarningConfig
 from companion.guidance.landing import CommandKind, Decision, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent

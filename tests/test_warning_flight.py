@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.flight_log import FlightLog, RecordKind
-from companion.app.replay import replay
+from companion.flightlog.flight_log import FlightLog, RecordKind
+from companion.tools.replay import replay
 from sitl.testing.helpers import fly_to_the_end, free_udp_port, start_camera_sitl, write_sitl_mission
 
 pytestmark = pytest.mark.sitl

@@ -12,10 +12,10 @@ import logging
 import math
 import time
 
-from companion.app.flight_log import RecordKind
 from companion.app.outcome import FlightOutcome
-from companion.app.recorder import FlightRecorder
 from companion.app.supervision import COMPANION_MODES
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.landing import CommandKind, Decision
 from companion.vehicle.link import Action, FlightMode, LinkResult, Offboard, Telemetry, VehicleError
 from companion.vehicle.sim_control import SetpointNedYaw

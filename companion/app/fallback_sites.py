@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import logging
 
-from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig, with_fallback_sites
-from companion.app.recorder import FlightRecorder
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.geofence import Geofence, latlon_to_ne_m
 from companion.json_value import JsonObject
 from companion.vehicle.link import MissionStore

@@ -39,19 +39,19 @@ from collections.abc import AsyncIterator, Callable
 
 from companion.app.commands import VehicleCommands
 from companion.app.drivers import FreeRunningDriver, LockstepDriver
-from companion.app.flight_log import RecordKind
 from companion.app.frame_intake import FrameIntake
 from companion.app.landing_loop import LandingLoop, vehicle_state
 from companion.app.mission import MissionConfig, OperatingMode
 from companion.app.operator_desk import OperatorDesk
 from companion.app.outcome import FlightOutcome
-from companion.app.recorder import FlightRecorder
 from companion.app.run_end import RunEnd
 from companion.app.stall_watchdog import StallWatchdog
 from companion.app.supervision import Supervision
 from companion.app.task_group import run_until_first_ends, unless_done
 from companion.camera.frames import CameraError, Frame, FrameSource
 from companion.camera.waiting import open_when_up
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.vehicle_state import VehicleState
 from companion.perception.pipeline import SlzPipeline
 from companion.vehicle.link import VehicleLink

@@ -11,10 +11,10 @@ import functools
 import time
 from collections.abc import Callable
 
-from companion.app.flight_log import RecordKind
 from companion.app.outcome import FlightOutcome
-from companion.app.recorder import FlightRecorder
 from companion.camera.frames import Frame
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.geometry import GeometryError, Pose
 from companion.perception.errors import PerceptionError
 from companion.perception.pipeline import FrameResult, SlzPipeline

@@ -6,9 +6,9 @@ from __future__ import annotations
 import logging
 import math
 
-from companion.app.flight_log import RecordKind
-from companion.app.recorder import FlightRecorder
 from companion.app.start_sequence import StartStep
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.landing import Decision, LandingPhase
 from companion.guidance.stimulus import Stimulus, to_json
 from companion.guidance.vehicle_state import VehicleState

@@ -24,19 +24,19 @@ from collections.abc import Awaitable, Callable
 
 from companion.app.commands import VehicleCommands
 from companion.app.fallback_sites import with_rally_sites
-from companion.app.flight_log import RecordKind
 from companion.app.frame_intake import FrameIntake
 from companion.app.ground_report import GroundReport
 from companion.app.journal import FlightJournal
 from companion.app.mission import MissionConfig, OperatingMode, with_fence_ne_m
 from companion.app.operator_desk import OperatorDesk
 from companion.app.outcome import FlightOutcome
-from companion.app.recorder import FlightRecorder
 from companion.app.run_end import RunEnd
 from companion.app.start_sequence import StartAction, StartSequence, StartStage
 from companion.app.supervision import Supervision
 from companion.app.warning_device import WarningDevice
 from companion.camera.frames import Frame
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.geometry import Pose, polygon_centroid_ne_m
 from companion.guidance.energy import EnergyBudget
 from companion.guidance.footprint import nearest_occupied_m

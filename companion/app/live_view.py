@@ -1,6 +1,6 @@
 """The flight live in Foxglove (``live_view`` in the mission config, ``slz fly --live-view PORT``): a server of
 Foxglove's WebSocket protocol (the foxglove-sdk package, the ``live`` extra) on the companion, with the topics and
-schemas of :mod:`companion.app.foxglove_topics`, the same as ``slz export --mcap`` writes.
+schemas of :mod:`companion.flightlog.foxglove_topics`, the same as ``slz export --mcap`` writes.
 
 It never slows the flight: the flight's loop only queues a job (bounded by ``backlog_messages``; a full queue drops
 the job) for the view's own thread, which builds the JSON and the JPEG; nothing is queued while no client is
@@ -22,8 +22,10 @@ from typing import TYPE_CHECKING, Any
 
 import cv2
 
-from companion.app.flight_log import RecordKind, kind_of
-from companion.app.foxglove_topics import (
+from companion.app.live_view_config import LiveViewConfig
+from companion.errors import SlzError
+from companion.flightlog.flight_log import RecordKind, kind_of
+from companion.flightlog.foxglove_topics import (
     SCHEMAS,
     TOPICS,
     grid_message,
@@ -31,8 +33,6 @@ from companion.app.foxglove_topics import (
     messages_of,
     world_ned_transform,
 )
-from companion.app.live_view_config import LiveViewConfig
-from companion.errors import SlzError
 from companion.json_value import JsonObject
 
 if TYPE_CHECKING:

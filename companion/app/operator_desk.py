@@ -13,9 +13,9 @@ from __future__ import annotations
 import logging
 from dataclasses import asdict
 
-from companion.app.flight_log import RecordKind
 from companion.app.mission import MissionConfig
-from companion.app.recorder import FlightRecorder
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.ground.command_channel import AckResult, CommandChannel, GroundCommand
 from companion.ground.operator_commands import COMMAND_OF_MAV_CMD
 from companion.guidance.footprint import nearest_occupied_m

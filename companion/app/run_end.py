@@ -11,10 +11,10 @@ from __future__ import annotations
 import asyncio
 import logging
 
-from companion.app.flight_log import RecordKind
 from companion.app.outcome import FlightOutcome
-from companion.app.recorder import FlightRecorder
 from companion.app.supervision import Supervision
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.landing import Decision
 from companion.guidance.vehicle_state import VehicleState
 from companion.vehicle.link import VehicleStatus

@@ -16,8 +16,8 @@ from __future__ import annotations
 import logging
 
 from companion.app.commands import VehicleCommands
-from companion.app.flight_log import RecordKind
-from companion.app.recorder import FlightRecorder
+from companion.flightlog.flight_log import RecordKind
+from companion.flightlog.recorder import FlightRecorder
 from companion.guidance.config import WarningConfig, WarnWhen
 from companion.guidance.landing import Decision, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent

@@ -4,7 +4,7 @@ Every :class:`~companion.guidance.landing.Decision` carries its :class:`Decision
 :class:`RefusalCause` of a landing point or zone it gave up (or waited on), and the :class:`ZoneChange` events of the
 zone commitment in that frame. Its ``reason`` text is for people and may be reworded freely; nothing that counts reads
 it (a test rewords every reason and checks that no metric moves). Flight logs written before these fields existed are
-read through :func:`companion.app.legacy_decisions.vocabulary_of`, the one place that still matches texts.
+read through :func:`companion.flightlog.legacy_decisions.vocabulary_of`, the one place that still matches texts.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ calls above the ground.
 Run: ``.venv/bin/python -m models.eval.height_pairs [--labels models/eval/data/height_pairs.json]
 [--out models/eval/results/height_pairs] [--overlays docs/images/height]``. For each pair of ``--labels`` (two
 overlapping photographs of a real site and rectangles of classes on the first) it runs ``slz height-map``'s
-measurement (:mod:`companion.app.height_pair`) and counts, per class, over the cells of the labelled rectangles that
+measurement (:mod:`companion.tools.height_pair`) and counts, per class, over the cells of the labelled rectangles that
 the second photograph also shows: the share flagged above the ground (standing or moving), the share measured flat,
 and the share unknown. Flat classes (lawn, asphalt) should not be flagged; standing ones (trees, cars, buildings)
 should. Writes ``OUT.json`` and ``OUT.md`` and an overlay of each pair with its labels.
@@ -23,7 +23,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.app.height_pair import (
+from companion.perception.config import MotionHeightConfig, OccupancyConfig, load_perception_config
+from companion.perception.density import OnnxDensityModel
+from companion.perception.motion_height import CELL_PX, HeightState
+from companion.tools.height_pair import (
     ground_homography,
     overlay,
     pair_geometry,
@@ -31,9 +34,6 @@ from companion.app.height_pair import (
     photo_meta,
     read_frame,
 )
-from companion.perception.config import MotionHeightConfig, OccupancyConfig, load_perception_config
-from companion.perception.density import OnnxDensityModel
-from companion.perception.motion_height import CELL_PX, HeightState
 from models.eval.real import occupied_cells, tiled_density
 
 FLAT = ("lawn", "asphalt")

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from companion.app.flight_log import DecisionRecord, FlightLog
+from companion.flightlog.flight_log import DecisionRecord, FlightLog
 from companion.geometry import inside_polygon
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause, ZoneChange
 from companion.perception.selection import Target

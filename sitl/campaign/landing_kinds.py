@@ -12,7 +12,7 @@ import enum
 from dataclasses import dataclass
 from pathlib import Path
 
-from companion.app.flight_log import DecisionRecord, FlightLog
+from companion.flightlog.flight_log import DecisionRecord, FlightLog
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent
 

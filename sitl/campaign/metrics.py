@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from companion.app.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.config import load_yaml_config
+from companion.flightlog.flight_log import DecisionRecord, FlightLog, RecordKind
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource, RefusalCause
 from companion.perception.selection import Target

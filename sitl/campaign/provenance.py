@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from companion.app.recorder import open_append, read_log
+from companion.flightlog.recorder import open_append, read_log
 from sitl.harness.process import REPO_ROOT
 
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.app.recorder import read_log
+from companion.flightlog.recorder import read_log
 from sitl.campaign.metric_fields import Summary, fields_of
 from sitl.campaign.metrics import HOLD_CAUSES, MissionMetrics, park_layout, stale, with_obstacles
 from sitl.campaign.provenance import Segment, SegmentLog, segments

@@ -30,9 +30,9 @@ from typing import Any, TextIO
 
 import yaml
 
-from companion.app.recorder import open_append, read_log
 from companion.config import ConfigError, read_yaml_file, validate_config
 from companion.errors import SlzError
+from companion.flightlog.recorder import open_append, read_log
 from sitl.campaign.metrics import stale
 from sitl.campaign.provenance import SegmentLog, source_commit, utc_now
 from sitl.campaign.spec import CampaignSpec, MissionPlan

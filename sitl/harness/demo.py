@@ -19,10 +19,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.app.flight_log import FlightLog
-from companion.app.landing_report import landing_report
-from companion.app.replay import flight_config, replay
-from companion.app.report import camera_views, tracks_at_landing
+from companion.flightlog.flight_log import FlightLog
+from companion.tools.landing_report import landing_report
+from companion.tools.replay import flight_config, replay
+from companion.tools.report import camera_views, tracks_at_landing
 from sitl.harness.mission import DEFAULT_MISSION_CONFIG, MissionResult, MissionSpec, fly
 from sitl.vehicle.truth import people_at, read_truth, touchdown
 

@@ -23,10 +23,10 @@ from typing import Any, Protocol
 
 import yaml
 
-from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import MISSION_PATH_FIELDS, MissionConfig, camera_mismatches
 from companion.config import paths_from, read_yaml_file, validate_config
 from companion.errors import SlzError
+from companion.flightlog.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.guidance.landing import CommandKind, LandingPhase
 from sitl.config import SitlConfig
 from sitl.harness.process import REPO_ROOT, SitlProcess, child_env, die_with_parent, log_tail, terminate_then_kill

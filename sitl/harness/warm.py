@@ -1,7 +1,7 @@
 """Warm workers: a SITL process and a companion process kept across missions (the campaign's default).
 
 A cold mission starts two Python processes, each importing the flight stack, and the SITL creating its OpenGL
-context; a warm worker starts them once (``slz serve``, :mod:`companion.app.serve`) and then sends each mission's
+context; a warm worker starts them once (``slz serve``, :mod:`companion.tools.serve`) and then sends each mission's
 ``slz sitl`` and ``slz fly`` command lines to them. Every mission still builds its scene, vehicle, autopilot and
 companion (pipeline, tracker, MAVSDK instance) from its own config and seed, in fresh objects, so its result is the
 cold mission's: the campaign tests fly the same missions both ways and compare them metric for metric.

@@ -1,5 +1,5 @@
 """The SITL's truth live in Foxglove (``slz sitl --live-view PORT``, ``sitl.live_view_port``): where every person
-really is and where the vehicle really is, on the topics and schemas of :mod:`companion.app.foxglove_topics`
+really is and where the vehicle really is, on the topics and schemas of :mod:`companion.flightlog.foxglove_topics`
 (``/truth/people``, ``/tf`` with ``world`` → ``world_ned`` → ``vehicle``), so a person at the desk sees the truth
 beside the companion's own live view (``slz fly --live-view``) of its map.
 
@@ -13,8 +13,8 @@ import json
 import logging
 from typing import Any
 
-from companion.app.foxglove_topics import SCHEMAS, discs, stamp, world_ned_transform
 from companion.errors import SlzError
+from companion.flightlog.foxglove_topics import SCHEMAS, discs, stamp, world_ned_transform
 from sitl.dynamics.base import VehicleState
 
 logger = logging.getLogger(__name__)

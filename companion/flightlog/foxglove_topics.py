@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.app.flight_log import RecordKind
+from companion.flightlog.flight_log import RecordKind
 from companion.json_value import JsonObject, JsonValue
 from companion.perception.projection import HeadPlaneOccupancy
 

@@ -29,18 +29,18 @@ from typing import Any
 import cv2
 import numpy as np
 
-from companion.app.flight_log import DecisionRecord, FlightLog, FlightLogError, RecordKind
-from companion.app.landing_report import landing_report
 from companion.app.mission import MissionConfig
-from companion.app.replay import VideoWriter, flight_config
-from companion.app.timeline import flight_events
 from companion.errors import SlzError
+from companion.flightlog.flight_log import DecisionRecord, FlightLog, FlightLogError, RecordKind
+from companion.flightlog.timeline import flight_events
 from companion.geometry import Pose
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.perception.pipeline import camera_from_config
 from companion.perception.projection import HeadPlaneProjector
 from companion.perception.selection import Target
 from companion.perception.visualize import draw_circles_overlay
+from companion.tools.landing_report import landing_report
+from companion.tools.replay import VideoWriter, flight_config
 
 logger = logging.getLogger(__name__)
 
@@ -366,7 +366,7 @@ def _markdown(flight_dir: Path, summary: dict[str, Any], files: list[Path], out_
 
 def _autopilot_section(flight: FlightLog, ulog: Path, out: Path) -> tuple[list[str], Path]:
     """The autopilot's ULog beside the flight: its picture and the merged timeline's lines (markdown)."""
-    from companion.app.autopilot_log import (
+    from companion.tools.autopilot_log import (
         AutopilotLogError,
         check_same_flight,
         merged_timeline,
@@ -416,7 +416,7 @@ def build_flight_report(
         Also write ``camera.mp4`` (the contact sheet is written whenever frames were saved).
     ulog : Path, optional
         The autopilot's PX4 ULog of the same flight: ``autopilot.png`` and a merged timeline beside the companion's
-        (:mod:`companion.app.autopilot_log`).
+        (:mod:`companion.tools.autopilot_log`).
 
     Raises
     ------

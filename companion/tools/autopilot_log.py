@@ -21,7 +21,7 @@ from companion.errors import SlzError
 from companion.geometry import F64Array
 
 if TYPE_CHECKING:
-    from companion.app.flight_log import FlightLog
+    from companion.flightlog.flight_log import FlightLog
 
 # PX4's vehicle_status.nav_state values and the names the companion's log uses for the flight modes.
 NAV_STATE_NAMES = {
@@ -170,7 +170,7 @@ def check_same_flight(log: AutopilotLog, flight_t0_s: float, flight_t1_s: float)
 def merged_timeline(flight: FlightLog, log: AutopilotLog) -> list[tuple[float, str, str]]:
     """The companion's decisions, failsafes and commands and the autopilot's mode changes, failsafe flag,
     acknowledged commands and its warnings (and worse), in time order: (t_s, who, what)."""
-    from companion.app.flight_log import RecordKind
+    from companion.flightlog.flight_log import RecordKind
     from companion.guidance.landing import ENDING_KINDS
 
     rows: list[tuple[float, str, str]] = []

@@ -4,7 +4,7 @@ them, and the landing report files them."""
 
 from __future__ import annotations
 
-from companion.app.flight_log import FlightLog, RecordKind
+from companion.flightlog.flight_log import FlightLog, RecordKind
 from companion.guidance.landing import LandingPhase
 from companion.json_value import JsonObject
 

@@ -20,11 +20,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from companion.app.flight_log import FlightHeader, FlightLog, FlightLogError, RecordKind
 from companion.app.landing_loop import landing_guidance
 from companion.app.mission import MissionConfig, with_fallback_sites, with_fence_ne_m
-from companion.app.recorder import plain
 from companion.errors import SlzError
+from companion.flightlog.flight_log import FlightHeader, FlightLog, FlightLogError, RecordKind
+from companion.flightlog.recorder import plain
 from companion.geometry import GeometryError, Pose
 from companion.guidance.landing import Decision, LandingGuidance, LandingPhase
 from companion.guidance.stimulus import Denied, stimulus_of_record

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from companion.app.legacy_decisions import vocabulary_of
-from companion.app.recorder import RecorderError, read_log
 from companion.errors import SlzError
+from companion.flightlog.legacy_decisions import vocabulary_of
+from companion.flightlog.recorder import RecorderError, read_log
 from companion.guidance.landing import CommandKind, LandingPhase
 from companion.guidance.vehicle_state import VehicleState
 from companion.guidance.vocabulary import (
@@ -170,7 +170,7 @@ class DecisionRecord:
     def from_record(cls, record: dict[str, Any]) -> DecisionRecord:
         """From a checked ``decision`` record (see :data:`REQUIRED_FIELDS`); a decision without a target, setpoint
         or reason has none. A log from before decisions carried their event is read through the one legacy reader
-        of their words (:func:`companion.app.legacy_decisions.vocabulary_of`)."""
+        of their words (:func:`companion.flightlog.legacy_decisions.vocabulary_of`)."""
         decision = record["decision"]
         reason = str(decision.get("reason", ""))
         phase = LandingPhase(decision["phase"])

@@ -1,8 +1,8 @@
 """A recorded flight as an MCAP file Foxglove opens as it is (``slz export FLIGHT --mcap``): the camera frames saved,
 the vehicle's pose as transforms, the zones and the target in the world, the decisions, phases, commands and events;
 and, for a SITL run, the truth (where every person really was). The topics and schemas are the live view's
-(:mod:`companion.app.foxglove_topics`); log time is the vehicle's boot clock in nanoseconds. The occupancy map is not
-in a flight log, so ``/slz/map`` stays empty here (``slz replay`` recomputes it; the live view sends it).
+(:mod:`companion.flightlog.foxglove_topics`); log time is the vehicle's boot clock in nanoseconds. The occupancy map is
+not in a flight log, so ``/slz/map`` stays empty here (``slz replay`` recomputes it; the live view sends it).
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
-from companion.app.flight_log import FlightLog
-from companion.app.foxglove_topics import SCHEMAS, TOPICS, messages_of, truth_messages, world_ned_transform
 from companion.errors import SlzError
+from companion.flightlog.flight_log import FlightLog
+from companion.flightlog.foxglove_topics import SCHEMAS, TOPICS, messages_of, truth_messages, world_ned_transform
 from companion.json_value import JsonObject
 
 

@@ -20,9 +20,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from companion.app.flight_log import FlightLog, FlightLogError, RecordKind
 from companion.app.mission import OperatingMode
-from companion.app.timeline import flight_events
+from companion.flightlog.flight_log import FlightLog, FlightLogError, RecordKind
+from companion.flightlog.timeline import flight_events
 from companion.guidance.landing import ENDING_KINDS, CommandKind, LandingPhase
 from companion.guidance.vocabulary import DecisionEvent, DecisionSource
 from companion.json_value import JsonObject
