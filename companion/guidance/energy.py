@@ -49,10 +49,6 @@ class EnergyEstimate:
         """What is left no longer covers getting home and down."""
         return self.seconds_left <= self.needed_s
 
-    def inputs(self) -> dict[str, float | str]:
-        """What a decision on it was made from (the flight log's inputs, which a replay decides again from)."""
-        return {"reason": self.reason(), "remaining": self.remaining, "reach_m": self.home_m}
-
     def reason(self) -> str:
         """In words, for the decision and the ground station."""
         return (

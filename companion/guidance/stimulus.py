@@ -12,6 +12,7 @@ At a vehicle tick several stimuli may be due at once; :data:`TICK_PRIORITY` orde
 
 from __future__ import annotations
 
+import typing
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -206,18 +207,8 @@ program's own stop and limit, then the ground station; the start sequence before
 touchdown before the budget (``TimeUp``, with the energy budget's :class:`EnergyLow` in its place when it is used
 up), and perception's silence last."""
 
-_KINDS: tuple[type[Stimulus], ...] = (
-    Started,
-    FrameSeen,
-    Silence,
-    Landed,
-    TimeUp,
-    EnergyLow,
-    PilotTookOver,
-    LimitReached,
-    StopAsked,
-    OperatorOrder,
-)
+_KINDS: tuple[type[Stimulus], ...] = typing.get_args(Stimulus)
+"""Every kind of stimulus, as :data:`Stimulus` names them."""
 _BY_NAME: dict[str, type[Stimulus]] = {kind.name: kind for kind in _KINDS}
 _BY_SOURCE: dict[DecisionSource, type[Stimulus]] = {kind.source: kind for kind in _KINDS}
 

@@ -27,6 +27,7 @@ from sitl.autopilot.mavlink_link import MavlinkLink, for_autopilot
 from sitl.autopilot.mission_server import MissionServer
 from sitl.autopilot.params import ParamError, decode_value, encode_value
 from sitl.autopilot.status import MavResult, Severity
+from sitl.autopilot.telemetry import euler
 from sitl.px4_params import ParamType
 
 logger = logging.getLogger(__name__)
@@ -156,7 +157,7 @@ class MavlinkServer:
         up = min(max((values[2] - STICK_FULL / 2) / (STICK_FULL / 2), -1.0), 1.0)
         deadband = 0.05
         forward, right, up = (0.0 if abs(v) < deadband else v for v in (forward, right, up))
-        yaw = self.v.telemetry.euler(self.v.dynamics.state())[2]
+        yaw = euler(self.v.dynamics.state())[2]
         north = forward * math.cos(yaw) - right * math.sin(yaw)
         east = forward * math.sin(yaw) + right * math.cos(yaw)
         self.v.commander.set_pilot_sticks(north, east, -up)

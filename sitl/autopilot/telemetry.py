@@ -347,8 +347,6 @@ class TelemetryBuilder:
             "PROTOCOL_VERSION": lambda mav, t_s, s, cmd, bat: ProtocolVersionMessage(),
         }
 
-    euler = staticmethod(euler)
-
     def can_build(self, name: str) -> bool:
         """True for the messages this autopilot sends."""
         return name in self._builders
