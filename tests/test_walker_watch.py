@@ -101,3 +101,26 @@ def test_someone_who_keeps_coming_makes_the_wait_too_long() -> None:
     watch.reset()
     assert not watch.waited_too_long(t)
     assert not watch.passed
+
+
+def wanderer_north_m() -> list[float]:
+    """Issue 63's `moving_10/oldest/0027`, frame by frame: a walker 2.8 m north of the point closes at 0.55 m/s for
+    2 s, turns back a little for 0.5 s (the fit's closing speed dips below ``min_closing_mps``), then walks on in."""
+    north_m, out = 2.8, []
+    for k in range(60):
+        north_m += (0.6 if 2.0 <= k * FRAME_S < 2.5 else -0.55) * FRAME_S
+        out.append(north_m)
+    return out
+
+
+def test_a_walker_who_wanders_is_watched_until_no_fit_has_seen_them_coming_for_a_while() -> None:
+    north_m = wanderer_north_m()
+    maps = [people_map([(n, 0.0)]) for n in north_m]
+    before = watch_until_ready(WalkerWatch(WalkerWatchConfig(clear_after_walker_s=0.0), FOOTPRINT_M), maps)
+    assert before is not None
+    assert 2.0 <= before * FRAME_S < 3.0  # the dip's three maps were a look before issue 63 ...
+    at_touchdown_m = north_m[before] - 0.3 - 0.55 * WalkerWatchConfig().blind_descent_s  # body edge, walking on in
+    assert at_touchdown_m < FOOTPRINT_M  # ... and the walker would have reached the footprint by touchdown
+    watch = WalkerWatch(WalkerWatchConfig(), FOOTPRINT_M)
+    assert watch_until_ready(watch, maps) is None  # now the dip is no look: the walker comes on and is seen coming
+    assert watch.waits == 1

@@ -12,12 +12,14 @@ walking in. Its closing speed is the Theil-Sen slope of the sector's distances o
 of the pairwise slopes: a false positive that flickers for a frame or two moves it little), and the distance it will
 have left at touchdown is the distance now less the closing speed times ``blind_descent_s``. The descent goes on
 below the gate once the gate's maps span ``window_s`` and none of the last ``clear_frames`` predicts a person inside
-the footprint by touchdown; a wait longer than ``max_wait_s`` refuses the point (someone keeps coming). Only maps
-taken at the gate count: higher up, a descending camera sees the bodies of people standing near the point drift
-towards it on the head plane (parallax), which is no walk. A person standing still has no closing speed; a person
-already in the footprint is the descent's own check, which at the gate waits too (the vehicle hovers there, 3 m
-above the heads, and the maps at 4.5-5 m are the model's least sure: a false positive that flickers passes, a person
-who stays refuses the point after ``max_wait_s``).
+the footprint by touchdown, and, once someone was seen walking in, none has for ``clear_after_walker_s`` (a walker who
+wanders makes the fit dip below ``min_closing_mps`` for a few maps, then walks on in: issue 63's ROI table had one
+land under the descent that way after a look of 0.3 s); a wait longer than ``max_wait_s`` refuses the point (someone
+keeps coming). Only maps taken at the gate count: higher up, a descending camera sees the bodies of people standing
+near the point drift towards it on the head plane (parallax), which is no walk. A person standing still has no
+closing speed; a person already in the footprint is the descent's own check, which at the gate waits too (the
+vehicle hovers there, 3 m above the heads, and the maps at 4.5-5 m are the model's least sure: a false positive that
+flickers passes after ``clear_frames``, a person who stays refuses the point after ``max_wait_s``).
 
 This module has no I/O; times are vehicle-clock seconds, distances metres on the head plane (north/east, NED).
 """
@@ -70,6 +72,15 @@ class WalkerWatchConfig(StrictModel):
         description="Time from perception_min_altitude_m to touchdown, when nothing is seen (SITL: 5.4 s from 4.5 m).",
     )
     clear_frames: int = Field(default=3, ge=1, le=100, description="Frames without a threat to resume the descent.")
+    clear_after_walker_s: float = Field(
+        default=2.0,
+        ge=0.0,
+        le=30.0,
+        description=(
+            "After someone was seen walking in, the look without a threat that resumes the descent (s; 0: "
+            "clear_frames alone, before issue 63): a walker who wanders drops below min_closing_mps for a few maps."
+        ),
+    )
     max_wait_s: float = Field(default=20.0, gt=0.0, le=300.0, description="Waiting longer refuses the point.")
 
 
@@ -161,6 +172,7 @@ class WalkerWatch:
         self._history: collections.deque[tuple[float, F64Array]] = collections.deque()
         self._clear_frames = 0
         self._first_s: float | None = None
+        self._walker_seen_s: float | None = None
         self.waiting_since_s: float | None = None
         """When the watch first saw someone walking in, at this gate (None: nobody yet)."""
         self.passed = False
@@ -173,6 +185,7 @@ class WalkerWatch:
         self._history.clear()
         self._clear_frames = 0
         self._first_s = None
+        self._walker_seen_s = None
         self.waiting_since_s = None
         self.passed = False
 
@@ -228,13 +241,16 @@ class WalkerWatch:
             return True
         if approach is not None or blocked:
             self._clear_frames = 0
+            if approach is not None:
+                self._walker_seen_s = t_s
             if self.waiting_since_s is None:
                 self.waiting_since_s = t_s
                 self.waits += 1
             return False
         self._clear_frames += 1
         looked = self._first_s is not None and t_s - self._first_s >= c.window_s - 1e-9
-        self.passed = looked and self._clear_frames >= c.clear_frames
+        walker_gone = self._walker_seen_s is None or t_s - self._walker_seen_s >= c.clear_after_walker_s - 1e-9
+        self.passed = looked and walker_gone and self._clear_frames >= c.clear_frames
         return self.passed
 
     def waited_too_long(self, t_s: float) -> bool:
