@@ -201,6 +201,41 @@ def test_a_lost_track_keeps_the_landing_point_and_a_shrinking_zone_aborts() -> N
     assert "shrank" in d.reason
 
 
+@pytest.mark.parametrize("reacquire", [True, False])
+def test_a_zone_the_tracker_starts_anew_over_the_landing_point_refines_it(reacquire: bool) -> None:
+    # Issue 63's ROI table (moving_10/oldest/0027, replayed): at the gate a walker reshaped the zone, its track was
+    # lost and the tracker started another 0.6 m beside the point; the footprint around the stale point overlapped
+    # the map's margin around people 2 m away, and the descent waited there 20 s and refused the point.
+    def descending(g: LandingGuidance) -> VehicleState:
+        state = VehicleState(0.0, 0.0, 0.0, -12.0, 0.0)
+        g.on(Started(state))
+        d = g.on(FrameSeen(state, _frame(0.1, [_track(3, 0.2, 0.0, 1.2)], Target(0.2, 0.0, 1.2, 3), _map()), seq=0))
+        assert d.phase is LandingPhase.DESCENT
+        return state
+
+    g = _guidance(commitment={"reacquire_in_descent": reacquire})
+    state = descending(g)  # over zone 3 at (0.2, 0.0), 1.2 m free around it
+    anew = _track(9, -0.4, 0.0, 1.5)  # the same free ground, a new track: IoU 0.52 with the point's circle ...
+    near_person = _map(person_at=(1.6, 0.0))  # ... and occupied to 0.8 m north of the point, inside its footprint
+    decisions = [
+        g.on(FrameSeen(state, _frame(0.2 + 0.1 * k, [anew], None, near_person), seq=0))
+        for k in range(2 * g.config.unsafe_frames_to_abort)
+    ]
+    if reacquire:
+        assert all(d.phase is LandingPhase.DESCENT for d in decisions)
+        assert g.descent.locked == Target(-0.4, 0.0, 1.5, 9)
+        assert "over zone 9" in decisions[-1].reason
+        assert g.reselections == 0
+    else:  # before issue 63: the stale point, a person in its footprint, the descent refused
+        assert any(d.phase is LandingPhase.SEARCH and "person" in d.reason for d in decisions)
+        assert g.reselections == 1
+    shrunk = _guidance()  # a zone smaller than a landing needs does not take the point over (IoU 0.56)
+    state = descending(shrunk)
+    d = shrunk.on(FrameSeen(state, _frame(0.2, [_track(9, 0.0, 0.0, 0.9)], None, _map()), seq=0))
+    assert d.phase is LandingPhase.DESCENT
+    assert shrunk.descent.locked == Target(0.2, 0.0, 1.2, 3)
+
+
 def test_a_zone_outside_the_geofence_is_never_approached() -> None:
     g = _guidance()
     state = VehicleState(0.0, 15.0, 0.0, -20.0, 0.0)

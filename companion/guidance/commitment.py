@@ -101,6 +101,13 @@ class CommitmentConfig(StrictModel):
         description="The tracker lost the committed zone: a zone seen now that overlaps its last circle by this IoU "
         "continues it (far zones flicker in and out of the map, and each return starts a new track).",
     )
+    reacquire_in_descent: bool = Field(
+        default=True,
+        description="The same during a descent: a zone seen now that overlaps the landing point's circle by "
+        "reacquire_iou, within capture_radius_m of it, refines the point as its own track would (False: before "
+        "issue 63, the point stays where its lost track left it; at the walker gate a zone that reshapes as people "
+        "pass starts a new track beside it, and the footprint around the stale point overlaps the map's margin).",
+    )
     lost_after_s: float = Field(
         default=3.0,
         ge=0.0,

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+
+import numpy as np
 
 from companion.guidance.config import GuidanceConfig
 from companion.guidance.footprint import footprint_view
@@ -20,6 +22,8 @@ from companion.guidance.vocabulary import DecisionEvent, RefusalCause
 from companion.guidance.walker_watch import WalkerWatch
 from companion.perception.pipeline import FrameResult
 from companion.perception.selection import Target
+from companion.perception.tracking import TrackedZone
+from companion.perception.zones import circle_iou
 
 WAITING_AT_GATE = "wait at"
 """How the reason of a frame spent at the walker gate begins (hovering there, watching or waiting out a person in the
@@ -105,9 +109,12 @@ class Descent:
         assert locked is not None
         trusted = state.altitude_m >= c.perception_min_altitude_m
         blind = state.altitude_m < c.blind_altitude_m
-        # The landing point is a point on the ground. The locked track refines it while it is seen near it; a
-        # missing track (the zones of a noisy map come and go) leaves it where it was.
+        # The landing point is a point on the ground. The locked track refines it while it is seen near it, or the
+        # track the tracker started in its place (a zone seen now over the point's circle, as the commitment
+        # reacquires its zone); a missing track (the zones of a noisy map come and go) leaves it where it was.
         track = next((t for t in result.tracks if t.track_id == locked.track_id), None)
+        if track is None or track.misses > 0:
+            track = self._seen_again(result.tracks, locked) or track
         shrunk = False
         seen = (
             track is not None
@@ -171,6 +178,26 @@ class Descent:
                 reason = f"{WAITING_AT_GATE} {gate_m:.1f} m over {_named(locked)}: {watch_says}"
                 event = DecisionEvent.WAIT_AT_GATE
         return DescentStep(StepKind.SETPOINT, reason, event, cause, goal_alt)
+
+    def _seen_again(self, tracks: Sequence[TrackedZone], locked: Target) -> TrackedZone | None:
+        """A zone seen in this frame, no smaller than a landing needs, that overlaps the landing point's circle by
+        ``commitment.reacquire_iou`` (the best); None without one, for a fallback site (no zone), or when
+        ``commitment.reacquire_in_descent`` is off."""
+        c = self.config.commitment
+        if not c.reacquire_in_descent or locked.track_id is None or locked.track_id < 0:
+            return None
+        seen_now = [
+            t
+            for t in tracks
+            if t.misses == 0 and t.track_id != locked.track_id and t.radius_m >= self.min_zone_radius_m
+        ]
+        if not seen_now:
+            return None
+        iou = circle_iou(
+            [(locked.north_m, locked.east_m, locked.radius_m)], [(t.north_m, t.east_m, t.radius_m) for t in seen_now]
+        )[0]
+        k = int(np.argmax(iou))
+        return seen_now[k] if iou[k] >= c.reacquire_iou else None
 
     def gate_m(self) -> float:
         """The walker gate's altitude (m above ground): just above the floor below which no map decides."""
