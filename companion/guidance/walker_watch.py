@@ -10,14 +10,14 @@ So a descent stops at a gate just above the floor and watches before it goes on.
 gives the nearest occupied cell in each of ``sectors`` directions; a sector whose distance keeps shrinking is someone
 walking in. Its closing speed is the Theil-Sen slope of the sector's distances over the last ``window_s`` (the median
 of the pairwise slopes: a false positive that flickers for a frame or two moves it little), and the distance it will
-have left at touchdown is the distance now less the closing speed times ``blind_descent_s``. The descent goes on
-below the gate once the gate's maps span ``window_s`` and none of the last ``clear_frames`` predicts a person inside
-the footprint by touchdown, and, once someone was seen walking in, none has for ``clear_after_walker_s`` (a walker who
-wanders makes the fit dip below ``min_closing_mps`` for a few maps, then walks on in: issue 63's ROI table had one
-land under the descent that way after a look of 0.3 s); a wait longer than ``max_wait_s`` refuses the point (someone
-keeps coming). Only maps taken at the gate count: higher up, a descending camera sees the bodies of people standing
-near the point drift towards it on the head plane (parallax), which is no walk. A person standing still has no
-closing speed; a person already in the footprint is the descent's own check, which at the gate waits too (the
+have left at touchdown is the distance now less the closing speed times ``blind_descent_s``. The descent goes on below
+the gate once the gate's maps span ``window_s`` and none of the last ``clear_frames`` predicts a person inside the
+footprint by touchdown, and, once someone was seen walking in, none has for ``clear_after_walker_s`` (a walker who
+wanders makes the fit dip below ``min_closing_mps`` for a few maps, then walks on in: in issue 63's ROI table one did
+so after a look of 0.3 s and passed under the landing descent); a wait longer than ``max_wait_s`` refuses the point
+(someone keeps coming). Only maps taken at the gate count: higher up, a descending camera sees the bodies of people
+standing near the point drift towards it on the head plane (parallax), which is no walk. A person standing still has
+no closing speed; a person already in the footprint is the descent's own check, which at the gate waits too (the
 vehicle hovers there, 3 m above the heads, and the maps at 4.5-5 m are the model's least sure: a false positive that
 flickers passes after ``clear_frames``, a person who stays refuses the point after ``max_wait_s``).
 
