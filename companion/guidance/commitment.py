@@ -130,6 +130,19 @@ class CommitmentConfig(StrictModel):
     )
 
 
+def seen_again(
+    north_m: float, east_m: float, radius_m: float, seen_now: Sequence[TrackedZone], min_iou: float
+) -> tuple[TrackedZone, float] | None:
+    """The zone a lost one is seen again as: of the zones ``seen_now``, the one whose circle overlaps the lost
+    circle (centre NED, m; radius m) most, with that IoU, when it is at least ``min_iou`` (``reacquire_iou``); None
+    otherwise. The commitment follows its zone by it, and a descent its landing point."""
+    if not seen_now:
+        return None
+    iou = circle_iou([(north_m, east_m, radius_m)], [(t.north_m, t.east_m, t.radius_m) for t in seen_now])[0]
+    k = int(np.argmax(iou))
+    return (seen_now[k], float(iou[k])) if iou[k] >= min_iou else None
+
+
 @dataclass(frozen=True)
 class RefusedPoint:
     """A landing point refused at ``t_s`` (a person seen there, or a descent aborted over it)."""
@@ -317,19 +330,15 @@ class TargetCommitment:
             self._zone, self._seen_s = own, t_s
             return own
         seen_now = [t for t in tracks if t.misses == 0 and t.track_id != last.track_id]
-        if seen_now:
-            iou = circle_iou(
-                [(last.north_m, last.east_m, last.radius_m)], [(t.north_m, t.east_m, t.radius_m) for t in seen_now]
-            )[0]
-            k = int(np.argmax(iou))
-            if iou[k] >= self.config.reacquire_iou:
-                again = seen_now[k]
-                text = f"zone {last.track_id} seen again as zone {again.track_id} (IoU {iou[k]:.2f})"
-                events.append(CommitmentEvent(ZoneChange.REACQUIRE, None, text))
-                self._zone, self._seen_s = again, t_s
-                self.committed_id = again.track_id
-                self._rival_id = None if self._rival_id == again.track_id else self._rival_id
-                return again
+        found = seen_again(last.north_m, last.east_m, last.radius_m, seen_now, self.config.reacquire_iou)
+        if found is not None:
+            again, overlap = found
+            text = f"zone {last.track_id} seen again as zone {again.track_id} (IoU {overlap:.2f})"
+            events.append(CommitmentEvent(ZoneChange.REACQUIRE, None, text))
+            self._zone, self._seen_s = again, t_s
+            self.committed_id = again.track_id
+            self._rival_id = None if self._rival_id == again.track_id else self._rival_id
+            return again
         if t_s - self._seen_s > self.config.lost_after_s:
             text = f"released: zone {last.track_id} not seen for {self.config.lost_after_s:g} s"
             events.append(CommitmentEvent(ZoneChange.RELEASE, RefusalCause.ZONE_LOST, text))

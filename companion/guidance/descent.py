@@ -13,8 +13,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
+from companion.guidance.commitment import seen_again
 from companion.guidance.config import GuidanceConfig
 from companion.guidance.footprint import footprint_view
 from companion.guidance.vehicle_state import VehicleState
@@ -23,7 +22,6 @@ from companion.guidance.walker_watch import WalkerWatch
 from companion.perception.pipeline import FrameResult
 from companion.perception.selection import Target
 from companion.perception.tracking import TrackedZone
-from companion.perception.zones import circle_iou
 
 WAITING_AT_GATE = "wait at"
 """How the reason of a frame spent at the walker gate begins (hovering there, watching or waiting out a person in the
@@ -180,9 +178,9 @@ class Descent:
         return DescentStep(StepKind.SETPOINT, reason, event, cause, goal_alt)
 
     def _seen_again(self, tracks: Sequence[TrackedZone], locked: Target) -> TrackedZone | None:
-        """A zone seen in this frame, no smaller than a landing needs, that overlaps the landing point's circle by
-        ``commitment.reacquire_iou`` (the best); None without one, for a fallback site (no zone), or when
-        ``commitment.reacquire_in_descent`` is off."""
+        """What the landing point's lost zone is seen again as (:func:`~companion.guidance.commitment.seen_again`),
+        among the zones seen in this frame that are no smaller than a landing needs; None without one, for a fallback
+        site (no zone), or when ``commitment.reacquire_in_descent`` is off."""
         c = self.config.commitment
         if not c.reacquire_in_descent or locked.track_id is None or locked.track_id < 0:
             return None
@@ -191,13 +189,8 @@ class Descent:
             for t in tracks
             if t.misses == 0 and t.track_id != locked.track_id and t.radius_m >= self.min_zone_radius_m
         ]
-        if not seen_now:
-            return None
-        iou = circle_iou(
-            [(locked.north_m, locked.east_m, locked.radius_m)], [(t.north_m, t.east_m, t.radius_m) for t in seen_now]
-        )[0]
-        k = int(np.argmax(iou))
-        return seen_now[k] if iou[k] >= c.reacquire_iou else None
+        found = seen_again(locked.north_m, locked.east_m, locked.radius_m, seen_now, c.reacquire_iou)
+        return None if found is None else found[0]
 
     def gate_m(self) -> float:
         """The walker gate's altitude (m above ground): just above the floor below which no map decides."""
