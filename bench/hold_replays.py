@@ -64,6 +64,14 @@ def replay(campaign: Path, mission_id: str, work: Path, resume: bool) -> dict[st
     return result
 
 
+def repo_relative(path: Path) -> str:
+    """``path`` relative to the repository (as the record is read on other machines), else as it is."""
+    try:
+        return str(path.relative_to(REPO_ROOT))
+    except ValueError:
+        return str(path)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description="Re-fly a campaign's SLZ holds and explain each from its flight log.")
     parser.add_argument("campaign", type=Path, nargs="?", default=REPO_ROOT / "runs/campaigns/paper_table1_roi")
@@ -107,7 +115,7 @@ def main() -> int:
     save_report(
         {
             "machine": machine_context(),
-            "campaign": str(campaign),
+            "campaign": repo_relative(campaign),
             "holds": rows,
             "by_cause": dict(causes),
             "by_verdict": dict(verdicts),
