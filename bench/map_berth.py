@@ -9,6 +9,10 @@ area whose true clearance (to the nearest body's edge) is between 0.5 and 6 m:
 
 - **berth** = true clearance - the map's clearance (distance to the nearest cell it calls occupied), metres: how much
   further from people the map keeps a landing point than the bodies ask. Reported by the vehicle's altitude band.
+- **the head plane's own share** (``geometry`` in the output): the same berth for a perfect body detector, each body
+  a column of its radius from the ground to the head plane, projected from the camera onto the head plane as the map
+  is. A standing person's lower body meets the head plane nearer the nadir than the person stands (by ``d * h_t / h``
+  at ``d`` from the nadir, ``h`` the camera's height): no threshold or dilation takes that part away.
 - **bodies seen**: of the bodies whose head cell lies well inside the known map, the share with an occupied cell
   within 0.3 m of it (the recall of the map on the head plane).
 - **ground called occupied**: of the known cells in the landing area more than 2 m from every body's edge, the share
@@ -55,7 +59,7 @@ VARIANTS: dict[str, tuple[float, float]] = {
     "threshold 0.03, dilation 0.25 m": (0.03, 0.25),
 }
 """Name: (density_threshold people per cell, dilation_m)."""
-BANDS = ((20.0, "above 20 m"), (8.0, "8-20 m"), (0.0, "below 8 m"))
+BANDS = ((20.0, "above 20 m"), (8.0, "8-20 m"), (6.0, "6-8 m"), (0.0, "below 6 m"))
 SEEN_WITHIN_CELLS = 3  # 0.3 m on the 0.1 m head-plane grid
 CLEARANCE_RANGE_M = (0.5, 6.0)
 AWAY_FROM_PEOPLE_M = 2.0
@@ -84,9 +88,40 @@ def bodies_seen(
     return seen, counted
 
 
+COLUMN_SAMPLES = 9
+"""Points along a body's column (ground to head plane) projected onto the head plane for the geometric berth."""
+GEOMETRY = "geometry"
+"""The key of the perfect detector's berth in the output (not a variant of the occupancy config)."""
+
+
+def head_plane_clearance_m(
+    positions_ne_m: npt.NDArray[np.float64],
+    radii_m: npt.NDArray[np.float64],
+    camera_ned_m: npt.NDArray[np.float64],
+    head_height_m: float,
+    north_m: npt.NDArray[np.float64],
+    east_m: npt.NDArray[np.float64],
+) -> npt.NDArray[np.float64]:
+    """Distance (m) from head-plane points to the nearest body as a perfect detector would map it: each body a column
+    of its radius from the ground up to the head plane, every height projected from the camera onto the head plane
+    (a point ``z`` m above the ground at ``p`` lands at ``c + (p - c) (h - h_t) / (h - z)``, ``c`` the camera's
+    nadir, ``h`` its height; radii scale alike). Shapes as :func:`sitl.vehicle.truth.clearance_m`."""
+    height_m = -float(camera_ned_m[2])
+    nadir = np.asarray(camera_ned_m[:2], np.float64)
+    clear = np.full(np.broadcast_shapes(north_m.shape, east_m.shape), np.inf)
+    if height_m <= head_height_m:
+        return clearance_m(positions_ne_m, radii_m, north_m, east_m)
+    for z_m in np.linspace(0.0, head_height_m, COLUMN_SAMPLES):
+        scale = (height_m - head_height_m) / (height_m - z_m)
+        projected = nadir + (positions_ne_m - nadir) * scale
+        np.minimum(clear, clearance_m(projected, radii_m * scale, north_m, east_m), out=clear)
+    return clear
+
+
 def measure(folders: list[Path], every: int) -> dict[str, Any]:
     """Berths (a sample of cells) and bodies seen, per variant and altitude band."""
     out: dict[str, Any] = {v: {"berth_m": {}, "seen": 0, "bodies": 0, "ground": {}} for v in VARIANTS}
+    geometry: dict[str, list[float]] = {}
     frames = 0
     suns = {}
     for folder in folders:
@@ -115,6 +150,9 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
             density = predict_downscaled(pipeline.density_model, image, input_scale(gsd, pipeline.min_gsd_m_per_px))
             density_camera = pipeline.projector.camera.scaled(1.0 / density.stride_x, 1.0 / density.stride_y)
             positions, radii = people_at(truth_header, truth.at(float(record["t_s"])))
+            camera_ned_m = pipeline.projector.T_world_camera(pose)[:3, 3]
+            head_height_m = config.perception.projection.head_height_m
+            geometry_done = False
             for name, (threshold, dilation_m) in VARIANTS.items():
                 occupancy_config = config.perception.occupancy.model_copy(
                     update={"density_threshold": threshold, "dilation_m": dilation_m}
@@ -132,6 +170,13 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                 cells = known_in_area & (true_clearance > low) & (true_clearance < high)
                 berth = (true_clearance[cells] - map_clearance[cells])[::7]  # a sample: neighbours agree
                 out[name]["berth_m"].setdefault(band, []).extend(berth.tolist())
+                if not geometry_done:  # the same grid for every variant: once per frame
+                    perfect = head_plane_clearance_m(
+                        positions, radii, camera_ned_m, head_height_m, north[cells], east[cells]
+                    )
+                    perfect = np.maximum(perfect, 0.0)  # as the map: 0 inside what it calls occupied
+                    geometry.setdefault(band, []).extend((true_clearance[cells] - perfect)[::7].tolist())
+                    geometry_done = True
                 away = known_in_area & (true_clearance > AWAY_FROM_PEOPLE_M)
                 ground = out[name]["ground"].setdefault(sun_band, [0, 0])
                 ground[0] += int((away & occupied).sum())
@@ -140,7 +185,7 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                 out[name]["seen"] += seen
                 out[name]["bodies"] += counted
         sys.stdout.write(f"{folder}: sun {sun_deg:.1f} deg, done\n")
-    return {"frames": frames, "variants": out, "sun_elevation_deg": suns}
+    return {"frames": frames, "variants": out, GEOMETRY: geometry, "sun_elevation_deg": suns}
 
 
 def main() -> int:
@@ -179,9 +224,20 @@ def main() -> int:
             f"| {name} | {q50:.2f} [{q10:.2f}, {q90:.2f}] | {bands} | {found['seen']} / {found['bodies']} "
             f"({100 * seen:.2f} %) | {grounds} |\n"
         )
+    every_geometry = np.concatenate([np.asarray(v) for v in measured[GEOMETRY].values()])
+    geometry_by_band = {band: round(float(np.median(v)), 2) for band, v in measured[GEOMETRY].items()}
+    g10, g50, g90 = (float(q) for q in np.quantile(every_geometry, (0.1, 0.5, 0.9)))
+    bands = ", ".join(f"{band} {value:.2f}" for band, value in geometry_by_band.items())
+    sys.stdout.write(
+        f"| the head plane's own share (a perfect body detector, no dilation) | {g50:.2f} [{g10:.2f}, {g90:.2f}] | "
+        f"{bands} | - | - |\n"
+    )
+    geometry_row = {"berth_m_p10_p50_p90": [round(q, 3) for q in (g10, g50, g90)],
+                    "berth_m_median_by_band": geometry_by_band}  # fmt: skip
     save_report(
         {"machine": machine_context(), "folders": [str(f) for f in args.folders], "frames": measured["frames"],
-         "every": args.every, "sun_elevation_deg": measured["sun_elevation_deg"], "variants": rows},
+         "every": args.every, "sun_elevation_deg": measured["sun_elevation_deg"], "variants": rows,
+         GEOMETRY: geometry_row},
         args.out,
     )  # fmt: skip
     return 0
