@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from companion.tools.serve import watch_owner
 from sitl.campaign.spec import load_campaign_spec
 from sitl.campaign.worker import fly_one
 from sitl.harness.instances import leased_instance
@@ -140,3 +141,16 @@ def test_a_warm_worker_flies_on_after_its_companion_process_is_killed_mid_missio
             worker.close()
     assert not worker.sitl_process.alive
     assert not worker.companion_process.alive
+
+
+@pytest.mark.unit
+def test_a_serve_process_whose_owner_is_gone_exits_after_the_grace() -> None:
+    """The owner watch of ``slz serve``: a parent other than the owner it started under means the owner died (the
+    kernel re-parented the process), so after the grace the process exits with 1, whatever its command is doing."""
+    exits: list[int] = []
+    not_my_parent = os.getppid() + 1
+    watch = threading.Thread(target=watch_owner, args=(not_my_parent, 0.05, 0.01, exits.append), daemon=True)
+    watch.start()
+    watch.join(timeout=10.0)
+    assert not watch.is_alive(), "the watch did not act within 10 s"
+    assert exits == [1]

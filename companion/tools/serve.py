@@ -14,7 +14,10 @@ Protocol (JSON, one object per line):
   and 2, so the output of native libraries and of child processes too) go to ``log`` (truncated) while it runs;
   between commands standard output goes nowhere and standard error to the process's own (its start-up log);
 - its reply is ``{"exit_code": n}``, plus ``"error"`` when it raised (the traceback is in its log);
-- end of input ends the process (exit 0).
+- end of input ends the process (exit 0);
+- a process whose owner is gone (its parent process changed: the kernel re-parented it) gives a command still running
+  ``OWNER_GONE_GRACE_S`` to end on the SIGTERM its owner's death sent it (``die_with_parent``), then exits (code 1):
+  a warm process never outlives the worker it serves, whatever its command is doing.
 
 Replies go to a private copy of the original standard output, which no command and no child process can write to.
 """
@@ -28,6 +31,8 @@ import logging
 import os
 import signal
 import sys
+import threading
+import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -37,6 +42,11 @@ from companion.errors import SlzError
 from companion.json_value import JsonObject
 
 logger = logging.getLogger(__name__)
+
+OWNER_POLL_S = 0.5
+"""How often the owner watch looks at the parent process id (s)."""
+OWNER_GONE_GRACE_S = 10.0
+"""What a command still running gets to end once the owner is gone (s): a flight's own SIGTERM handling takes 3 s."""
 
 
 class ServeError(SlzError):
@@ -108,8 +118,26 @@ def run_one(run: Callable[[Sequence[str]], int], argv: list[str]) -> JsonObject:
             signal.signal(signum, handler)
 
 
+def watch_owner(
+    owner_pid: int,
+    grace_s: float = OWNER_GONE_GRACE_S,
+    poll_s: float = OWNER_POLL_S,
+    exit_now: Callable[[int], object] = os._exit,
+) -> None:
+    """Wait until this process's parent is no longer ``owner_pid``, then ``grace_s`` more, then ``exit_now(1)``.
+
+    Runs in a daemon thread of :func:`serve`: a process ending normally (end of input) never reaches the exit."""
+    while os.getppid() == owner_pid:
+        time.sleep(poll_s)
+    logger.warning("the process that owns this one is gone: exiting in %g s", grace_s)
+    time.sleep(grace_s)
+    exit_now(1)
+
+
 def serve(run: Callable[[Sequence[str]], int], preload: Sequence[str] = (), requests: TextIO | None = None) -> int:
     """Serve requests from ``requests`` (standard input) until its end (see the module docstring); returns 0."""
+    owner = threading.Thread(target=watch_owner, args=(os.getppid(),), name="serve-owner-watch", daemon=True)
+    owner.start()  # a daemon: nothing joins it, the process's end stops it
     for module in preload:
         importlib.import_module(module)
     reply = os.fdopen(os.dup(1), "w", buffering=1)  # os.dup: not inherited by child processes
