@@ -143,14 +143,41 @@ def test_a_warm_worker_flies_on_after_its_companion_process_is_killed_mid_missio
     assert not worker.companion_process.alive
 
 
+def owner_process() -> subprocess.Popen[bytes]:
+    """A process that lives until its standard input ends: the owner a watch is given."""
+    return subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
+
+
+def end(owner: subprocess.Popen[bytes]) -> None:
+    assert owner.stdin is not None
+    owner.stdin.close()
+    owner.wait(timeout=30)
+
+
 @pytest.mark.unit
 def test_a_serve_process_whose_owner_is_gone_exits_after_the_grace() -> None:
-    """The owner watch of ``slz serve``: a parent other than the owner it started under means the owner died (the
-    kernel re-parented the process), so after the grace the process exits with 1, whatever its command is doing."""
+    """The owner watch of ``slz serve``: once the process that started it has ended and the serve loop has not finished
+    within the grace, the process exits with 1, whatever its command is doing."""
     exits: list[int] = []
-    not_my_parent = os.getppid() + 1
-    watch = threading.Thread(target=watch_owner, args=(not_my_parent, 0.05, 0.01, exits.append), daemon=True)
+    owner = owner_process()
+    watch = threading.Thread(target=watch_owner, args=(owner.pid, threading.Event(), 0.05, exits.append), daemon=True)
     watch.start()
+    assert exits == [], "the watch acted while its owner lived"
+    end(owner)
     watch.join(timeout=10.0)
-    assert not watch.is_alive(), "the watch did not act within 10 s"
+    assert not watch.is_alive(), "the watch did not act within 10 s of its owner's end"
     assert exits == [1]
+
+
+@pytest.mark.unit
+def test_a_serve_loop_that_ends_within_the_grace_is_not_cut_short() -> None:
+    exits: list[int] = []
+    finished = threading.Event()
+    owner = owner_process()
+    watch = threading.Thread(target=watch_owner, args=(owner.pid, finished, 30.0, exits.append), daemon=True)
+    watch.start()
+    finished.set()  # the loop read the end of its input and returned
+    end(owner)
+    watch.join(timeout=10.0)
+    assert not watch.is_alive(), "the watch did not return within 10 s of its owner's end"
+    assert exits == []

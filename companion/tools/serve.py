@@ -15,9 +15,9 @@ Protocol (JSON, one object per line):
   between commands standard output goes nowhere and standard error to the process's own (its start-up log);
 - its reply is ``{"exit_code": n}``, plus ``"error"`` when it raised (the traceback is in its log);
 - end of input ends the process (exit 0);
-- a process whose owner is gone (its parent process changed: the kernel re-parented it) gives a command still running
-  ``OWNER_GONE_GRACE_S`` to end on the SIGTERM its owner's death sent it (``die_with_parent``), then exits (code 1):
-  a warm process never outlives the worker it serves, whatever its command is doing.
+- when the process that started it (its owner) ends, a command still running gets ``OWNER_GONE_GRACE_S`` to end on
+  the SIGTERM the owner's death sent it (``die_with_parent``), then the process exits (code 1): a warm process never
+  outlives the worker it serves, whatever its command is doing.
 
 Replies go to a private copy of the original standard output, which no command and no child process can write to.
 """
@@ -29,10 +29,10 @@ import importlib
 import json
 import logging
 import os
+import select
 import signal
 import sys
 import threading
-import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -43,8 +43,6 @@ from companion.json_value import JsonObject
 
 logger = logging.getLogger(__name__)
 
-OWNER_POLL_S = 0.5
-"""How often the owner watch looks at the parent process id (s)."""
 OWNER_GONE_GRACE_S = 10.0
 """What a command still running gets to end once the owner is gone (s): a flight's own SIGTERM handling takes 3 s."""
 
@@ -120,23 +118,36 @@ def run_one(run: Callable[[Sequence[str]], int], argv: list[str]) -> JsonObject:
 
 def watch_owner(
     owner_pid: int,
+    finished: threading.Event,
     grace_s: float = OWNER_GONE_GRACE_S,
-    poll_s: float = OWNER_POLL_S,
     exit_now: Callable[[int], object] = os._exit,
 ) -> None:
-    """Wait until this process's parent is no longer ``owner_pid``, then ``grace_s`` more, then ``exit_now(1)``.
+    """Wait for the process ``owner_pid`` to end, then up to ``grace_s`` for ``finished`` (the serve loop's end);
+    unless it came, ``exit_now(1)``.
 
-    Runs in a daemon thread of :func:`serve`: a process ending normally (end of input) never reaches the exit."""
-    while os.getppid() == owner_pid:
-        time.sleep(poll_s)
-    logger.warning("the process that owns this one is gone: exiting in %g s", grace_s)
-    time.sleep(grace_s)
+    Runs in a daemon thread of :func:`serve` for as long as the process lives. The wait is on a pidfd of the owner
+    (Linux; elsewhere, as :func:`sitl.harness.process.die_with_parent`, there is no watch)."""
+    if sys.platform != "linux":
+        return
+    try:
+        owner = os.pidfd_open(owner_pid)
+    except ProcessLookupError:  # gone before the watch began
+        pass
+    else:
+        try:
+            select.select([owner], [], [])  # readable once the owner has ended: no deadline, the watch is the process's
+        finally:
+            os.close(owner)
+    if finished.wait(grace_s):
+        return
+    logger.warning("the process that owned this one ended %g s ago and its command still runs: exiting", grace_s)
     exit_now(1)
 
 
 def serve(run: Callable[[Sequence[str]], int], preload: Sequence[str] = (), requests: TextIO | None = None) -> int:
     """Serve requests from ``requests`` (standard input) until its end (see the module docstring); returns 0."""
-    owner = threading.Thread(target=watch_owner, args=(os.getppid(),), name="serve-owner-watch", daemon=True)
+    finished = threading.Event()
+    owner = threading.Thread(target=watch_owner, args=(os.getppid(), finished), name="serve-owner-watch", daemon=True)
     owner.start()  # a daemon: nothing joins it, the process's end stops it
     for module in preload:
         importlib.import_module(module)
@@ -155,5 +166,6 @@ def serve(run: Callable[[Sequence[str]], int], preload: Sequence[str] = (), requ
         with output_to(log_path, own_stderr):
             answer = run_one(run, argv)
         reply.write(json.dumps(answer) + "\n")
+    finished.set()
     reply.close()
     return 0
