@@ -59,6 +59,7 @@ VARIANTS: dict[str, tuple[float, float]] = {
     "threshold 0.03, dilation 0.25 m": (0.03, 0.25),
 }
 """Name: (density_threshold people per cell, dilation_m)."""
+FIRST_VARIANT = next(iter(VARIANTS))
 BANDS = ((20.0, "above 20 m"), (8.0, "8-20 m"), (6.0, "6-8 m"), (0.0, "below 6 m"))
 SEEN_WITHIN_CELLS = 3  # 0.3 m on the 0.1 m head-plane grid
 CLEARANCE_RANGE_M = (0.5, 6.0)
@@ -108,9 +109,9 @@ def head_plane_clearance_m(
     nadir, ``h`` its height; radii scale alike). Shapes as :func:`sitl.vehicle.truth.clearance_m`."""
     height_m = -float(camera_ned_m[2])
     nadir = np.asarray(camera_ned_m[:2], np.float64)
-    clear = np.full(np.broadcast_shapes(north_m.shape, east_m.shape), np.inf)
     if height_m <= head_height_m:
         return clearance_m(positions_ne_m, radii_m, north_m, east_m)
+    clear = np.full(np.broadcast_shapes(north_m.shape, east_m.shape), np.inf)
     for z_m in np.linspace(0.0, head_height_m, COLUMN_SAMPLES):
         scale = (height_m - head_height_m) / (height_m - z_m)
         projected = nadir + (positions_ne_m - nadir) * scale
@@ -152,7 +153,6 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
             positions, radii = people_at(truth_header, truth.at(float(record["t_s"])))
             camera_ned_m = pipeline.projector.T_world_camera(pose)[:3, 3]
             head_height_m = config.perception.projection.head_height_m
-            geometry_done = False
             for name, (threshold, dilation_m) in VARIANTS.items():
                 occupancy_config = config.perception.occupancy.model_copy(
                     update={"density_threshold": threshold, "dilation_m": dilation_m}
@@ -170,13 +170,12 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                 cells = known_in_area & (true_clearance > low) & (true_clearance < high)
                 berth = (true_clearance[cells] - map_clearance[cells])[::7]  # a sample: neighbours agree
                 out[name]["berth_m"].setdefault(band, []).extend(berth.tolist())
-                if not geometry_done:  # the same grid for every variant: once per frame
+                if name == FIRST_VARIANT:  # the same grid and cells for every variant: once per frame
                     perfect = head_plane_clearance_m(
                         positions, radii, camera_ned_m, head_height_m, north[cells], east[cells]
                     )
                     perfect = np.maximum(perfect, 0.0)  # as the map: 0 inside what it calls occupied
                     geometry.setdefault(band, []).extend((true_clearance[cells] - perfect)[::7].tolist())
-                    geometry_done = True
                 away = known_in_area & (true_clearance > AWAY_FROM_PEOPLE_M)
                 ground = out[name]["ground"].setdefault(sun_band, [0, 0])
                 ground[0] += int((away & occupied).sum())
