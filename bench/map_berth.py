@@ -15,6 +15,12 @@ area whose true clearance (to the nearest body's edge) is between 0.5 and 6 m:
   at ``d`` from the nadir, ``h`` the camera's height): no threshold or dilation takes that part away.
 - **bodies seen**: of the bodies whose head cell lies well inside the known map, the share with an occupied cell
   within 0.3 m of it (the recall of the map on the head plane).
+- **the blob's reach** (``reach`` in the output; the shipped variant): how far each body's occupied run reaches from
+  its head towards the camera's nadir, and what a per-ray rule that reads the run's inner end as the body's lowest
+  point (a height ``z``: 0 the feet) would make of it. Such a rule places the body at ``r_in (h - z) / (h - h_t)``
+  from the nadir instead of ``r_in``; its **margin** is the body's true inner edge minus that estimate (negative: the
+  rule would free ground the body stands on). The network is trained on head points, not bodies: whether its blobs
+  reach the feet is this measurement's question.
 - **ground called occupied**: of the known cells in the landing area more than 2 m from every body's edge, the share
   the map calls occupied (false positives away from people), by the scene's sun elevation: below 30 degrees a
   person's shadow is more than 2.9 m long.
@@ -119,10 +125,67 @@ def head_plane_clearance_m(
     return clear
 
 
+REACH_ASSUMED_LOWEST_M = (0.0, 0.5, 1.0)
+"""Heights (m) a per-ray rule could assume a body's occupied run reaches down to (0: the feet)."""
+REACH = "reach"
+"""The key of the blob-reach measurement in the output."""
+
+
+def run_inner_end_m(
+    head_plane: HeadPlaneOccupancy,
+    occupied: npt.NDArray[np.bool_],
+    nadir_ne_m: npt.NDArray[np.float64],
+    body_ne_m: npt.NDArray[np.float64],
+    search_from_m: float,
+) -> float | None:
+    """Distance (m) from the nadir of the inner end of a body's occupied run on the head plane, along the ray from the
+    nadir through the body: the first occupied sample walking inward from the body (at ``d`` from the nadir) to
+    ``search_from_m``, then on inward while occupied. None where the body's part of the ray is not occupied (not seen)
+    or the walk leaves the known map before the run ends (nothing to measure)."""
+    grid = head_plane.grid
+    offset = body_ne_m - nadir_ne_m
+    d = float(np.hypot(*offset))
+    if d <= grid.resolution_m:
+        return None
+    step = grid.resolution_m / 2.0
+    radii = np.arange(d, -step / 2.0, -step)  # from the body inward to the nadir
+    points = nadir_ne_m + np.outer(radii / d, offset)
+    rows = np.rint((points[:, 0] - grid.north_min_m) / grid.resolution_m - 0.5).astype(np.intp)
+    cols = np.rint((points[:, 1] - grid.east_min_m) / grid.resolution_m - 0.5).astype(np.intp)
+    inside = (rows >= 0) & (rows < grid.rows) & (cols >= 0) & (cols < grid.cols)
+    rows, cols = np.clip(rows, 0, grid.rows - 1), np.clip(cols, 0, grid.cols - 1)
+    known = inside & head_plane.known[rows, cols]
+    hit = known & occupied[rows, cols]
+    candidates = np.nonzero(hit & (radii >= search_from_m - 1e-9))[0]
+    if not len(candidates):
+        return None
+    first = int(candidates[0])
+    ends = np.nonzero(~hit[first:])[0]
+    if not len(ends):
+        return 0.0  # occupied all the way to the nadir
+    last = first + int(ends[0]) - 1
+    if not known[last + 1]:
+        return None  # the run runs off the known map
+    return float(radii[last])
+
+
+def reach_margins_m(
+    inner_end_m: float, body_distance_m: float, body_radius_m: float, camera_height_m: float, head_height_m: float
+) -> dict[float, float]:
+    """For each assumed lowest height of a run (:data:`REACH_ASSUMED_LOWEST_M`), the body's true inner edge minus
+    where a per-ray rule would put it (``inner_end_m (h - z) / (h - h_t)`` from the nadir): negative where the rule
+    would free ground the body stands on."""
+    return {
+        z_m: body_distance_m - body_radius_m - inner_end_m * (camera_height_m - z_m) / (camera_height_m - head_height_m)
+        for z_m in REACH_ASSUMED_LOWEST_M
+    }
+
+
 def measure(folders: list[Path], every: int) -> dict[str, Any]:
     """Berths (a sample of cells) and bodies seen, per variant and altitude band."""
     out: dict[str, Any] = {v: {"berth_m": {}, "seen": 0, "bodies": 0, "ground": {}} for v in VARIANTS}
     geometry: dict[str, list[float]] = {}
+    reach: dict[str, dict[str, Any]] = {}
     frames = 0
     suns = {}
     for folder in folders:
@@ -176,6 +239,10 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                     )
                     perfect = np.maximum(perfect, 0.0)  # as the map: 0 inside what it calls occupied
                     geometry.setdefault(band, []).extend((true_clearance[cells] - perfect)[::7].tolist())
+                    measure_reach(
+                        reach.setdefault(band, {"not_measured": 0, "margins_m": {}}),
+                        head_plane, occupied, camera_ned_m, positions, radii, head_height_m,
+                    )  # fmt: skip
                 away = known_in_area & (true_clearance > AWAY_FROM_PEOPLE_M)
                 ground = out[name]["ground"].setdefault(sun_band, [0, 0])
                 ground[0] += int((away & occupied).sum())
@@ -184,7 +251,39 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
                 out[name]["seen"] += seen
                 out[name]["bodies"] += counted
         sys.stdout.write(f"{folder}: sun {sun_deg:.1f} deg, done\n")
-    return {"frames": frames, "variants": out, GEOMETRY: geometry, "sun_elevation_deg": suns}
+    return {"frames": frames, "variants": out, GEOMETRY: geometry, REACH: reach, "sun_elevation_deg": suns}
+
+
+def measure_reach(
+    into: dict[str, Any],
+    head_plane: HeadPlaneOccupancy,
+    occupied: npt.NDArray[np.bool_],
+    camera_ned_m: npt.NDArray[np.float64],
+    positions_ne_m: npt.NDArray[np.float64],
+    radii_m: npt.NDArray[np.float64],
+    head_height_m: float,
+) -> None:
+    """Adds one map's bodies in view to ``into`` (those whose head and feet points on the head plane both lie in known
+    cells): ``not_measured``, those of them whose ray holds no occupied cell between the two points or whose run leaves
+    the known map; ``margins_m``, per assumed height, the others' margins (:func:`reach_margins_m`)."""
+    height_m = -float(camera_ned_m[2])
+    if height_m <= head_height_m:
+        return
+    nadir = np.asarray(camera_ned_m[:2], np.float64)
+    feet_share = (height_m - head_height_m) / height_m
+    grid = head_plane.grid
+    for body, radius in zip(positions_ne_m, radii_m, strict=True):
+        feet = nadir + (body - nadir) * feet_share
+        cells = [tuple(round(v) for v in grid.world_to_cell(float(n), float(e))) for n, e in (body, feet)]
+        if not all(0 <= r < grid.rows and 0 <= c < grid.cols and head_plane.known[r, c] for r, c in cells):
+            continue  # not in view
+        d = float(np.hypot(*(body - nadir)))
+        inner = run_inner_end_m(head_plane, occupied, nadir, body, d * feet_share - float(radius))
+        if inner is None:
+            into["not_measured"] += 1
+            continue
+        for z_m, margin in reach_margins_m(inner, d, float(radius), height_m, head_height_m).items():
+            into["margins_m"].setdefault(str(z_m), []).append(round(margin, 3))
 
 
 def main() -> int:
@@ -231,15 +330,42 @@ def main() -> int:
         f"| the head plane's own share (a perfect body detector, no dilation) | {g50:.2f} [{g10:.2f}, {g90:.2f}] | "
         f"{bands} | - | - |\n"
     )
+    reach_rows = reach_table(measured[REACH])
+    for row in reach_rows:
+        sys.stdout.write(
+            f"reach {row['band']}, run read down to {row['assumed_lowest_m']:g} m: {row['bodies']} bodies "
+            f"({row['not_measured']} more in view not measured), margin "
+            f"median {row['margin_m_p50']:.2f} m, p5 {row['margin_m_p5']:.2f} m, below 0: {row['below_0']} "
+            f"({100 * row['below_0'] / max(1, row['bodies']):.1f} %)\n"
+        )
     geometry_row = {"berth_m_p10_p50_p90": [round(q, 3) for q in (g10, g50, g90)],
                     "berth_m_median_by_band": geometry_by_band}  # fmt: skip
     save_report(
         {"machine": machine_context(), "folders": [str(f) for f in args.folders], "frames": measured["frames"],
          "every": args.every, "sun_elevation_deg": measured["sun_elevation_deg"], "variants": rows,
-         GEOMETRY: geometry_row},
+         GEOMETRY: geometry_row, REACH: reach_rows},
         args.out,
     )  # fmt: skip
     return 0
+
+
+def reach_table(reach: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per altitude band and assumed lowest height: bodies measured, in view but not measured, margin
+    quantiles, how many below 0 (the rule would free ground under the body)."""
+    rows = []
+    for _, band in BANDS:
+        found = reach.get(band)
+        if found is None:
+            continue
+        for z_key, margins in found["margins_m"].items():
+            values = np.asarray(margins, np.float64)
+            p5, p50 = (float(q) for q in np.quantile(values, (0.05, 0.5)))
+            rows.append(
+                {"band": band, "assumed_lowest_m": float(z_key), "bodies": len(values),
+                 "not_measured": found["not_measured"], "margin_m_p5": round(p5, 3), "margin_m_p50": round(p50, 3),
+                 "margin_m_min": round(float(values.min()), 3), "below_0": int((values < 0).sum())}
+            )  # fmt: skip
+    return rows
 
 
 if __name__ == "__main__":

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.map_berth import head_plane_clearance_m
+from bench.map_berth import head_plane_clearance_m, reach_margins_m, run_inner_end_m
+from companion.perception.projection import GridSpec, HeadPlaneOccupancy
 
 pytestmark = pytest.mark.unit
 
@@ -41,3 +42,56 @@ def test_beyond_the_body_the_head_is_what_is_nearest() -> None:
 
 def test_a_camera_below_the_head_plane_maps_the_bodies_where_they_stand() -> None:
     assert clearance(1.0, 0.0) == pytest.approx(2.5 - BODY_RADIUS_M, abs=1e-6)
+
+
+GRID = GridSpec(north_min_m=-5.0, east_min_m=-5.0, resolution_m=0.1, rows=100, cols=100)
+NADIR = np.array([0.0, 0.0])
+BODY = np.array([2.5, 0.0])
+
+
+def blob_map(north_from_m: float, north_to_m: float, known_from_m: float = -5.0) -> HeadPlaneOccupancy:
+    """A head-plane map occupied where north lies in [from, to] and |east| < 0.3 m, known north of ``known_from_m``."""
+    north, east = np.meshgrid(GRID.north_centres_m, GRID.east_centres_m, indexing="ij")
+    occupied = (north >= north_from_m) & (north <= north_to_m) & (np.abs(east) < 0.3)
+    known = north >= known_from_m
+    return HeadPlaneOccupancy(grid=GRID, free=known & ~occupied, known=known)
+
+
+def inner_end(head_plane: HeadPlaneOccupancy, search_from_m: float = 1.4) -> float | None:
+    return run_inner_end_m(head_plane, head_plane.known & ~head_plane.free, NADIR, BODY, search_from_m)
+
+
+def test_the_run_of_a_blob_that_reaches_the_feet_ends_at_the_feet() -> None:
+    """A body at 2.5 m seen from 5 m: its feet meet the head plane at 1.65 m; a blob from there to the head ends
+    there, and a rule reading that end as the feet puts the body where it stands (less its radius: a margin of minus
+    the radius, the column having no width)."""
+    end = inner_end(blob_map(1.65, 2.75))
+    assert end == pytest.approx(1.65, abs=0.1)
+    assert end is not None
+    margins = reach_margins_m(end, 2.5, BODY_RADIUS_M, 5.0, HEAD_HEIGHT_M)
+    assert margins[0.0] == pytest.approx(-BODY_RADIUS_M, abs=0.2)
+    assert margins[1.0] > margins[0.0]
+
+
+def test_a_blob_on_the_head_alone_would_be_moved_beyond_the_body_by_a_feet_rule() -> None:
+    """A head-point network's blob from 2.2 m to 2.75 m: read as reaching the feet, it puts the body at 3.3 m,
+    a metre beyond it (margin below -1 m); read as it is, it keeps the body (margin >= 0)."""
+    end = inner_end(blob_map(2.2, 2.75))
+    assert end == pytest.approx(2.2, abs=0.1)
+    assert end is not None
+    margins = reach_margins_m(end, 2.5, BODY_RADIUS_M, 5.0, HEAD_HEIGHT_M)
+    assert margins[0.0] < -1.0
+    no_rule = 2.5 - BODY_RADIUS_M - end
+    assert no_rule >= -0.05
+
+
+def test_a_run_to_the_nadir_ends_at_zero() -> None:
+    assert inner_end(blob_map(-1.0, 2.75)) == 0.0
+
+
+def test_a_body_whose_ray_holds_no_occupied_cell_is_not_measured() -> None:
+    assert inner_end(blob_map(3.0, 3.5)) is None
+
+
+def test_a_run_that_leaves_the_known_map_is_not_measured() -> None:
+    assert inner_end(blob_map(1.0, 2.75, known_from_m=1.5)) is None
