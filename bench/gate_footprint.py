@@ -9,11 +9,12 @@ ray from the nadir as one body whose lowest point is the run's inner end: a run 
 touches an unknown cell, or reaches the nadir, is kept whole. ``bench/map_berth.py``'s ``reach`` measures whether the
 map's runs reach the feet, which the check needs (at the gate, every body in view by 0.59 m or more).
 
-For every map of a replayed flight taken while the descent was at the gate (the decision's altitude within the gate
-band, a landing point locked), this recomputes the map as the companion did and says whether the footprint is seen
-occupied as flown and with the per-ray check, beside the truth (a body's edge inside the footprint). Reported per
-flight and in total: maps at the gate, maps seen occupied each way, and maps with a body truly inside, each way (a
-check that sees such a map free would let a descent go on over a person).
+For every map of a replayed flight taken while the descent was at the gate (the frame's altitude within the gate's
+band, a landing point locked by the descent's decision on it), this recomputes the map as the companion did and says
+whether the footprint is seen occupied as flown and with the per-ray check, beside the truth (a body's edge inside
+the footprint). Reported per flight and in total: maps at the gate, maps seen occupied each way, maps with a body
+truly inside and how many of those each way saw (a check that sees such a map free would let a descent go on over a
+person), and why the check kept each map it kept.
 
 Run: ``.venv/bin/python -m bench.gate_footprint FOLDER... [--out bench/results/gate_footprint.json]`` on folders as
 ``bench/hold_replays.py`` or ``slz campaign replay`` write them (``flight/`` with png frames, ``truth.jsonl``).
@@ -33,6 +34,7 @@ import numpy.typing as npt
 from bench.machine import machine_context, save_report
 from companion.flightlog.flight_log import FlightLog, RecordKind
 from companion.geometry import Pose
+from companion.guidance.descent import GATE_SLACK_M
 from companion.guidance.footprint import footprint_view
 from companion.perception.density import input_scale, predict_downscaled
 from companion.perception.pipeline import SlzPipeline
@@ -42,10 +44,6 @@ from sitl.campaign.hold_explain import TruthAt
 from sitl.vehicle.truth import body_edges_m, read_truth
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-
-GATE_SLACK_M = 0.5
-"""Maps taken within this much above the gate (and above the floor) count as the gate's (the descent's own slack is
-``companion.guidance.descent.GATE_SLACK_M``)."""
 
 
 class Kept:
