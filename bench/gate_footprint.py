@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bench.machine import machine_context, save_report
+from bench.map_berth import ray_samples
 from companion.flightlog.flight_log import FlightLog, RecordKind
 from companion.geometry import Pose
 from companion.guidance.descent import GATE_SLACK_M
@@ -97,13 +98,7 @@ def per_ray_kept(
         r_cell = float(np.hypot(*offset))
         if r_cell <= grid.resolution_m:
             return Kept.NADIR  # no ray to read
-        points = np.asarray(nadir_ne_m) + np.outer(radii / r_cell, offset)
-        rows = np.rint((points[:, 0] - grid.north_min_m) / grid.resolution_m - 0.5).astype(np.intp)
-        cols = np.rint((points[:, 1] - grid.east_min_m) / grid.resolution_m - 0.5).astype(np.intp)
-        in_grid = (rows >= 0) & (rows < grid.rows) & (cols >= 0) & (cols < grid.cols)
-        rows, cols = np.clip(rows, 0, grid.rows - 1), np.clip(cols, 0, grid.cols - 1)
-        known = in_grid & head_plane.known[rows, cols]
-        hit = known & occupied[rows, cols]
+        known, hit = ray_samples(head_plane, occupied, np.asarray(nadir_ne_m), offset / r_cell, radii)
         at = int(np.argmin(np.abs(radii - r_cell)))
         if not hit[at]:
             return Kept.SAMPLE  # the cell and its ray's sample disagree: keep it
@@ -122,20 +117,6 @@ def per_ray_kept(
         if r_cell >= min(float(radii[inner]) * scale, float(radii[outer])) - step:
             return Kept.HEAD
     return None
-
-
-def per_ray_occupied(
-    head_plane: HeadPlaneOccupancy,
-    nadir_ne_m: tuple[float, float],
-    camera_height_m: float,
-    head_height_m: float,
-    north_m: float,
-    east_m: float,
-    radius_m: float,
-) -> bool:
-    """Whether the per-ray check sees a person inside the footprint (:func:`per_ray_kept` keeps a cell)."""
-    kept = per_ray_kept(head_plane, nadir_ne_m, camera_height_m, head_height_m, north_m, east_m, radius_m)
-    return kept is not None
 
 
 def gate_maps(folder: Path) -> dict[str, Any]:

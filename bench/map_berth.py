@@ -131,6 +131,25 @@ REACH = "reach"
 """The key of the blob-reach measurement in the output."""
 
 
+def ray_samples(
+    head_plane: HeadPlaneOccupancy,
+    occupied: npt.NDArray[np.bool_],
+    nadir_ne_m: npt.NDArray[np.float64],
+    direction_ne: npt.NDArray[np.float64],
+    radii_m: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """A map sampled along the ray from the nadir in ``direction_ne`` (a unit vector, north and east) at ``radii_m``
+    (N,): whether each sample's cell is known (inside the grid and seen), and whether it is occupied, each (N,)."""
+    grid = head_plane.grid
+    points = nadir_ne_m + np.outer(radii_m, direction_ne)
+    rows = np.rint((points[:, 0] - grid.north_min_m) / grid.resolution_m - 0.5).astype(np.intp)
+    cols = np.rint((points[:, 1] - grid.east_min_m) / grid.resolution_m - 0.5).astype(np.intp)
+    inside = (rows >= 0) & (rows < grid.rows) & (cols >= 0) & (cols < grid.cols)
+    rows, cols = np.clip(rows, 0, grid.rows - 1), np.clip(cols, 0, grid.cols - 1)
+    known = inside & head_plane.known[rows, cols]
+    return known, known & occupied[rows, cols]
+
+
 def run_inner_end_m(
     head_plane: HeadPlaneOccupancy,
     occupied: npt.NDArray[np.bool_],
@@ -149,13 +168,7 @@ def run_inner_end_m(
         return None
     step = grid.resolution_m / 2.0
     radii = np.arange(d, -step / 2.0, -step)  # from the body inward to the nadir
-    points = nadir_ne_m + np.outer(radii / d, offset)
-    rows = np.rint((points[:, 0] - grid.north_min_m) / grid.resolution_m - 0.5).astype(np.intp)
-    cols = np.rint((points[:, 1] - grid.east_min_m) / grid.resolution_m - 0.5).astype(np.intp)
-    inside = (rows >= 0) & (rows < grid.rows) & (cols >= 0) & (cols < grid.cols)
-    rows, cols = np.clip(rows, 0, grid.rows - 1), np.clip(cols, 0, grid.cols - 1)
-    known = inside & head_plane.known[rows, cols]
-    hit = known & occupied[rows, cols]
+    known, hit = ray_samples(head_plane, occupied, nadir_ne_m, offset / d, radii)
     candidates = np.nonzero(hit & (radii >= search_from_m - 1e-9))[0]
     if not len(candidates):
         return None
@@ -216,19 +229,21 @@ def measure(folders: list[Path], every: int) -> dict[str, Any]:
             positions, radii = people_at(truth_header, truth.at(float(record["t_s"])))
             camera_ned_m = pipeline.projector.T_world_camera(pose)[:3, 3]
             head_height_m = config.perception.projection.head_height_m
+            # The grid is the pose's, the same for every variant: its cells' true clearance once per frame.
+            grid = pipeline.projector.grid_for(pose)
+            north, east = np.meshgrid(grid.north_centres_m, grid.east_centres_m, indexing="ij")
+            true_clearance = clearance_m(positions, radii, north, east)
+            in_area = inside_polygon(area, north, east)
             for name, (threshold, dilation_m) in VARIANTS.items():
                 occupancy_config = config.perception.occupancy.model_copy(
                     update={"density_threshold": threshold, "dilation_m": dilation_m}
                 )
                 occupancy = OccupancyMapper(occupancy_config).compute(density, gsd)
                 head_plane = pipeline.projector.project(occupancy.values, density_camera, pose)
-                grid = head_plane.grid
                 occupied = head_plane.known & ~head_plane.free
-                north, east = np.meshgrid(grid.north_centres_m, grid.east_centres_m, indexing="ij")
                 not_occupied = (~occupied).astype(np.uint8)
                 map_clearance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, 5) * grid.resolution_m
-                true_clearance = clearance_m(positions, radii, north, east)
-                known_in_area = head_plane.known & inside_polygon(area, north, east)
+                known_in_area = head_plane.known & in_area
                 low, high = CLEARANCE_RANGE_M
                 cells = known_in_area & (true_clearance > low) & (true_clearance < high)
                 berth = (true_clearance[cells] - map_clearance[cells])[::7]  # a sample: neighbours agree

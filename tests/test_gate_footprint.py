@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.gate_footprint import Kept, per_ray_kept, per_ray_occupied
+from bench.gate_footprint import Kept, per_ray_kept
 from companion.guidance.footprint import footprint_view
 from companion.perception.projection import GridSpec, HeadPlaneOccupancy
 
@@ -33,7 +33,7 @@ def as_flown(head_plane: HeadPlaneOccupancy) -> bool:
 
 def per_ray(head_plane: HeadPlaneOccupancy) -> bool:
     """The footprint around the nadir (the vehicle over its point, as at the gate)."""
-    return per_ray_occupied(head_plane, (0.0, 0.0), CAMERA_M, HEAD_M, 0.0, 0.0, FOOTPRINT_M)
+    return per_ray_kept(head_plane, (0.0, 0.0), CAMERA_M, HEAD_M, 0.0, 0.0, FOOTPRINT_M) is not None
 
 
 def test_the_lower_part_of_a_standing_persons_run_is_not_a_person_in_the_footprint() -> None:
