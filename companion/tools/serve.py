@@ -130,10 +130,10 @@ def watch_owner(
     if sys.platform != "linux":
         return
     try:
-        owner = os.pidfd_open(owner_pid)
+        owner: int | None = os.pidfd_open(owner_pid)
     except ProcessLookupError:  # gone before the watch began
-        pass
-    else:
+        owner = None
+    if owner is not None:
         try:
             select.select([owner], [], [])  # readable once the owner has ended: no deadline, the watch is the process's
         finally:
